@@ -1,0 +1,1 @@
+//! Mesh and landmark file input/output. (Implementation in progress.)
