@@ -1,1 +1,219 @@
-//! model (in progress)
+//! A Gaussian-process morphable model: mean shape and albedo, low-rank bases,
+//! topology, landmarks and metadata; and how to build one from a template.
+
+use crate::kernel::{Hyperparameters, KernelPoint, ModelKernel};
+use crate::lowrank::{low_rank, LowRank, NystromOptions, RankSpec};
+use crate::template::{Mesh, Provenance, Template};
+use gpmm_core::{Basis, DenseBasis, FactoredBasis, ModelError};
+use rand::{Rng, RngExt};
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+/// The basis of one model part (shape or colour), scaled by `sqrt(eigenvalue)`.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PartBasis {
+    /// Component `k` = `fields[k] ⊗ directions[k]`; `fields` is `rank x vertices` row-major.
+    Factored {
+        /// Unit 3-vector per component.
+        directions: Vec<[f32; 3]>,
+        /// Scaled scalar fields, `rank x vertices`.
+        fields: Vec<f32>,
+    },
+    /// Component `k` has a 3-vector per vertex; `values` is `rank x vertices x 3`.
+    Dense {
+        /// Scaled basis values.
+        values: Vec<f32>,
+    },
+}
+
+/// One part of a model (shape in mm, or colour in linear RGB).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelPart {
+    /// Mean per vertex.
+    pub mean: Vec<[f32; 3]>,
+    /// Eigenvalue of each component, descending.
+    pub eigenvalues: Vec<f64>,
+    /// The scaled basis.
+    pub basis: PartBasis,
+}
+
+impl ModelPart {
+    /// Builds a factored part from a low-rank decomposition.
+    pub fn from_low_rank(mean: Vec<[f32; 3]>, lr: &LowRank) -> Self {
+        let mut directions = Vec::with_capacity(lr.components.len());
+        let mut fields = Vec::with_capacity(lr.components.len() * mean.len());
+        for c in &lr.components {
+            let s = c.eigenvalue.sqrt();
+            directions.push(c.direction.map(|v| v as f32));
+            fields.extend(c.field.iter().map(|f| (f * s) as f32));
+        }
+        Self { mean, eigenvalues: lr.components.iter().map(|c| c.eigenvalue).collect(), basis: PartBasis::Factored { directions, fields } }
+    }
+
+    /// Number of components.
+    pub fn rank(&self) -> usize {
+        self.eigenvalues.len()
+    }
+
+    /// The core's view of the basis (the same code the device runs).
+    pub fn core_basis(&self) -> Result<Basis<'_>, ModelError> {
+        let n = self.mean.len();
+        Ok(match &self.basis {
+            PartBasis::Factored { directions, fields } => Basis::Factored(FactoredBasis::new(fields, directions, n)?),
+            PartBasis::Dense { values } => Basis::Dense(DenseBasis::new(values, self.rank(), n)?),
+        })
+    }
+
+    /// `mean + Σ coeffs[k] · basis_k`.
+    pub fn instance(&self, coeffs: &[f32]) -> Result<Vec<[f32; 3]>, ModelError> {
+        let mut out = self.mean.clone();
+        self.core_basis()?.add_instance(coeffs, &mut out)?;
+        Ok(out)
+    }
+}
+
+/// Everything the model file records besides the arrays.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelMetadata {
+    /// Always `gpmm-model`.
+    pub format: String,
+    /// File format version.
+    pub version: u32,
+    /// Kernel name (one of the nine, or e.g. `pca` for learned models).
+    pub kernel: String,
+    /// Kernel hyperparameters used.
+    pub hyperparameters: Hyperparameters,
+    /// Nyström sample size.
+    pub nystrom_points: usize,
+    /// Nyström sample seed.
+    pub nystrom_seed: u64,
+    /// Exact trace of the shape kernel matrix (mm²).
+    pub shape_trace: f64,
+    /// Exact trace of the colour kernel matrix.
+    pub color_trace: f64,
+    /// Landmark scheme (e.g. `ibug68`).
+    pub landmark_scheme: String,
+    /// Where the template came from.
+    pub template: Provenance,
+    /// Units of positions.
+    pub units: String,
+    /// The program that wrote the file.
+    pub created_by: String,
+}
+
+/// The current model file format version.
+pub const MODEL_VERSION: u32 = 1;
+
+/// A Gaussian-process morphable model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GpModel {
+    /// Shape part (mm).
+    pub shape: ModelPart,
+    /// Albedo part (linear RGB).
+    pub color: ModelPart,
+    /// Triangles (vertex indices).
+    pub triangles: Vec<[u32; 3]>,
+    /// Landmark vertex ids.
+    pub landmarks: Vec<u32>,
+    /// Metadata.
+    pub metadata: ModelMetadata,
+}
+
+impl GpModel {
+    /// Number of vertices.
+    pub fn vertices(&self) -> usize {
+        self.shape.mean.len()
+    }
+
+    /// Fraction of the shape kernel's trace the model keeps.
+    pub fn captured_shape(&self) -> f64 {
+        fraction(&self.shape.eigenvalues, self.metadata.shape_trace)
+    }
+
+    /// Fraction of the colour kernel's trace the model keeps.
+    pub fn captured_color(&self) -> f64 {
+        fraction(&self.color.eigenvalues, self.metadata.color_trace)
+    }
+
+    /// The mesh for given coefficients (missing coefficients are zero; colours clamped to [0,1]).
+    pub fn instance(&self, shape: &[f32], color: &[f32]) -> Result<Mesh, ModelError> {
+        let p = self.shape.instance(shape)?;
+        let c = self.color.instance(color)?;
+        Ok(Mesh {
+            positions: p.iter().map(|v| v.map(f64::from)).collect(),
+            colors: c.iter().map(|v| v.map(|x| f64::from(x).clamp(0.0, 1.0))).collect(),
+            triangles: self.triangles.clone(),
+        })
+    }
+
+    /// A random instance: all coefficients drawn from N(0, 1).
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> Result<Mesh, ModelError> {
+        let a: Vec<f32> = (0..self.shape.rank()).map(|_| rng.sample(StandardNormal)).collect();
+        let b: Vec<f32> = (0..self.color.rank()).map(|_| rng.sample(StandardNormal)).collect();
+        self.instance(&a, &b)
+    }
+}
+
+fn fraction(eigenvalues: &[f64], trace: f64) -> f64 {
+    if trace > 0.0 {
+        (eigenvalues.iter().sum::<f64>() / trace).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Settings of a model build.
+#[derive(Debug, Clone)]
+pub struct BuildOptions {
+    /// Which of the nine kernels.
+    pub kernel: ModelKernel,
+    /// Kernel hyperparameters.
+    pub hyperparameters: Hyperparameters,
+    /// Shape rank.
+    pub rank_shape: RankSpec,
+    /// Colour rank.
+    pub rank_color: RankSpec,
+    /// Nyström settings.
+    pub nystrom: NystromOptions,
+}
+
+/// Which stage a build is in (for progress reporting).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BuildStage {
+    /// Shape kernel: scalar problem `done` of `total` finished.
+    Shape,
+    /// Colour kernel: scalar problem `done` of `total` finished.
+    Color,
+}
+
+/// Builds a model from a normalized template.
+pub fn build_model(template: &Template, opts: &BuildOptions, mut progress: impl FnMut(BuildStage, usize, usize)) -> GpModel {
+    let mesh = &template.mesh;
+    let points: Vec<KernelPoint> = mesh.positions.iter().zip(&mesh.colors).map(|(p, c)| KernelPoint { position: *p, color: *c }).collect();
+    let hp = &opts.hyperparameters;
+    let shape_lr =
+        low_rank(&opts.kernel.shape_kernel(hp), &points, opts.rank_shape, &opts.nystrom, |d, t| progress(BuildStage::Shape, d, t));
+    let color_lr =
+        low_rank(&opts.kernel.albedo_kernel(hp), &points, opts.rank_color, &opts.nystrom, |d, t| progress(BuildStage::Color, d, t));
+    let to32 = |v: &[[f64; 3]]| v.iter().map(|p| p.map(|x| x as f32)).collect::<Vec<_>>();
+    GpModel {
+        shape: ModelPart::from_low_rank(to32(&mesh.positions), &shape_lr),
+        color: ModelPart::from_low_rank(to32(&mesh.colors), &color_lr),
+        triangles: mesh.triangles.clone(),
+        landmarks: template.landmarks.clone(),
+        metadata: ModelMetadata {
+            format: "gpmm-model".into(),
+            version: MODEL_VERSION,
+            kernel: opts.kernel.name().into(),
+            hyperparameters: hp.clone(),
+            nystrom_points: opts.nystrom.points.min(points.len()),
+            nystrom_seed: opts.nystrom.seed,
+            shape_trace: shape_lr.trace,
+            color_trace: color_lr.trace,
+            landmark_scheme: template.scheme.clone(),
+            template: template.provenance.clone(),
+            units: "mm".into(),
+            created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION")).into(),
+        },
+    }
+}

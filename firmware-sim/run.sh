@@ -1,0 +1,125 @@
+#!/usr/bin/env bash
+# Builds the firmware, runs it under QEMU and decodes its defmt log.
+#
+#   firmware-sim/run.sh [--profile m4f|m7] [--data FILE] [--timeout SECONDS]
+#   firmware-sim/run.sh --elf ELF [--data FILE] ...     (run a built ELF; cargo's runner)
+#
+# stdout: the decoded log lines, then one machine-readable line
+#   GPMM_FIGURES {"instructions":…,"stack_peak_bytes":…,"checksum":…,"flash_bytes":…,
+#                 "ram_static_bytes":…,…}
+# stderr: progress, build output, sizes.
+# Exit status: 0 if the firmware reported status=ok and exited through semihosting with
+# 0; non-zero otherwise (build failure, firmware failure, timeout, undecodable log).
+#
+# Environment: GPMM_FW_TOOLCHAIN=auto|rustup|debian (see install-deps.sh).
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+target=thumbv7em-none-eabihf
+profile=m4f
+data=""
+elf=""
+timeout_s=300
+log() { echo "run.sh: $*" >&2; }
+die() { log "$*"; exit 1; }
+
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --profile) profile="${2:?--profile needs m4f or m7}"; shift 2 ;;
+        --data) data="${2:?--data needs a file}"; shift 2 ;;
+        --elf) elf="${2:?--elf needs a file}"; shift 2 ;;
+        --timeout) timeout_s="${2:?--timeout needs seconds}"; shift 2 ;;
+        -h|--help) sed -n '2,15p' "${BASH_SOURCE[0]}"; exit 0 ;;
+        *) die "unknown argument $1 (see --help)" ;;
+    esac
+done
+case "$profile" in m4f|m7) ;; *) die "unknown profile $profile (m4f or m7)" ;; esac
+if [ -n "$data" ]; then
+    [ -f "$data" ] || die "no such data file: $data"
+    data="$(cd "$(dirname "$data")" && pwd)/$(basename "$data")"
+fi
+
+# 1. Tools (idempotent; fast when everything is there). Last line: toolchain=…
+toolchain="$("$here/install-deps.sh" | tail -n 1)"
+toolchain="${toolchain#toolchain=}"
+decoder="$here/target/host/release/gpmm-defmt-decode"
+
+# 2. Build (unless an ELF was given).
+if [ -z "$elf" ]; then
+    features=()
+    [ "$profile" = m7 ] && features=(--features m7)
+    cd "$here"
+    # Outer settings that would change what or where cargo builds (e.g. when a test
+    # under cargo calls this script) do not apply to the firmware.
+    unset RUSTFLAGS CARGO_ENCODED_RUSTFLAGS CARGO_BUILD_RUSTFLAGS CARGO_BUILD_TARGET CARGO_TARGET_DIR CARGO_BUILD_TARGET_DIR
+    args=(build --release --locked --target "$target" --target-dir "$here/target" "${features[@]}")
+    log "building ($toolchain toolchain, profile $profile)"
+    if [ "$toolchain" = debian ]; then
+        RUSTC=/usr/bin/rustc RUSTC_BOOTSTRAP=1 /usr/bin/cargo "${args[@]}" -Z build-std=core
+    else
+        env -u RUSTC -u RUSTC_BOOTSTRAP cargo "${args[@]}"
+    fi
+    elf="$here/target/$target/release/gpmm-firmware-sim"
+fi
+[ -f "$elf" ] || die "no ELF at $elf"
+
+# 3. The memory map the ELF was linked with (symbols from memory-*.x).
+sym() { arm-none-eabi-nm "$elf" | awk -v s="$2" '$3 == s { print $1 }' | head -n 1 | sed 's/^/0x/'; }
+ram_size=$(( $(sym "$elf" _gpmm_ram_size) ))
+flash_size=$(( $(sym "$elf" _gpmm_flash_size) ))
+part_start=$(( $(sym "$elf" _gpmm_data_start) ))
+part_end=$(( $(sym "$elf" _gpmm_data_end) ))
+part_bytes=$(( part_end - part_start ))
+code_budget=$(( flash_size - part_bytes ))
+case "$ram_size" in
+    196608) elf_profile=m4f; machine=(-M mps2-an386 -cpu cortex-m4) ;;
+    524288) elf_profile=m7; machine=(-M mps2-an500 -cpu cortex-m7) ;;
+    *) die "ELF has an unknown memory map (RAM $ram_size bytes)" ;;
+esac
+part_hex=$(printf '0x%08x' "$part_start")
+
+# 4. Sizes: flash = text + data (initial values of .data live in flash), static RAM = data + bss.
+read -r text dat bss _ < <(arm-none-eabi-size -B "$elf" | tail -n 1)
+flash_bytes=$(( text + dat ))
+ram_static_bytes=$(( dat + bss ))
+arm-none-eabi-size -B "$elf" >&2
+log "profile $elf_profile: flash $flash_bytes of $code_budget bytes for code (+ $part_bytes bytes data partition at $part_hex, $flash_size in all); static RAM $ram_static_bytes of $ram_size bytes"
+
+# 5. Run under QEMU. -icount shift=0: 1 instruction = 1 ns of virtual time, so SysTick
+# (25 MHz) counts instructions / 40. Semihosting output (the raw defmt stream) goes to
+# QEMU's stdout; nothing else writes there (no display, monitor or serial).
+loader=()
+if [ -n "$data" ]; then
+    data_bytes=$(stat -c %s "$data")
+    [ "$data_bytes" -le "$part_bytes" ] || die "$data is $data_bytes bytes; the $elf_profile data partition holds $part_bytes"
+    loader=(-device "loader,file=$data,addr=$part_hex")
+    log "data partition: $data ($data_bytes bytes) at $part_hex"
+fi
+raw="$here/target/defmt-$elf_profile.raw"
+mkdir -p "$here/target"
+qemu=(qemu-system-arm "${machine[@]}" -display none -monitor none -serial null
+      -semihosting-config enable=on,target=native -icount shift=0 -kernel "$elf" "${loader[@]}")
+log "${qemu[*]}"
+set +e
+timeout "$timeout_s" "${qemu[@]}" </dev/null >"$raw"
+qemu_rc=$?
+set -e
+
+# 6. Decode.
+set +e
+"$decoder" "$elf" --figures flash_bytes="$flash_bytes" ram_static_bytes="$ram_static_bytes" \
+    flash_code_budget_bytes="$code_budget" ram_budget_bytes="$ram_size" qemu_exit="$qemu_rc" <"$raw" \
+    | tee "$here/target/defmt-$elf_profile.log"
+decode_rc=${PIPESTATUS[0]}
+set -e
+
+if [ "$qemu_rc" -eq 124 ]; then
+    die "QEMU timed out after ${timeout_s}s (the firmware did not exit)"
+elif [ "$qemu_rc" -ne 0 ]; then
+    die "the firmware failed (QEMU exit status $qemu_rc)"
+elif [ "$decode_rc" -ne 0 ]; then
+    die "the defmt log did not decode (status $decode_rc)"
+elif ! grep -q '^INFO  status=ok$' "$here/target/defmt-$elf_profile.log"; then
+    die "the firmware exited without status=ok"
+fi
+log "ok"

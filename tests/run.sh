@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# The whole gpmm test suite, from a fresh checkout on a fresh Debian machine.
+# Installs what it needs, then: formatting, lints, unit + integration tests of the workspace.
+# Usage: bash tests/run.sh            (GPMM_DATA overrides the data directory, default ../shared/data)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+
+step "toolchain"
+if ! command -v cargo >/dev/null 2>&1; then
+    echo "cargo not found: install Rust (rustup) first" >&2
+    exit 1
+fi
+cargo --version
+rustup component list --installed 2>/dev/null | grep -q rustfmt || rustup component add rustfmt clippy 2>/dev/null || true
+
+export GPMM_DATA="${GPMM_DATA:-$(cd .. && pwd)/shared/data}"
+if [ ! -d "$GPMM_DATA" ]; then
+    echo "warning: data directory $GPMM_DATA is missing; tests that need the template will say so" >&2
+fi
+
+step "cargo fmt --check"
+cargo fmt --all -- --check
+
+step "cargo clippy -D warnings"
+cargo clippy --workspace --all-targets -- -D warnings
+
+step "cargo test (workspace)"
+cargo test --workspace 2>&1 | tee target/test-output.txt
+# Print one closing summary line over all test binaries.
+passed=$(grep -Eo '^test result: [a-zA-Z]+\. [0-9]+ passed' target/test-output.txt | awk '{s+=$4} END {print s+0}')
+failed=$(grep -Eo '[0-9]+ failed' target/test-output.txt | awk '{s+=$1} END {print s+0}')
+echo "${passed} passed, ${failed} failed"
