@@ -16,6 +16,8 @@ cargo --version
 rustup component list --installed 2>/dev/null | grep -q rustfmt || rustup component add rustfmt clippy 2>/dev/null || true
 
 export GPMM_DATA="${GPMM_DATA:-$(cd .. && pwd)/shared/data}"
+# In CI the data must be there: tests that need it fail instead of skipping.
+if [ -n "${CI:-}" ]; then export GPMM_REQUIRE_DATA=1; fi
 if [ ! -d "$GPMM_DATA" ]; then
     echo "warning: data directory $GPMM_DATA is missing; tests that need the template will say so" >&2
 fi

@@ -9,6 +9,18 @@
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
+pub mod camera;
+pub mod light;
 pub mod model;
+pub mod pose;
+pub mod raster;
+pub mod shading;
+pub mod tile;
 
+pub use camera::{Camera, ScreenPoint};
+pub use light::ShLight;
 pub use model::{Basis, DenseBasis, FactoredBasis, ModelError, Vec3};
+pub use pose::{Mat3, Pose};
+pub use raster::{Cull, FrameStats, RasterError, TileRasterizer};
+pub use shading::{project_vertices, shade_vertices, vertex_normals, vertex_stage, ProjectedVertex, TriIndex, VertexError};
+pub use tile::{Fragment, Tile, TileSink, NO_TRIANGLE};

@@ -187,14 +187,21 @@ pub enum BuildStage {
 }
 
 /// Builds a model from a normalized template.
-pub fn build_model(template: &Template, opts: &BuildOptions, mut progress: impl FnMut(BuildStage, usize, usize)) -> GpModel {
+pub fn build_model(template: &Template, opts: &BuildOptions, mut progress: impl FnMut(BuildStage, usize, usize) + Send) -> GpModel {
     let mesh = &template.mesh;
     let points: Vec<KernelPoint> = mesh.positions.iter().zip(&mesh.colors).map(|(p, c)| KernelPoint { position: *p, color: *c }).collect();
     let hp = &opts.hyperparameters;
-    let shape_lr =
-        low_rank(&opts.kernel.shape_kernel(hp), &points, opts.rank_shape, &opts.nystrom, |d, t| progress(BuildStage::Shape, d, t));
-    let color_lr =
-        low_rank(&opts.kernel.albedo_kernel(hp), &points, opts.rank_color, &opts.nystrom, |d, t| progress(BuildStage::Color, d, t));
+    // Shape and colour run concurrently: each alone leaves a core idle in the eigensolver.
+    let progress = std::sync::Mutex::new(&mut progress);
+    let report = |stage, d, t| {
+        if let Ok(mut p) = progress.lock() {
+            (*p)(stage, d, t)
+        }
+    };
+    let (shape_lr, color_lr) = rayon::join(
+        || low_rank(&opts.kernel.shape_kernel(hp), &points, opts.rank_shape, &opts.nystrom, |d, t| report(BuildStage::Shape, d, t)),
+        || low_rank(&opts.kernel.albedo_kernel(hp), &points, opts.rank_color, &opts.nystrom, |d, t| report(BuildStage::Color, d, t)),
+    );
     let to32 = |v: &[[f64; 3]]| v.iter().map(|p| p.map(|x| x as f32)).collect::<Vec<_>>();
     GpModel {
         shape: ModelPart::from_low_rank(to32(&mesh.positions), &shape_lr),

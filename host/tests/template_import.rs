@@ -18,6 +18,8 @@ fn data_dir() -> Option<PathBuf> {
     };
     if dir.is_dir() {
         Some(dir)
+    } else if std::env::var_os("GPMM_REQUIRE_DATA").is_some() {
+        panic!("data directory {} is absent but GPMM_REQUIRE_DATA is set", dir.display());
     } else {
         eprintln!("SKIPPED: data directory {} is absent (set GPMM_DATA)", dir.display());
         None

@@ -1,0 +1,106 @@
+//! Rigid pose of the model in camera space: Euler angles plus a translation.
+//!
+//! Conventions (shared with scalismo-faces' `Pose`/`RenderTransforms.modelTransform`):
+//! - Model space: x to the image right in a frontal view, y up, z toward the camera, millimetres.
+//! - Camera space: the camera sits at the origin looking down −z with y up (see [`crate::camera`]).
+//! - `p_camera = R · p_model + t` with `R = Rz(roll) · Ry(yaw) · Rx(pitch)`: pitch is applied first,
+//!   then yaw, then roll. All rotations are right-handed (counter-clockwise looking down the axis
+//!   toward the origin).
+//! - Signs: positive **yaw** turns the nose (+z) toward +x, i.e. the face turns toward the
+//!   **image right** (the subject's own left); positive **pitch** tilts the nose down (toward −y);
+//!   positive **roll** turns the face counter-clockwise as seen in the image.
+
+use crate::Vec3;
+
+/// A row-major 3×3 matrix.
+pub type Mat3 = [[f32; 3]; 3];
+
+/// Pose of the model: Euler angles in radians and a translation in mm (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// Rotation about the model's y axis (radians); positive turns the face toward the image right.
+    pub yaw: f32,
+    /// Rotation about the x axis (radians); positive tilts the nose down.
+    pub pitch: f32,
+    /// Rotation about the z axis (radians); positive is counter-clockwise in the image.
+    pub roll: f32,
+    /// Translation in camera space (mm); a face 1 m in front of the camera has `z = -1000`.
+    pub translation: Vec3,
+}
+
+impl Pose {
+    /// No rotation, the model `distance_mm` in front of the camera (translation `(0, 0, -distance_mm)`).
+    pub const fn frontal(distance_mm: f32) -> Self {
+        Self { yaw: 0.0, pitch: 0.0, roll: 0.0, translation: [0.0, 0.0, -distance_mm] }
+    }
+
+    /// The rotation matrix `R = Rz(roll) · Ry(yaw) · Rx(pitch)`.
+    pub fn rotation(&self) -> Mat3 {
+        let (sy, cy) = (libm::sinf(self.yaw), libm::cosf(self.yaw));
+        let (sp, cp) = (libm::sinf(self.pitch), libm::cosf(self.pitch));
+        let (sr, cr) = (libm::sinf(self.roll), libm::cosf(self.roll));
+        let rz = [[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]];
+        let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+        let rx = [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]];
+        mat_mul(&mat_mul(&rz, &ry), &rx)
+    }
+
+    /// Maps a model-space point to camera space: `R · p + t`.
+    pub fn transform_point(&self, p: Vec3) -> Vec3 {
+        let r = mat_vec(&self.rotation(), p);
+        [r[0] + self.translation[0], r[1] + self.translation[1], r[2] + self.translation[2]]
+    }
+}
+
+/// `a · b` for 3×3 matrices.
+pub fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
+    let [b0, b1, b2] = *b;
+    a.map(|[x, y, z]| [x * b0[0] + y * b1[0] + z * b2[0], x * b0[1] + y * b1[1] + z * b2[1], x * b0[2] + y * b1[2] + z * b2[2]])
+}
+
+/// `m · v`.
+pub fn mat_vec(m: &Mat3, v: Vec3) -> Vec3 {
+    [
+        m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+        m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+        m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
+    ]
+}
+
+#[cfg(test)]
+#[allow(clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    fn close(a: Vec3, b: Vec3) -> bool {
+        a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-5)
+    }
+
+    #[test]
+    fn yaw_turns_nose_to_image_right() {
+        let p = Pose { yaw: core::f32::consts::FRAC_PI_2, ..Pose::frontal(0.0) };
+        assert!(close(p.transform_point([0.0, 0.0, 1.0]), [1.0, 0.0, 0.0]));
+    }
+
+    #[test]
+    fn pitch_tilts_nose_down() {
+        let p = Pose { pitch: core::f32::consts::FRAC_PI_2, ..Pose::frontal(0.0) };
+        assert!(close(p.transform_point([0.0, 0.0, 1.0]), [0.0, -1.0, 0.0]));
+    }
+
+    #[test]
+    fn roll_is_counter_clockwise() {
+        let p = Pose { roll: core::f32::consts::FRAC_PI_2, ..Pose::frontal(0.0) };
+        assert!(close(p.transform_point([1.0, 0.0, 0.0]), [0.0, 1.0, 0.0]));
+    }
+
+    #[test]
+    fn order_is_pitch_then_yaw_then_roll() {
+        let p = Pose { yaw: 0.3, pitch: -0.2, roll: 0.5, translation: [1.0, 2.0, 3.0] };
+        let v = [0.3, -0.7, 0.9];
+        let x = Pose { pitch: p.pitch, ..Pose::frontal(0.0) }.transform_point(v);
+        let y = Pose { yaw: p.yaw, ..Pose::frontal(0.0) }.transform_point(x);
+        let z = Pose { roll: p.roll, ..Pose::frontal(0.0) }.transform_point(y);
+        assert!(close(p.transform_point(v), [z[0] + 1.0, z[1] + 2.0, z[2] + 3.0]));
+    }
+}

@@ -1,0 +1,191 @@
+//! Per-vertex stage: area-weighted vertex normals, SH Lambert shading and projection.
+//!
+//! All outputs go to caller-provided slices (one entry per vertex); nothing allocates.
+//! Shading uses the normal rotated by the pose (the light is fixed in camera space), so a
+//! light-only change needs [`shade_vertices`] again, a pose change both [`shade_vertices`] and
+//! [`project_vertices`], and a shape change [`vertex_normals`] too ([`vertex_stage`] does all).
+
+use crate::camera::Camera;
+use crate::light::ShLight;
+use crate::pose::{mat_vec, Pose};
+use crate::Vec3;
+
+/// A vertex index type for triangle lists (`u16` on the device, `u32` on the host).
+pub trait TriIndex: Copy {
+    /// The index as `usize`.
+    fn index(self) -> usize;
+}
+
+impl TriIndex for u16 {
+    fn index(self) -> usize {
+        usize::from(self)
+    }
+}
+
+impl TriIndex for u32 {
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Why the vertex stage refused its input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VertexError {
+    /// Slices that need one entry per vertex have different lengths.
+    LengthMismatch,
+    /// A triangle refers to a vertex index `>=` the number of vertices.
+    IndexOutOfRange,
+    /// A position, albedo, pose, camera or light value is NaN or infinite.
+    NonFinite,
+}
+
+/// One vertex after the per-vertex stage: screen position, reciprocal depth and shaded colour.
+///
+/// `inv_w == 0.0` marks a vertex in front of the camera's near plane (or otherwise not
+/// projectable): the rasterizer skips every triangle using it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProjectedVertex {
+    /// Pixel x (right; pixel centres at `i + 0.5`).
+    pub x: f32,
+    /// Pixel y (down; pixel centres at `j + 0.5`).
+    pub y: f32,
+    /// `1 / w` with `w` the camera-space depth in mm (`0.0`: not projectable).
+    pub inv_w: f32,
+    /// Shaded linear RGB: albedo ⊙ irradiance.
+    pub color: Vec3,
+}
+
+impl ProjectedVertex {
+    /// An unprojectable vertex (all zero).
+    pub const INVALID: Self = Self { x: 0.0, y: 0.0, inv_w: 0.0, color: [0.0; 3] };
+}
+
+fn finite3(v: &Vec3) -> bool {
+    v.iter().all(|c| c.is_finite())
+}
+
+fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Area-weighted unit vertex normals (model space) of a counter-clockwise-outward mesh.
+///
+/// Each triangle adds its unnormalized cross product `(b − a) × (c − a)` (twice its area times
+/// its unit normal) to its three vertices; sums are then normalized. Vertices in no (non-degenerate)
+/// triangle get `[0, 0, 0]`, which shades with the ambient (band-0) light only.
+pub fn vertex_normals<I: TriIndex>(positions: &[Vec3], triangles: &[[I; 3]], normals: &mut [Vec3]) -> Result<(), VertexError> {
+    if normals.len() != positions.len() {
+        return Err(VertexError::LengthMismatch);
+    }
+    if !positions.iter().all(finite3) {
+        return Err(VertexError::NonFinite);
+    }
+    let n = positions.len();
+    if triangles.iter().any(|t| t.iter().any(|i| i.index() >= n)) {
+        return Err(VertexError::IndexOutOfRange);
+    }
+    normals.fill([0.0; 3]);
+    for t in triangles {
+        let [ia, ib, ic] = t.map(TriIndex::index);
+        let (Some(&a), Some(&b), Some(&c)) = (positions.get(ia), positions.get(ib), positions.get(ic)) else {
+            continue;
+        };
+        let f = cross(sub(b, a), sub(c, a));
+        for i in [ia, ib, ic] {
+            if let Some(nv) = normals.get_mut(i) {
+                nv[0] += f[0];
+                nv[1] += f[1];
+                nv[2] += f[2];
+            }
+        }
+    }
+    for nv in normals.iter_mut() {
+        let len2 = nv[0] * nv[0] + nv[1] * nv[1] + nv[2] * nv[2];
+        if len2 > 0.0 && len2.is_finite() {
+            let inv = 1.0 / libm::sqrtf(len2);
+            *nv = [nv[0] * inv, nv[1] * inv, nv[2] * inv];
+        } else {
+            *nv = [0.0; 3];
+        }
+    }
+    Ok(())
+}
+
+/// Sets `out[i].color = albedo[i] ⊙ light.irradiance(R · normal[i])` (R: the pose rotation).
+pub fn shade_vertices(
+    albedos: &[Vec3],
+    normals: &[Vec3],
+    pose: &Pose,
+    light: &ShLight,
+    out: &mut [ProjectedVertex],
+) -> Result<(), VertexError> {
+    if albedos.len() != out.len() || normals.len() != out.len() {
+        return Err(VertexError::LengthMismatch);
+    }
+    if !albedos.iter().all(finite3) || !normals.iter().all(finite3) || !light.coeffs.iter().all(finite3) || !pose_finite(pose) {
+        return Err(VertexError::NonFinite);
+    }
+    let r = pose.rotation();
+    for ((o, a), n) in out.iter_mut().zip(albedos).zip(normals) {
+        let e = light.irradiance(mat_vec(&r, *n));
+        o.color = [a[0] * e[0], a[1] * e[1], a[2] * e[2]];
+    }
+    Ok(())
+}
+
+fn pose_finite(pose: &Pose) -> bool {
+    pose.yaw.is_finite() && pose.pitch.is_finite() && pose.roll.is_finite() && finite3(&pose.translation)
+}
+
+/// Sets `out[i].x, y, inv_w` from `camera.project(pose · positions[i])`; unprojectable vertices get `inv_w = 0`.
+pub fn project_vertices(positions: &[Vec3], pose: &Pose, camera: &Camera, out: &mut [ProjectedVertex]) -> Result<(), VertexError> {
+    if positions.len() != out.len() {
+        return Err(VertexError::LengthMismatch);
+    }
+    let cam_ok = camera.focal.is_finite() && camera.principal.iter().all(|c| c.is_finite()) && camera.near.is_finite();
+    if !positions.iter().all(finite3) || !pose_finite(pose) || !cam_ok {
+        return Err(VertexError::NonFinite);
+    }
+    let r = pose.rotation();
+    let t = pose.translation;
+    for (o, p) in out.iter_mut().zip(positions) {
+        let q = mat_vec(&r, *p);
+        match camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) {
+            Some(s) => {
+                o.x = s.x;
+                o.y = s.y;
+                o.inv_w = s.inv_w;
+            }
+            None => {
+                o.x = 0.0;
+                o.y = 0.0;
+                o.inv_w = 0.0;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The whole per-vertex stage: normals into `normals` (scratch, one per vertex), then shading and projection into `out`.
+#[allow(clippy::too_many_arguments)]
+pub fn vertex_stage<I: TriIndex>(
+    positions: &[Vec3],
+    albedos: &[Vec3],
+    triangles: &[[I; 3]],
+    pose: &Pose,
+    camera: &Camera,
+    light: &ShLight,
+    normals: &mut [Vec3],
+    out: &mut [ProjectedVertex],
+) -> Result<(), VertexError> {
+    if albedos.len() != positions.len() || out.len() != positions.len() {
+        return Err(VertexError::LengthMismatch);
+    }
+    vertex_normals(positions, triangles, normals)?;
+    shade_vertices(albedos, normals, pose, light, out)?;
+    project_vertices(positions, pose, camera, out)
+}
