@@ -95,8 +95,12 @@ if [ -n "$data" ]; then
     loader=(-device "loader,file=$data,addr=$part_hex")
     log "data partition: $data ($data_bytes bytes) at $part_hex"
 fi
-raw="$here/target/defmt-$elf_profile.raw"
+# Per-run files (several runs may go on at once, e.g. parallel tests); copied to
+# target/defmt-$elf_profile.{raw,log} at the end for inspection (the last run wins).
 mkdir -p "$here/target"
+raw="$(mktemp "$here/target/defmt-$elf_profile.XXXXXX.raw")"
+declog="${raw%.raw}.log"
+trap 'rm -f "$raw" "$declog"' EXIT
 qemu=(qemu-system-arm "${machine[@]}" -display none -monitor none -serial null
       -semihosting-config enable=on,target=native -icount shift=0 -kernel "$elf" "${loader[@]}")
 log "${qemu[*]}"
@@ -109,9 +113,11 @@ set -e
 set +e
 "$decoder" "$elf" --figures flash_bytes="$flash_bytes" ram_static_bytes="$ram_static_bytes" \
     flash_code_budget_bytes="$code_budget" ram_budget_bytes="$ram_size" qemu_exit="$qemu_rc" <"$raw" \
-    | tee "$here/target/defmt-$elf_profile.log"
+    | tee "$declog"
 decode_rc=${PIPESTATUS[0]}
 set -e
+cp "$raw" "$here/target/defmt-$elf_profile.raw.tmp$$" && mv -f "$here/target/defmt-$elf_profile.raw.tmp$$" "$here/target/defmt-$elf_profile.raw"
+cp "$declog" "$here/target/defmt-$elf_profile.log.tmp$$" && mv -f "$here/target/defmt-$elf_profile.log.tmp$$" "$here/target/defmt-$elf_profile.log"
 
 if [ "$qemu_rc" -eq 124 ]; then
     die "QEMU timed out after ${timeout_s}s (the firmware did not exit)"
@@ -119,7 +125,7 @@ elif [ "$qemu_rc" -ne 0 ]; then
     die "the firmware failed (QEMU exit status $qemu_rc)"
 elif [ "$decode_rc" -ne 0 ]; then
     die "the defmt log did not decode (status $decode_rc)"
-elif ! grep -q '^INFO  status=ok$' "$here/target/defmt-$elf_profile.log"; then
+elif ! grep -q '^INFO  status=ok$' "$declog"; then
     die "the firmware exited without status=ok"
 fi
 log "ok"

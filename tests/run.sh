@@ -28,6 +28,11 @@ cargo fmt --all -- --check
 step "cargo clippy -D warnings"
 cargo clippy --workspace --all-targets -- -D warnings
 
+step "firmware toolchain (Debian packages, QEMU)"
+# qemu-system-arm, binutils-arm-none-eabi, a thumbv7em toolchain and the defmt decoder, when
+# missing (tests/tests/firmware_render.rs runs the firmware under QEMU and fails without them).
+bash firmware-sim/install-deps.sh
+
 step "cargo test (workspace)"
 cargo test --workspace 2>&1 | tee target/test-output.txt
 # Print one closing summary line over all test binaries.

@@ -10,6 +10,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 pub mod camera;
+pub mod checksum;
 pub mod light;
 pub mod model;
 pub mod pose;
@@ -18,6 +19,7 @@ pub mod shading;
 pub mod tile;
 
 pub use camera::{Camera, ScreenPoint};
+pub use checksum::{crc32, FrameChecksum};
 pub use light::ShLight;
 pub use model::{Basis, DenseBasis, FactoredBasis, ModelError, Vec3};
 pub use pose::{Mat3, Pose};

@@ -1,84 +1,54 @@
 //! gpmm firmware, simulated: Cortex-M4F under QEMU (mps2-an386), or on a board.
 //!
-//! What it does now (the infrastructure later work fills):
+//! What it does now (the smoke test of the renderer; fitting comes later):
 //! 1. calibrates SysTick against a loop of known instruction count (under QEMU with
 //!    `-icount shift=0` one SysTick tick is 40 instructions: 1 instruction = 1 ns of
 //!    virtual time, SysTick runs on the 25 MHz system clock);
-//! 2. reads the header of the data partition (`GPMM_DATA` in memory.x), flashed
-//!    separately from the program;
-//! 3. runs a workload from gpmm-core (a model instance from a factored basis) and
-//!    measures its instructions (`clock::measure`, within ±4);
+//! 2. reads the data partition (`GPMM_DATA` in memory.x), flashed separately from the
+//!    program: nothing there (first word erased) logs "no data partition" and exits ok;
+//!    otherwise it must hold a valid device mesh (`mesh.rs`), else the firmware fails;
+//! 3. renders the mesh with gpmm-core exactly as the host does: the vertex stage (normals,
+//!    SH shading, projection) into static buffers, then `TileRasterizer<16, 16, BIN>` into a
+//!    `FrameChecksum` sink; both stages are timed in instructions (`clock::measure`, ±4);
 //! 4. measures the stack's high-water mark (cortex-m-rt's `paint-stack`);
 //! 5. logs `key=value` figures with defmt over semihosting and exits through
-//!    semihosting: status 0 on success, 1 on any failure (panic, fault, bad calibration).
+//!    semihosting: status 0 on success, 1 on any failure (bad data, panic, fault, bad calibration).
 #![no_std]
 #![no_main]
 
 mod clock;
+mod mesh;
 mod partition;
 mod stack;
 
-use core::hint::black_box;
-
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
-use gpmm_core::{FactoredBasis, Vec3};
+use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasterizer, Vec3};
 
 /// The device profile this image was linked for (memory.x or memory-m7.x).
 const PROFILE: &str = if cfg!(feature = "m7") { "m7" } else { "m4f" };
 
-/// Vertices and rank of the stand-in workload.
-const VERTICES: usize = 256;
-const RANK: usize = 16;
+/// Largest mesh the static buffers hold (36 bytes of RAM per vertex: normal + projected vertex).
+/// `m4f`: 4,352 vertices = 153 KiB of the 192 KiB RAM (the cropped template has 4,249); with the
+/// renderer (23 KiB) that leaves about 14 KiB for the stack (peak measured: 1.6 KiB).
+const MAX_VERTICES: usize = if cfg!(feature = "m7") { 12_288 } else { 4_352 };
+/// Tile size of the renderer.
+const TILE: usize = 16;
+/// Triangles binned per tile row (8 bytes each); a row with more scans the whole list instead
+/// (never lossy, but slow: with 1,024 the template's frame overflowed 2 rows and took 80 M
+/// instead of 28 M instructions).
+const BIN: usize = 2048;
 
-/// Deterministic pseudo-random values in [-1, 1), computed at compile time (lives in flash).
-const fn pattern<const N: usize>(seed: u32) -> [f32; N] {
-    let mut out = [0.0f32; N];
-    let mut state = seed;
-    let mut i = 0;
-    while i < N {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        out[i] = (state % 2000) as f32 / 1000.0 - 1.0;
-        i += 1;
-    }
-    out
-}
-
-static FIELDS: [f32; VERTICES * RANK] = pattern(0x9e37_79b9);
-static DIRECTIONS: [Vec3; RANK] = {
-    let raw: [f32; RANK * 3] = pattern(0x85eb_ca6b);
-    let mut d = [[0.0f32; 3]; RANK];
-    let mut k = 0;
-    while k < RANK {
-        d[k] = [raw[3 * k], raw[3 * k + 1], raw[3 * k + 2]];
-        k += 1;
-    }
-    d
-};
-
-/// The measured workload: one model instance (`VERTICES × RANK` multiply-adds per axis).
-/// Returns an FNV-1a checksum over the bits of the result.
-#[inline(never)]
-fn workload() -> Result<u32, gpmm_core::ModelError> {
-    let basis = FactoredBasis::new(black_box(&FIELDS[..]), black_box(&DIRECTIONS[..]), VERTICES)?;
-    let coeffs: [f32; RANK] = black_box(pattern(0xc2b2_ae35));
-    let mut instance = [[0.0f32; 3]; VERTICES];
-    basis.add_instance(&coeffs, &mut instance)?;
-    let mut hash = 0x811c_9dc5u32;
-    for v in black_box(&instance) {
-        for x in v {
-            for b in x.to_bits().to_le_bytes() {
-                hash = (hash ^ u32::from(b)).wrapping_mul(0x0100_0193);
-            }
-        }
-    }
-    Ok(hash)
-}
+/// The renderer of this firmware (tile buffers + bin).
+type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
 
 #[entry]
 fn main() -> ! {
+    // cortex-m-rt turns these into `&'static mut` (zero-initialised ones go to .bss).
+    static mut NORMALS: [Vec3; MAX_VERTICES] = [[0.0; 3]; MAX_VERTICES];
+    static mut PROJECTED: [ProjectedVertex; MAX_VERTICES] = [ProjectedVertex::INVALID; MAX_VERTICES];
+    static mut RASTERIZER: Rasterizer = Rasterizer::new();
+
     let mut core = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
     clock::start(&mut core.SYST);
 
@@ -94,31 +64,25 @@ fn main() -> ! {
         cal.measured_2000
     );
     if !cal.ok() {
-        defmt::error!(
-            "SysTick does not count instructions (expected {=u32} ticks): run QEMU with -icount shift=0",
-            cal.expected_ticks()
-        );
+        defmt::error!("SysTick does not count instructions (expected {=u32} ticks): run QEMU with -icount shift=0", cal.expected_ticks());
         fail();
     }
 
     // 2. The data partition.
     let part = partition::region();
     defmt::info!("data_partition_addr=0x{=u32:08x} data_partition_bytes={=u32}", part.as_ptr() as u32, part.len() as u32);
-    match partition::header(part) {
-        Some(h) => defmt::info!("data_magic=0x{=u32:08x} data_head_fnv=0x{=u32:08x}", h.magic, h.head_fnv),
-        None => defmt::info!("no data partition (first word erased)"),
+    if partition::is_erased(part) {
+        defmt::info!("no data partition (first word erased)");
+    } else {
+        let m = match mesh::parse(part, MAX_VERTICES) {
+            Ok(m) => m,
+            Err(e) => {
+                defmt::error!("data partition: not a valid device mesh: {}", e);
+                fail();
+            }
+        };
+        render(&m, NORMALS, PROJECTED, RASTERIZER);
     }
-
-    // 3. The workload, timed.
-    let (result, instructions) = clock::measure(workload);
-    let checksum = match result {
-        Ok(c) => c,
-        Err(e) => {
-            defmt::error!("workload failed: {=str}", model_error_name(e));
-            fail();
-        }
-    };
-    defmt::info!("instructions={=u64} checksum={=u32}", instructions, checksum);
 
     // 4. Stack high-water mark (everything any code above has used, exception frames included).
     let peak = stack::peak_bytes();
@@ -128,10 +92,70 @@ fn main() -> ! {
     semihosting::process::exit(0)
 }
 
-fn model_error_name(e: gpmm_core::ModelError) -> &'static str {
+/// 3. Renders the device mesh into a checksum and logs the frame's figures (fails on bad data).
+fn render(m: &mesh::DeviceMesh<'_>, normals: &mut [Vec3], projected: &mut [ProjectedVertex], rasterizer: &mut Rasterizer) {
+    let n = m.positions.len();
+    let (Some(normals), Some(projected)) = (normals.get_mut(..n), projected.get_mut(..n)) else {
+        defmt::error!("mesh larger than the buffers");
+        fail();
+    };
+    defmt::info!(
+        "mesh_vertices={=u32} mesh_triangles={=u32} width={=u32} height={=u32} renderer_ram_bytes={=u32} vertex_buffers_bytes={=u32}",
+        n as u32,
+        m.triangles.len() as u32,
+        m.width,
+        m.height,
+        core::mem::size_of::<Rasterizer>() as u32,
+        (MAX_VERTICES * (core::mem::size_of::<Vec3>() + core::mem::size_of::<ProjectedVertex>())) as u32
+    );
+    let (r, vertex_instructions) =
+        clock::measure(|| vertex_stage(m.positions, m.albedo, m.triangles, &m.pose, &m.camera, &m.light, normals, projected));
+    if let Err(e) = r {
+        defmt::error!("vertex stage refused the mesh: {=str}", vertex_error_name(e));
+        fail();
+    }
+    let mut sum = FrameChecksum::new();
+    let (r, raster_instructions) =
+        clock::measure(|| rasterizer.render(projected, m.triangles, m.width, m.height, Cull::Clockwise, &mut sum));
+    let stats = match r {
+        Ok(s) => s,
+        Err(e) => {
+            defmt::error!("rasterizer refused the frame: {=str}", raster_error_name(e));
+            fail();
+        }
+    };
+    defmt::info!(
+        "vertex_instructions={=u64} raster_instructions={=u64} frame_instructions={=u64}",
+        vertex_instructions,
+        raster_instructions,
+        vertex_instructions + raster_instructions
+    );
+    defmt::info!(
+        "frame_checksum={=u32} covered_pixels={=u32} color_sum_r={=u64} color_sum_g={=u64} color_sum_b={=u64} drawn_triangles={=u32} overflow_rows={=u32}",
+        sum.value(),
+        sum.covered,
+        sum.color_sum[0],
+        sum.color_sum[1],
+        sum.color_sum[2],
+        stats.drawn,
+        stats.overflow_rows
+    );
+}
+
+fn vertex_error_name(e: gpmm_core::VertexError) -> &'static str {
     match e {
-        gpmm_core::ModelError::LengthMismatch => "LengthMismatch",
-        gpmm_core::ModelError::TooManyCoefficients => "TooManyCoefficients",
+        gpmm_core::VertexError::LengthMismatch => "LengthMismatch",
+        gpmm_core::VertexError::IndexOutOfRange => "IndexOutOfRange",
+        gpmm_core::VertexError::NonFinite => "NonFinite",
+    }
+}
+
+fn raster_error_name(e: gpmm_core::RasterError) -> &'static str {
+    match e {
+        gpmm_core::RasterError::IndexOutOfRange => "IndexOutOfRange",
+        gpmm_core::RasterError::ImageTooLarge => "ImageTooLarge",
+        gpmm_core::RasterError::TooManyTriangles => "TooManyTriangles",
+        gpmm_core::RasterError::ZeroTileSize => "ZeroTileSize",
     }
 }
 

@@ -1,6 +1,7 @@
 //! The data partition: a fixed region of flash (`GPMM_DATA` in memory.x) that holds the
 //! model blob, flashed separately from the program (QEMU: `-device loader`; a board:
-//! probe-rs). The firmware reads it in place and validates whatever it finds there.
+//! probe-rs). The firmware reads it in place and validates whatever it finds there
+//! (the device mesh: `mesh.rs`).
 
 /// Words that mean "nothing flashed": erased flash (0xFF) or QEMU's zeroed RAM.
 const ERASED: [u32; 2] = [0xffff_ffff, 0x0000_0000];
@@ -23,23 +24,11 @@ pub fn region() -> &'static [u8] {
     }
 }
 
-/// What the firmware checks of the partition so far.
-pub struct Header {
-    /// First 4 bytes, little-endian.
-    pub magic: u32,
-    /// FNV-1a of the first 256 bytes.
-    pub head_fnv: u32,
-}
-
-/// `None` if the partition looks erased (nothing was flashed).
-pub fn header(part: &[u8]) -> Option<Header> {
-    let magic = u32::from_le_bytes(part.get(..4)?.try_into().ok()?);
-    if ERASED.contains(&magic) {
-        return None;
+/// Whether nothing was flashed: the first word is erased flash (`0xFFFFFFFF`) or QEMU's
+/// zeroed RAM (`0x00000000`), or the partition is shorter than a word.
+pub fn is_erased(part: &[u8]) -> bool {
+    match part.get(..4).and_then(|b| b.try_into().ok()) {
+        Some(w) => ERASED.contains(&u32::from_le_bytes(w)),
+        None => true,
     }
-    let mut head_fnv = 0x811c_9dc5u32;
-    for b in part.iter().take(256) {
-        head_fnv = (head_fnv ^ u32::from(*b)).wrapping_mul(0x0100_0193);
-    }
-    Some(Header { magic, head_fnv })
 }

@@ -105,6 +105,80 @@ impl ScalarKernel {
     }
 }
 
+/// Several scalar kernels evaluated together: each distinct `(space, scale)` term's
+/// exponential is computed once per pair and shared by every kernel that uses it (the
+/// direction classes of one matrix kernel differ only in their weights).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KernelBank {
+    terms: Vec<(Space, f64)>, // (space, 1/scale²)
+    weights: Vec<Vec<f64>>,   // per kernel, per term
+}
+
+impl KernelBank {
+    /// Collects the distinct terms of `kernels`.
+    pub fn new(kernels: &[ScalarKernel]) -> Self {
+        let mut terms: Vec<(Space, f64)> = Vec::new();
+        for k in kernels {
+            for &(space, _, inv) in &k.terms {
+                if !terms.iter().any(|&(s, i)| s == space && i == inv) {
+                    terms.push((space, inv));
+                }
+            }
+        }
+        let weights = kernels
+            .iter()
+            .map(|k| {
+                let mut w = vec![0.0; terms.len()];
+                for &(space, weight, inv) in &k.terms {
+                    if let Some(t) = terms.iter().position(|&(s, i)| s == space && i == inv) {
+                        w[t] += weight;
+                    }
+                }
+                w
+            })
+            .collect();
+        Self { terms, weights }
+    }
+
+    /// Number of kernels.
+    pub fn len(&self) -> usize {
+        self.weights.len()
+    }
+
+    /// Whether the bank holds no kernels.
+    pub fn is_empty(&self) -> bool {
+        self.weights.is_empty()
+    }
+
+    /// Number of distinct terms (scratch length for [`KernelBank::eval_into`]).
+    pub fn term_count(&self) -> usize {
+        self.terms.len()
+    }
+
+    /// Evaluates every kernel between `a` and `b` into `out` (one value per kernel);
+    /// `scratch` must hold [`KernelBank::term_count`] values.
+    #[inline]
+    pub fn eval_into(&self, a: &KernelPoint, b: &KernelPoint, scratch: &mut [f64], out: &mut [f64]) {
+        let mut d_pos = None;
+        let mut d_mir = None;
+        let mut d_col = None;
+        for (v, &(space, inv_s2)) in scratch.iter_mut().zip(&self.terms) {
+            let d2 = match space {
+                Space::Position => *d_pos.get_or_insert_with(|| dist2(&a.position, &b.position)),
+                Space::MirroredPosition => {
+                    *d_mir.get_or_insert_with(|| dist2(&a.position, &[-b.position[0], b.position[1], b.position[2]]))
+                }
+                Space::Color => *d_col.get_or_insert_with(|| dist2(&a.color, &b.color)),
+            };
+            let arg = d2 * inv_s2;
+            *v = if arg < 40.0 { libm::exp(-arg) } else { 0.0 };
+        }
+        for (o, w) in out.iter_mut().zip(&self.weights) {
+            *o = w.iter().zip(scratch.iter()).map(|(w, v)| w * v).sum();
+        }
+    }
+}
+
 /// Orthonormal directions that share one scalar kernel.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DirectionClass {

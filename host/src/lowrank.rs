@@ -15,7 +15,7 @@
 //! merged and sorted by eigenvalue. The captured fraction is `Σ kept eigenvalues / trace(K)`
 //! with the exact trace of the full `3N x 3N` kernel matrix.
 
-use crate::kernel::{DiagonalKernel, KernelPoint, ScalarKernel};
+use crate::kernel::{DiagonalKernel, KernelBank, KernelPoint, ScalarKernel};
 use faer::{Mat, MatRef, Side};
 use rand::seq::index::sample;
 use rand::SeedableRng;
@@ -142,49 +142,95 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 
 /// Nyström eigendecomposition of one scalar kernel over `points`, keeping at most `max_rank` pairs.
 pub fn scalar_nystrom(kernel: &ScalarKernel, points: &[KernelPoint], opts: &NystromOptions, max_rank: usize) -> ScalarEigen {
+    let mut all = bank_nystrom(std::slice::from_ref(kernel), points, opts, max_rank);
+    all.pop().unwrap_or_else(|| ScalarEigen { values: Vec::new(), vectors: Mat::zeros(points.len(), 0), trace: 0.0 })
+}
+
+/// Nyström eigendecompositions of several scalar kernels over the same points and sample,
+/// sharing every kernel evaluation (see [`KernelBank`]).
+pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &NystromOptions, max_rank: usize) -> Vec<ScalarEigen> {
     let n = points.len();
-    let trace: f64 = points.iter().map(|p| kernel.eval(p, p)).sum();
+    let c = kernels.len();
+    let bank = KernelBank::new(kernels);
+    let traces: Vec<f64> = kernels.iter().map(|k| points.iter().map(|p| k.eval(p, p)).sum()).collect();
     let empty = |trace| ScalarEigen { values: Vec::new(), vectors: Mat::zeros(n, 0), trace };
-    if n == 0 || max_rank == 0 || kernel.is_zero() {
-        return empty(trace);
+    if n == 0 || max_rank == 0 || c == 0 {
+        return traces.into_iter().map(empty).collect();
     }
-    let m = opts.points.clamp(1, n);
     let t0 = std::time::Instant::now();
+    let m = opts.points.clamp(1, n);
     let mut z = sample_points(points, m, opts.seed);
     z.sort_unstable();
 
-    let knz_data = cross_matrix(kernel, points, &z);
-    let knz = MatRef::from_column_major_slice(&knz_data, n, m);
-    let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
-    let Ok(eig) = kzz.self_adjoint_eigen(Side::Lower) else {
-        return empty(trace);
-    };
-    let lambda = eig.S().column_vector();
-    let u = eig.U();
-    let lmax = (0..m).map(|i| lambda[i]).fold(0.0f64, f64::max);
-    let keep: Vec<usize> = (0..m).rev().filter(|&i| lambda[i] > opts.tolerance * lmax && lambda[i] > 0.0).collect();
-    if keep.is_empty() {
-        return empty(trace);
+    // K_NZ of every kernel at once: column j holds c stacked columns of length n.
+    let mut knz_data = vec![0.0; c * n * m];
+    knz_data.par_chunks_mut(c * n).zip(z.par_iter()).for_each(|(col, &j)| {
+        let pj = &points[j];
+        let mut scratch = vec![0.0; bank.term_count()];
+        let mut vals = vec![0.0; c];
+        for (i, pi) in points.iter().enumerate() {
+            bank.eval_into(pi, pj, &mut scratch, &mut vals);
+            for (k, v) in vals.iter().enumerate() {
+                col[k * n + i] = *v;
+            }
+        }
+    });
+    log::debug!("nystrom: N={n} m={m} classes={c}: K_NZ ({:.2?})", t0.elapsed());
+
+    let mut out = Vec::with_capacity(c);
+    let mut subspaces = Vec::with_capacity(c);
+    for (k, &trace) in traces.iter().enumerate() {
+        let knz = MatRef::from_column_major_slice_with_stride(&knz_data[k * n..], n, m, c * n);
+        let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
+        let Ok(eig) = kzz.self_adjoint_eigen(Side::Lower) else {
+            out.push(Some(empty(trace)));
+            subspaces.push(None);
+            continue;
+        };
+        let lambda = eig.S().column_vector();
+        let u = eig.U();
+        let lmax = (0..m).map(|i| lambda[i]).fold(0.0f64, f64::max);
+        let keep: Vec<usize> = (0..m).rev().filter(|&i| lambda[i] > opts.tolerance * lmax && lambda[i] > 0.0).collect();
+        if keep.is_empty() {
+            out.push(Some(empty(trace)));
+            subspaces.push(None);
+            continue;
+        }
+        if opts.refine {
+            // The Nyström extensions K_NZ u_i of K_ZZ's leading eigenvectors span the subspace
+            // (twice the rank: Rayleigh–Ritz needs room to converge); see `rayleigh_ritz_bank`.
+            let dim = keep.len().min(max_rank.saturating_mul(2).saturating_add(10));
+            let uk = Mat::from_fn(m, dim, |r, col| u[(r, keep[col])]);
+            let ext = knz * &uk;
+            subspaces.push(Some(ext.qr().compute_thin_Q()));
+            out.push(None);
+        } else {
+            out.push(Some(plain_nystrom(knz, u, lambda.iter().copied().collect(), &keep, max_rank, trace)));
+            subspaces.push(None);
+        }
     }
-    log::debug!("nystrom: N={n} m={m} kept {} of K_ZZ's eigenpairs ({:.2?})", keep.len(), t0.elapsed());
+    log::debug!("nystrom: eigendecompositions of K_ZZ ({:.2?})", t0.elapsed());
+    drop(knz_data);
     if opts.refine {
-        // The Nyström extensions K_NZ u_i of K_ZZ's leading eigenvectors span the subspace;
-        // Rayleigh–Ritz against the exact K then gives the eigenpairs (see `rayleigh_ritz`).
-        let k = keep.len().min(max_rank.saturating_mul(2).saturating_add(10));
-        let uk = Mat::from_fn(m, k, |r, c| u[(r, keep[c])]);
-        let ext = knz * &uk;
-        let q = ext.qr().compute_thin_Q();
-        log::debug!("nystrom: subspace of {k} ({:.2?})", t0.elapsed());
-        let out = rayleigh_ritz(kernel, points, q, max_rank, trace);
-        log::debug!("nystrom: rayleigh-ritz done ({:.2?})", t0.elapsed());
-        return out;
+        let refined = rayleigh_ritz_bank(&bank, points, &subspaces, max_rank, &traces);
+        for (slot, r) in out.iter_mut().zip(refined) {
+            if slot.is_none() {
+                *slot = r;
+            }
+        }
+        log::debug!("nystrom: rayleigh-ritz ({:.2?})", t0.elapsed());
     }
-    // Plain Nyström: W = U_keep Λ_keep^{-1/2}; B = K_NZ W.
+    out.into_iter().zip(traces).map(|(e, t)| e.unwrap_or_else(|| empty(t))).collect()
+}
+
+/// Plain Nyström: `K̃ = B Bᵀ` with `B = K_NZ U Λ^{-1/2}`; eigenpairs of `K̃` from `Bᵀ B = V S Vᵀ`.
+fn plain_nystrom(knz: MatRef<'_, f64>, u: MatRef<'_, f64>, lambda: Vec<f64>, keep: &[usize], max_rank: usize, trace: f64) -> ScalarEigen {
+    let m = u.nrows();
     let w = Mat::from_fn(m, keep.len(), |r, c| u[(r, keep[c])] / lambda[keep[c]].sqrt());
     let b = knz * &w;
     let c = b.transpose() * &b;
     let Ok(eig_c) = c.self_adjoint_eigen(Side::Lower) else {
-        return empty(trace);
+        return ScalarEigen { values: Vec::new(), vectors: Mat::zeros(knz.nrows(), 0), trace };
     };
     let s = eig_c.S().column_vector();
     let v = eig_c.U();
@@ -192,47 +238,86 @@ pub fn scalar_nystrom(kernel: &ScalarKernel, points: &[KernelPoint], opts: &Nyst
     let smax = (0..r).map(|i| s[i]).fold(0.0f64, f64::max);
     let top: Vec<usize> = (0..r).rev().filter(|&i| s[i] > 1e-14 * smax && s[i] > 0.0).take(max_rank).collect();
     let vt = Mat::from_fn(r, top.len(), |row, col| v[(row, top[col])] / s[top[col]].sqrt());
-    let vectors = &b * &vt;
-    ScalarEigen { values: top.iter().map(|&i| s[i]).collect(), vectors, trace }
+    ScalarEigen { values: top.iter().map(|&i| s[i]).collect(), vectors: &b * &vt, trace }
 }
 
-/// Rayleigh–Ritz refinement of orthonormal `q` (`N x k`) against the exact kernel matrix.
+/// Rayleigh–Ritz refinement of orthonormal subspaces `Q_c` (`N x k_c`) against the exact
+/// kernel matrices `K_c` of a bank.
 ///
 /// Nyström's `K̃ = K_NZ K_ZZ⁺ K_ZN` is below `K` (it underestimates every eigenvalue, most for
 /// short-range terms the sample cannot resolve). Projecting the exact `K` onto the Nyström
-/// eigenvectors (`H = Qᵀ K Q`, streamed in row blocks, never storing `K`) and diagonalizing
-/// `H` gives the best eigenpairs within that subspace (Ritz values are lower bounds that
-/// converge fast). Cost: `N²` kernel evaluations and `N² k` multiply-adds.
-fn rayleigh_ritz(kernel: &ScalarKernel, points: &[KernelPoint], q: Mat<f64>, max_rank: usize, trace: f64) -> ScalarEigen {
+/// subspace (`H = Qᵀ K Q`) and diagonalizing `H` gives the best eigenpairs within it (Ritz
+/// values are lower bounds that converge fast). `K` is streamed in row blocks and only its
+/// upper block triangle is evaluated (`H = Σ_i Q_iᵀ K_ii Q_i + Σ_{i<j} (X_ij + X_ijᵀ)` with
+/// `X_ij = Q_iᵀ K_ij Q_j`), every kernel evaluation shared by all classes of the bank.
+fn rayleigh_ritz_bank(
+    bank: &KernelBank,
+    points: &[KernelPoint],
+    qs: &[Option<Mat<f64>>],
+    max_rank: usize,
+    traces: &[f64],
+) -> Vec<Option<ScalarEigen>> {
     let n = points.len();
-    let k = q.ncols();
-    const BLOCK: usize = 128;
+    const BLOCK: usize = 96;
     let starts: Vec<usize> = (0..n).step_by(BLOCK).collect();
-    let blocks: Vec<Mat<f64>> = starts
+    let dims: Vec<usize> = qs.iter().map(|q| q.as_ref().map_or(0, |q| q.ncols())).collect();
+    let zeros = || dims.iter().map(|&k| Mat::<f64>::zeros(k, k)).collect::<Vec<_>>();
+    let h = starts
         .par_iter()
-        .map(|&start| {
+        .fold(zeros, |mut acc, &start| {
             let rows = BLOCK.min(n - start);
-            let kb = Mat::from_fn(rows, n, |r, c| kernel.eval(&points[start + r], &points[c]));
-            let qb = q.subrows(start, rows);
-            // (Q_bᵀ K_b) Q accumulated: H += Q_bᵀ (K_b Q).
-            let kq = &kb * &q;
-            qb.transpose() * &kq
+            let cols = n - start;
+            let mut kb: Vec<Mat<f64>> = qs.iter().map(|q| if q.is_some() { Mat::zeros(rows, cols) } else { Mat::zeros(0, 0) }).collect();
+            let mut scratch = vec![0.0; bank.term_count()];
+            let mut vals = vec![0.0; bank.len()];
+            for c in 0..cols {
+                let pc = &points[start + c];
+                for r in 0..rows {
+                    bank.eval_into(&points[start + r], pc, &mut scratch, &mut vals);
+                    for ((m, v), q) in kb.iter_mut().zip(&vals).zip(qs) {
+                        if q.is_some() {
+                            m[(r, c)] = *v;
+                        }
+                    }
+                }
+            }
+            for ((hk, m), q) in acc.iter_mut().zip(&kb).zip(qs) {
+                let Some(q) = q else { continue };
+                let qi = q.subrows(start, rows);
+                let diag = m.subcols(0, rows) * qi;
+                *hk += qi.transpose() * &diag;
+                if cols > rows {
+                    let upper = m.subcols(rows, cols - rows) * q.subrows(start + rows, cols - rows);
+                    let x = qi.transpose() * &upper;
+                    *hk += &x;
+                    *hk += x.transpose();
+                }
+            }
+            acc
         })
-        .collect();
-    let mut h = Mat::<f64>::zeros(k, k);
-    for b in &blocks {
-        h += b;
-    }
-    let hs = Mat::from_fn(k, k, |i, j| 0.5 * (h[(i, j)] + h[(j, i)]));
-    let Ok(eig) = hs.self_adjoint_eigen(Side::Lower) else {
-        return ScalarEigen { values: Vec::new(), vectors: Mat::zeros(n, 0), trace };
-    };
-    let theta = eig.S().column_vector();
-    let w = eig.U();
-    let order: Vec<usize> = (0..k).rev().filter(|&i| theta[i] > 0.0).take(max_rank).collect();
-    let wt = Mat::from_fn(k, order.len(), |r, c| w[(r, order[c])]);
-    ScalarEigen { values: order.iter().map(|&i| theta[i]).collect(), vectors: &q * &wt, trace }
+        .reduce(zeros, |mut a, b| {
+            for (x, y) in a.iter_mut().zip(b) {
+                *x += y;
+            }
+            a
+        });
+    qs.iter()
+        .zip(h)
+        .zip(traces)
+        .map(|((q, h), &trace)| {
+            let q = q.as_ref()?;
+            let k = q.ncols();
+            let hs = Mat::from_fn(k, k, |i, j| 0.5 * (h[(i, j)] + h[(j, i)]));
+            let eig = hs.self_adjoint_eigen(Side::Lower).ok()?;
+            let theta = eig.S().column_vector();
+            let w = eig.U();
+            let order: Vec<usize> = (0..k).rev().filter(|&i| theta[i] > 0.0).take(max_rank).collect();
+            let wt = Mat::from_fn(k, order.len(), |r, c| w[(r, order[c])]);
+            Some(ScalarEigen { values: order.iter().map(|&i| theta[i]).collect(), vectors: q * &wt, trace })
+        })
+        .collect()
 }
+
 /// Low-rank approximation of a factored kernel over `points`.
 ///
 /// `progress` is called after each scalar problem with (done, total).
@@ -249,18 +334,18 @@ pub fn low_rank(
         RankSpec::Captured(_) => usize::MAX,
     };
     let mut candidates: Vec<(f64, usize, usize, usize)> = Vec::new(); // (value, class, pair, direction)
-    let mut eigens = Vec::with_capacity(classes.len());
+    let kernels: Vec<ScalarKernel> = classes.iter().map(|c| c.kernel.clone()).collect();
+    progress(0, 1);
+    let eigens = bank_nystrom(&kernels, points, opts, max_rank);
+    progress(1, 1);
     let mut trace = 0.0;
-    for (ci, class) in classes.iter().enumerate() {
-        let e = scalar_nystrom(&class.kernel, points, opts, max_rank);
+    for (ci, (class, e)) in classes.iter().zip(&eigens).enumerate() {
         trace += e.trace * class.directions.len() as f64;
         for (pi, &val) in e.values.iter().enumerate() {
             for di in 0..class.directions.len() {
                 candidates.push((val, ci, pi, di));
             }
         }
-        eigens.push(e);
-        progress(ci + 1, classes.len());
     }
     // Stable, deterministic order: eigenvalue descending, then class, pair, direction.
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then((a.1, a.2, a.3).cmp(&(b.1, b.2, b.3))));

@@ -233,3 +233,9 @@ fn hyperparameters_toml_overrides_only_what_it_names() {
     std::fs::write(&path, "gamma = 3.0\n").unwrap();
     assert!(Hyperparameters::from_toml_file(&path).unwrap_err().to_string().contains("gamma"));
 }
+
+#[test]
+fn documented_hyperparameter_file_equals_the_defaults() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/hyperparameters.toml");
+    assert_eq!(Hyperparameters::from_toml_file(&path).unwrap(), Hyperparameters::default());
+}

@@ -12,18 +12,7 @@ use gpmm_host::mesh_io::{read_landmarks_json, read_mesh, write_ply, write_ply_wi
 use gpmm_host::template::{load_template, Mesh, Template, TemplateError, TemplateOptions, IBUG68_MIRROR_PAIRS};
 
 fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("GPMM_DATA") {
-        Some(d) => PathBuf::from(d),
-        None => Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
-    };
-    if dir.is_dir() {
-        Some(dir)
-    } else if std::env::var_os("GPMM_REQUIRE_DATA").is_some() {
-        panic!("data directory {} is absent but GPMM_REQUIRE_DATA is set", dir.display());
-    } else {
-        eprintln!("SKIPPED: data directory {} is absent (set GPMM_DATA)", dir.display());
-        None
-    }
+    gpmm_host::data::data_dir_for_tests()
 }
 
 fn template_dir() -> Option<PathBuf> {
