@@ -47,6 +47,10 @@ pub enum Command {
     Render(RenderArgs),
     /// Render a figure (see `gpmm figure --help`).
     Figure(FigureArgs),
+    /// Render synthetic faces with known truth: ICT identities, transferred albedo, random light and pose.
+    Synth(crate::demo::SynthArgs),
+    /// The main job end to end: build a model from the template scan, render, sample, draw figures.
+    Demo(crate::demo::DemoArgs),
 }
 
 /// Arguments of `gpmm build`.
@@ -349,6 +353,8 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Sample(a) => sample(a),
+        Command::Synth(a) => crate::demo::synth(a),
+        Command::Demo(a) => crate::demo::demo(a),
         Command::Render(a) => render(a),
         Command::Figure(a) => match a.figure {
             FigureCommand::Kernels(k) => figure_kernels(k),

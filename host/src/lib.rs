@@ -8,6 +8,7 @@
 
 pub mod cli;
 pub mod data;
+pub mod demo;
 pub mod device_mesh;
 pub mod figure;
 pub mod kernel;

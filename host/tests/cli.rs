@@ -166,3 +166,50 @@ fn every_command_has_help() {
         assert!(out.contains("Usage"), "{cmd:?}: {out}");
     }
 }
+
+#[test]
+fn demo_quick_writes_model_pictures_and_synthetic_faces() {
+    let Some(data) = data_dir() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    ok(&gpmm(&["demo", "--quick", "--data", data.to_str().unwrap(), "--out-dir", out.to_str().unwrap()]));
+    for f in ["model.gpmm", "info.json", "mean.png", "mean_yaw30.png", "samples.png", "kernels.png", "synth.png", "synth/truth.json"] {
+        assert!(out.join(f).is_file(), "demo wrote {f}");
+    }
+    let info: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("info.json")).unwrap()).unwrap();
+    assert_eq!(info["rank_shape"], 40);
+    let truth: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("synth/truth.json")).unwrap()).unwrap();
+    assert!(truth.to_string().contains("yaw"));
+    // A wrong data directory is a clear error.
+    let o = gpmm(&["demo", "--quick", "--data", "/nonexistent", "--out-dir", out.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("GPMM_DATA"));
+}
+
+#[test]
+fn synth_command_writes_images_landmarks_and_truth() {
+    let Some(data) = data_dir() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let ict = data.join("ict");
+    ok(&gpmm(&[
+        "synth",
+        "--ict",
+        ict.to_str().unwrap(),
+        "--count",
+        "2",
+        "--seed",
+        "3",
+        "--yaws",
+        "0,-30",
+        "--size",
+        "64",
+        "-o",
+        out.to_str().unwrap(),
+    ]));
+    let pngs = std::fs::read_dir(&out).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "png")).count();
+    let pts = std::fs::read_dir(&out).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "pts")).count();
+    assert_eq!((pngs, pts), (4, 4));
+    assert!(out.join("truth.json").is_file());
+    let o = gpmm(&["synth", "--ict", "/nonexistent/ict", "--count", "1", "-o", out.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("/nonexistent/ict"));
+}
