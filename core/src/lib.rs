@@ -11,6 +11,7 @@
 
 pub mod camera;
 pub mod checksum;
+pub mod fit;
 pub mod light;
 pub mod model;
 pub mod pose;

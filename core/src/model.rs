@@ -73,6 +73,23 @@ impl<'a> FactoredBasis<'a> {
         }
         Ok(())
     }
+
+    /// Adds `Σ_k coeffs[k] · f_k[vertex] · e_k` to `out`: one vertex of the instance (e.g. a landmark) alone.
+    pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
+        if vertex >= self.vertices {
+            return Err(ModelError::LengthMismatch);
+        }
+        if coeffs.len() > self.rank() {
+            return Err(ModelError::TooManyCoefficients);
+        }
+        for (k, (c, dir)) in coeffs.iter().zip(self.directions).enumerate() {
+            let f = self.fields.get(k * self.vertices + vertex).copied().unwrap_or(0.0) * c;
+            out[0] += f * dir[0];
+            out[1] += f * dir[1];
+            out[2] += f * dir[2];
+        }
+        Ok(())
+    }
 }
 
 /// A dense basis: `values` is `rank × vertices × 3` row-major.
@@ -96,6 +113,30 @@ impl<'a> DenseBasis<'a> {
     /// Number of components.
     pub fn rank(&self) -> usize {
         self.rank
+    }
+
+    /// Number of vertices each component covers.
+    pub fn vertices(&self) -> usize {
+        self.vertices
+    }
+
+    /// Adds `Σ_k coeffs[k] · b_k[vertex]` to `out`: one vertex of the instance alone.
+    pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
+        if vertex >= self.vertices {
+            return Err(ModelError::LengthMismatch);
+        }
+        if coeffs.len() > self.rank {
+            return Err(ModelError::TooManyCoefficients);
+        }
+        for (k, c) in coeffs.iter().enumerate() {
+            let at = (k * self.vertices + vertex) * 3;
+            if let Some([x, y, z]) = self.values.get(at..at + 3) {
+                out[0] += c * x;
+                out[1] += c * y;
+                out[2] += c * z;
+            }
+        }
+        Ok(())
     }
 
     /// Adds `Σ_k coeffs[k] · b_k` to `out` (one entry per vertex).
@@ -140,6 +181,22 @@ impl Basis<'_> {
         match self {
             Basis::Factored(b) => b.rank(),
             Basis::Dense(b) => b.rank(),
+        }
+    }
+
+    /// Number of vertices each component covers.
+    pub fn vertices(&self) -> usize {
+        match self {
+            Basis::Factored(b) => b.vertices(),
+            Basis::Dense(b) => b.vertices(),
+        }
+    }
+
+    /// Adds the linear combination of components at one vertex to `out`.
+    pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
+        match self {
+            Basis::Factored(b) => b.add_vertex(coeffs, vertex, out),
+            Basis::Dense(b) => b.add_vertex(coeffs, vertex, out),
         }
     }
 

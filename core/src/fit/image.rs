@@ -1,0 +1,239 @@
+//! Image likelihood: Gaussian foreground against a colour-histogram background, as a [`TileSink`].
+//!
+//! For every pixel the model covers, `log N(I | R, σ² I₃) − log b(I)` is added (I: target colour,
+//! R: rendered colour, b: the background density of the target's colour); uncovered pixels add 0.
+//! This is the foreground/background likelihood ratio of Schönborn et al. (2017): the whole image
+//! is explained, by the face where it is drawn and by the background model elsewhere, and the
+//! background terms of uncovered pixels cancel in every Metropolis-Hastings ratio.
+
+use super::FitError;
+use crate::tile::{Tile, TileSink, NO_TRIANGLE};
+use crate::Vec3;
+
+/// The foreground σ of Schönborn et al. on colours in [0, 1].
+pub const DEFAULT_PIXEL_SIGMA: f32 = 0.043;
+
+/// Bins per channel of the background histogram.
+pub const BG_BINS: usize = 8;
+const BG_SHIFT: u32 = 5; // 256 / 8 = 32 = 1 << 5
+const BG_TOTAL: usize = BG_BINS * BG_BINS * BG_BINS;
+
+/// A borrowed 8-bit RGB target image, row-major, top row first, linear colours (value / 255).
+#[derive(Debug, Clone, Copy)]
+pub struct TargetImage<'a> {
+    pixels: &'a [[u8; 3]],
+    width: u32,
+    height: u32,
+}
+
+impl<'a> TargetImage<'a> {
+    /// Checks `pixels.len() == width · height` and that the image is not empty.
+    pub fn new(pixels: &'a [[u8; 3]], width: u32, height: u32) -> Result<Self, FitError> {
+        if width == 0 || height == 0 {
+            return Err(FitError::EmptyImage);
+        }
+        if (width as usize).checked_mul(height as usize) != Some(pixels.len()) {
+            return Err(FitError::LengthMismatch);
+        }
+        if width > crate::raster::MAX_IMAGE_SIZE || height > crate::raster::MAX_IMAGE_SIZE {
+            return Err(FitError::BadConfig);
+        }
+        Ok(Self { pixels, width, height })
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The pixel at `(x, y)`, if inside.
+    pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        self.pixels.get(y as usize * self.width as usize + x as usize).copied()
+    }
+
+    /// The linear colour in [0, 1] nearest to the continuous pixel position `(x, y)` (pixel centres at +0.5).
+    pub fn sample(&self, x: f32, y: f32) -> Option<Vec3> {
+        if !(x >= 0.0 && y >= 0.0) {
+            return None;
+        }
+        let p = self.pixel(x as u32, y as u32)?;
+        Some(to_linear(p))
+    }
+
+    /// Row `y` (`width` pixels).
+    pub fn row(&self, y: u32) -> Option<&'a [[u8; 3]]> {
+        let w = self.width as usize;
+        let start = (y as usize).checked_mul(w)?;
+        self.pixels.get(start..start.checked_add(w)?)
+    }
+}
+
+fn to_linear(p: [u8; 3]) -> Vec3 {
+    p.map(|c| f32::from(c) * (1.0 / 255.0))
+}
+
+fn bin(p: [u8; 3]) -> usize {
+    (usize::from(p[0] >> BG_SHIFT) * BG_BINS + usize::from(p[1] >> BG_SHIFT)) * BG_BINS + usize::from(p[2] >> BG_SHIFT)
+}
+
+/// Background colour model: an `8 × 8 × 8` histogram of the target image as a density on the
+/// RGB unit cube, mixed with a uniform floor so no colour has zero density (2 KiB).
+#[derive(Debug, Clone)]
+pub struct BackgroundModel {
+    log_density: [f32; BG_TOTAL],
+}
+
+impl BackgroundModel {
+    /// The histogram of `image`, mixed as `(1 − floor) · histogram + floor · uniform` (`floor` in (0, 1]).
+    pub fn from_image(image: &TargetImage<'_>, floor: f32) -> Result<Self, FitError> {
+        if !(floor > 0.0 && floor <= 1.0) {
+            return Err(FitError::BadConfig);
+        }
+        let mut counts = [0u32; BG_TOTAL];
+        for p in image.pixels {
+            if let Some(c) = counts.get_mut(bin(*p)) {
+                *c = c.saturating_add(1);
+            }
+        }
+        let n = image.pixels.len().max(1) as f32;
+        let mut log_density = [0.0f32; BG_TOTAL];
+        for (l, c) in log_density.iter_mut().zip(counts) {
+            // Density on the unit cube: probability / bin volume, bin volume = 1 / 512.
+            let d = (1.0 - floor) * (c as f32 / n) * BG_TOTAL as f32 + floor;
+            *l = libm::logf(d);
+        }
+        Ok(Self { log_density })
+    }
+
+    /// A uniform background (density 1, log density 0 everywhere).
+    pub fn uniform() -> Self {
+        Self { log_density: [0.0; BG_TOTAL] }
+    }
+
+    /// `log b(colour)` of an 8-bit colour.
+    pub fn log_density(&self, p: [u8; 3]) -> f32 {
+        self.log_density.get(bin(p)).copied().unwrap_or(0.0)
+    }
+}
+
+/// Result of one image evaluation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImageEval {
+    /// `Σ_covered [log N(I | R, σ) − log b(I)]` (a proper log-likelihood ratio, constants included).
+    pub log_likelihood: f32,
+    /// Covered pixels.
+    pub covered: u32,
+    /// `Σ_covered |I − R|²` over the three channels.
+    pub sq_err: f32,
+}
+
+impl ImageEval {
+    /// Root-mean-square colour error per channel over covered pixels (0 if none is covered).
+    pub fn rmse(&self) -> f32 {
+        if self.covered == 0 {
+            return 0.0;
+        }
+        libm::sqrtf(self.sq_err / (3.0 * self.covered as f32))
+    }
+}
+
+/// A [`TileSink`] accumulating the image likelihood while the model is rendered.
+#[derive(Debug)]
+pub struct ImageLikelihood<'a, 'b> {
+    image: TargetImage<'a>,
+    background: &'b BackgroundModel,
+    inv_two_var: f32,
+    log_norm: f32,
+    sum: f64,
+    sq: f64,
+    covered: u32,
+}
+
+impl<'a, 'b> ImageLikelihood<'a, 'b> {
+    /// A sink comparing renders with `image`, foreground σ `sigma` (> 0).
+    pub fn new(image: TargetImage<'a>, background: &'b BackgroundModel, sigma: f32) -> Result<Self, FitError> {
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        let log_norm = -3.0 * libm::logf(sigma * libm::sqrtf(core::f32::consts::TAU));
+        Ok(Self { image, background, inv_two_var: 0.5 / (sigma * sigma), log_norm, sum: 0.0, sq: 0.0, covered: 0 })
+    }
+
+    /// Clears the sums before the next frame.
+    pub fn reset(&mut self) {
+        self.sum = 0.0;
+        self.sq = 0.0;
+        self.covered = 0;
+    }
+
+    /// The sums of the frame(s) consumed since the last reset.
+    pub fn eval(&self) -> ImageEval {
+        let ll = self.sum as f32;
+        ImageEval { log_likelihood: if ll.is_nan() { f32::NEG_INFINITY } else { ll }, covered: self.covered, sq_err: self.sq as f32 }
+    }
+}
+
+impl<const TW: usize, const TH: usize> TileSink<TW, TH> for ImageLikelihood<'_, '_> {
+    fn consume(&mut self, tile: &Tile<TW, TH>) {
+        let (x0, y0) = tile.origin();
+        let (w, h) = tile.size();
+        let (mut sum, mut sq, mut covered) = (0.0f32, 0.0f32, 0u32);
+        for ((tri_row, col_row), y) in tile.triangles().iter().zip(tile.colors()).zip(y0..y0 + h) {
+            let Some(target_row) = self.image.row(y) else { continue };
+            let Some(target_row) = target_row.get(x0 as usize..) else { continue };
+            for ((t, c), p) in tri_row.iter().zip(col_row).zip(target_row).take(w as usize) {
+                if *t == NO_TRIANGLE {
+                    continue;
+                }
+                let i = to_linear(*p);
+                let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
+                let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+                sq += d2sum;
+                sum += self.log_norm - d2sum * self.inv_two_var - self.background.log_density(*p);
+                covered += 1;
+            }
+        }
+        self.sum += f64::from(sum);
+        self.sq += f64::from(sq);
+        self.covered = self.covered.saturating_add(covered);
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_images_are_errors() {
+        let px = [[0u8; 3]; 6];
+        assert_eq!(TargetImage::new(&px, 0, 6).err(), Some(FitError::EmptyImage));
+        assert_eq!(TargetImage::new(&px, 4, 2).err(), Some(FitError::LengthMismatch));
+        let img = TargetImage::new(&px, 3, 2).unwrap();
+        assert_eq!(BackgroundModel::from_image(&img, 0.0).err(), Some(FitError::BadConfig));
+        let bg = BackgroundModel::uniform();
+        assert_eq!(ImageLikelihood::new(img, &bg, f32::NAN).err(), Some(FitError::BadConfig));
+        assert_eq!(img.pixel(3, 0), None);
+        assert_eq!(img.sample(-0.5, 0.0), None);
+    }
+
+    #[test]
+    fn histogram_is_a_density() {
+        let px: [[u8; 3]; 4] = [[0, 0, 0], [0, 0, 0], [255, 255, 255], [10, 200, 30]];
+        let img = TargetImage::new(&px, 2, 2).unwrap();
+        let bg = BackgroundModel::from_image(&img, 0.01).unwrap();
+        // Integrates to 1 over the cube: Σ density · (1/512).
+        let total: f32 = bg.log_density.iter().map(|l| libm::expf(*l) / 512.0).sum();
+        assert!((total - 1.0).abs() < 1e-4, "{total}");
+        assert!(bg.log_density([0, 0, 0]) > bg.log_density([255, 255, 255]));
+        assert!(bg.log_density([100, 100, 100]) < 0.0);
+    }
+}

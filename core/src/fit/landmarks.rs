@@ -1,0 +1,171 @@
+//! Landmark likelihood: isotropic 2-D Gaussian between target points and projected model landmarks.
+
+use super::FitError;
+use crate::{Camera, Pose, Vec3};
+
+/// Largest number of landmarks a model may have (iBUG-68 needs 68).
+pub const MAX_LANDMARKS: usize = 128;
+
+/// Target landmarks in pixels (x right, y down, pixel centres at +0.5), a validity mask and σ.
+#[derive(Debug, Clone, Copy)]
+pub struct LandmarkTarget<'a> {
+    points: &'a [[f32; 2]],
+    valid: &'a [bool],
+    sigma: f32,
+}
+
+impl<'a> LandmarkTarget<'a> {
+    /// Checks that `points` and `valid` have the same length (at most [`MAX_LANDMARKS`]), that
+    /// every valid point is finite, that one is valid at all and that `sigma > 0` (pixels).
+    pub fn new(points: &'a [[f32; 2]], valid: &'a [bool], sigma: f32) -> Result<Self, FitError> {
+        if points.len() != valid.len() {
+            return Err(FitError::LengthMismatch);
+        }
+        if points.len() > MAX_LANDMARKS {
+            return Err(FitError::TooManyLandmarks);
+        }
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        if points.iter().zip(valid).any(|(p, &v)| v && !(p[0].is_finite() && p[1].is_finite())) {
+            return Err(FitError::NonFinite);
+        }
+        if !valid.iter().any(|&v| v) {
+            return Err(FitError::NoValidLandmarks);
+        }
+        Ok(Self { points, valid, sigma })
+    }
+
+    /// A landmark σ for a `width × height` working image: 1.5 % of the larger side (about 1.9 px at 128).
+    pub fn default_sigma(width: u32, height: u32) -> f32 {
+        0.015 * width.max(height) as f32
+    }
+
+    /// Number of landmarks (valid or not).
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether there are no landmarks.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The target points.
+    pub fn points(&self) -> &'a [[f32; 2]] {
+        self.points
+    }
+
+    /// The validity mask.
+    pub fn valid(&self) -> &'a [bool] {
+        self.valid
+    }
+
+    /// σ in pixels.
+    pub fn sigma(&self) -> f32 {
+        self.sigma
+    }
+
+    /// Centroid and RMS radius (pixels) of the valid points.
+    pub fn spread(&self) -> ([f32; 2], f32) {
+        let (mut c, mut n) = ([0.0f32; 2], 0.0f32);
+        for (p, _) in self.points.iter().zip(self.valid).filter(|(_, &v)| v) {
+            c[0] += p[0];
+            c[1] += p[1];
+            n += 1.0;
+        }
+        let n = n.max(1.0);
+        c = [c[0] / n, c[1] / n];
+        let mut r2 = 0.0f32;
+        for (p, _) in self.points.iter().zip(self.valid).filter(|(_, &v)| v) {
+            r2 += (p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]);
+        }
+        (c, libm::sqrtf(r2 / n))
+    }
+}
+
+/// The landmark term of one sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LandmarkEval {
+    /// `−½ Σ_valid |x_i − t_i|² / σ²` (no normalization constant; `−∞` if a valid landmark cannot be projected).
+    pub log_likelihood: f32,
+    /// `Σ_valid |x_i − t_i|²` in px² (`∞` if a landmark cannot be projected).
+    pub sq_err: f32,
+    /// Number of valid landmarks.
+    pub count: u32,
+}
+
+impl LandmarkEval {
+    /// Root-mean-square landmark distance in pixels.
+    pub fn rmse(&self) -> f32 {
+        libm::sqrtf(self.sq_err / (self.count.max(1) as f32))
+    }
+}
+
+/// Evaluates the landmark likelihood of model landmark positions (`positions[i]` is landmark `i`,
+/// model space) under `pose` and `camera`.
+pub fn evaluate_landmarks(positions: &[Vec3], pose: &Pose, camera: &Camera, target: &LandmarkTarget<'_>) -> Result<LandmarkEval, FitError> {
+    if positions.len() != target.len() {
+        return Err(FitError::LengthMismatch);
+    }
+    let r = pose.rotation();
+    let t = pose.translation;
+    let mut sq = 0.0f32;
+    let mut count = 0u32;
+    for ((p, tp), _) in positions.iter().zip(target.points).zip(target.valid).filter(|(_, &v)| v) {
+        let q = crate::pose::mat_vec(&r, *p);
+        let Some(s) = camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) else {
+            return Ok(LandmarkEval { log_likelihood: f32::NEG_INFINITY, sq_err: f32::INFINITY, count: count + 1 });
+        };
+        let (dx, dy) = (s.x - tp[0], s.y - tp[1]);
+        sq += dx * dx + dy * dy;
+        count += 1;
+    }
+    let ll = -0.5 * sq / (target.sigma * target.sigma);
+    let ll = if ll.is_nan() { f32::NEG_INFINITY } else { ll };
+    Ok(LandmarkEval { log_likelihood: ll, sq_err: sq, count })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_projection_has_zero_error() {
+        let cam = Camera::centered(100, 100, 200.0);
+        let pose = Pose::frontal(500.0);
+        let pts = [[0.0, 0.0, 0.0], [50.0, 0.0, 0.0]];
+        let target = [[50.0, 50.0], [70.0, 50.0]];
+        let t = LandmarkTarget::new(&target, &[true, true], 2.0).unwrap();
+        let e = evaluate_landmarks(&pts, &pose, &cam, &t).unwrap();
+        assert!(e.sq_err < 1e-6, "{e:?}");
+        let shifted = [[52.0, 50.0], [70.0, 50.0]];
+        let t = LandmarkTarget::new(&shifted, &[true, true], 2.0).unwrap();
+        let e = evaluate_landmarks(&pts, &pose, &cam, &t).unwrap();
+        assert!((e.log_likelihood + 0.5).abs() < 1e-4);
+        assert!((e.rmse() - libm::sqrtf(2.0)).abs() < 1e-4);
+        // A masked point does not count.
+        let t = LandmarkTarget::new(&shifted, &[false, true], 2.0).unwrap();
+        assert!(evaluate_landmarks(&pts, &pose, &cam, &t).unwrap().sq_err < 1e-6);
+    }
+
+    #[test]
+    fn bad_targets_are_errors() {
+        let p = [[f32::NAN, 0.0], [1.0, 1.0]];
+        assert_eq!(LandmarkTarget::new(&p, &[true, true], 1.0).err(), Some(FitError::NonFinite));
+        assert!(LandmarkTarget::new(&p, &[false, true], 1.0).is_ok());
+        assert_eq!(LandmarkTarget::new(&p, &[true], 1.0).err(), Some(FitError::LengthMismatch));
+        assert_eq!(LandmarkTarget::new(&p, &[false, false], 1.0).err(), Some(FitError::NoValidLandmarks));
+        assert_eq!(LandmarkTarget::new(&p, &[false, true], 0.0).err(), Some(FitError::BadConfig));
+        assert_eq!(LandmarkTarget::new(&p, &[false, true], f32::NAN).err(), Some(FitError::BadConfig));
+    }
+
+    #[test]
+    fn behind_camera_is_impossible() {
+        let cam = Camera::centered(100, 100, 200.0);
+        let t = LandmarkTarget::new(&[[1.0, 1.0]], &[true], 1.0).unwrap();
+        let e = evaluate_landmarks(&[[0.0, 0.0, 0.0]], &Pose::frontal(-100.0), &cam, &t).unwrap();
+        assert_eq!(e.log_likelihood, f32::NEG_INFINITY);
+    }
+}

@@ -1,0 +1,188 @@
+//! Closed-form least-squares SH light from sampled visible vertices.
+//!
+//! For each sampled vertex facing the camera, the target colour at its projected position should
+//! equal `albedo_c · Σ_i B_i(R n) · L_i,c` (B: the Lambert-convolved SH basis): linear in the light.
+//! Per channel this gives 9×9 normal equations `(Σ a² B Bᵀ + λ m I) L_c = Σ a I_c B + λ m L0_c`
+//! (m: number of samples; the ridge term pulls toward a mean light `L0`), solved by Cholesky.
+//! Visibility is a back-facing test only (self-occlusion, e.g. by the nose, is ignored).
+
+use super::image::TargetImage;
+use super::FitError;
+use crate::light::{lambert_basis, SH_COEFFS};
+use crate::pose::mat_vec;
+use crate::{Camera, Pose, ShLight, Vec3};
+
+/// How vertices are sampled and the system regularized.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightSolveConfig {
+    /// Use every `stride`-th vertex (≥ 1).
+    pub stride: usize,
+    /// Start at this vertex (vary it to use different samples).
+    pub offset: usize,
+    /// Minimum cosine between the normal and the direction to the camera.
+    pub min_cos: f32,
+    /// Ridge weight per sample toward `mean`.
+    pub lambda: f32,
+    /// The light the ridge pulls toward.
+    pub mean: ShLight,
+}
+
+impl Default for LightSolveConfig {
+    fn default() -> Self {
+        Self { stride: 7, offset: 0, min_cos: 0.2, lambda: 1e-3, mean: ShLight::ambient([0.8; 3]) }
+    }
+}
+
+/// Solves the SH light explaining `image` from an instance (model-space `positions`, unit
+/// `normals`, `albedos`) under `pose` and `camera`. Errors if fewer than 9 vertices are usable
+/// or a system is singular.
+pub fn solve_light(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    albedos: &[Vec3],
+    pose: &Pose,
+    camera: &Camera,
+    image: &TargetImage<'_>,
+    config: &LightSolveConfig,
+) -> Result<ShLight, FitError> {
+    if normals.len() != positions.len() || albedos.len() != positions.len() {
+        return Err(FitError::LengthMismatch);
+    }
+    if config.stride == 0 || !(config.lambda >= 0.0 && config.lambda.is_finite()) {
+        return Err(FitError::BadConfig);
+    }
+    let r = pose.rotation();
+    let t = pose.translation;
+    let mut ata = [[[0.0f32; SH_COEFFS]; SH_COEFFS]; 3];
+    let mut atb = [[0.0f32; SH_COEFFS]; 3];
+    let mut m = 0usize;
+    let samples = positions.iter().zip(normals).zip(albedos).skip(config.offset).step_by(config.stride);
+    for ((p, n), a) in samples {
+        let nc = mat_vec(&r, *n);
+        let q = mat_vec(&r, *p);
+        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
+        let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
+        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
+        if cos.is_nan() || cos < config.min_cos {
+            continue;
+        }
+        let Some(s) = camera.project(pc) else { continue };
+        let Some(target) = image.sample(s.x, s.y) else { continue };
+        let b = lambert_basis(nc);
+        for c in 0..3 {
+            let (Some(&ac), Some(&ic), Some(mat), Some(rhs)) = (a.get(c), target.get(c), ata.get_mut(c), atb.get_mut(c)) else {
+                continue;
+            };
+            for ((row, rh), bi) in mat.iter_mut().zip(rhs.iter_mut()).zip(&b) {
+                let wi = ac * bi;
+                *rh += wi * ic;
+                for (e, bj) in row.iter_mut().zip(&b) {
+                    *e += wi * ac * bj;
+                }
+            }
+        }
+        m += 1;
+    }
+    if m < SH_COEFFS {
+        return Err(FitError::Singular);
+    }
+    let ridge = config.lambda * m as f32;
+    let mut light = ShLight::zero();
+    for c in 0..3 {
+        let (Some(mat), Some(rhs)) = (ata.get_mut(c), atb.get_mut(c)) else { continue };
+        for (i, (row, rh)) in mat.iter_mut().zip(rhs.iter_mut()).enumerate() {
+            if let Some(e) = row.get_mut(i) {
+                *e += ridge;
+            }
+            *rh += ridge * config.mean.coeffs.get(i).and_then(|v| v.get(c)).copied().unwrap_or(0.0);
+        }
+        let x = cholesky_solve(mat, rhs)?;
+        for (l, v) in light.coeffs.iter_mut().zip(x) {
+            if let Some(lc) = l.get_mut(c) {
+                *lc = v;
+            }
+        }
+    }
+    if !light.coeffs.iter().flatten().all(|v| v.is_finite()) {
+        return Err(FitError::Singular);
+    }
+    Ok(light)
+}
+
+/// Solves `A x = b` for a symmetric positive-definite 9×9 `A` (overwritten by its Cholesky factor).
+fn cholesky_solve(a: &mut [[f32; SH_COEFFS]; SH_COEFFS], b: &[f32; SH_COEFFS]) -> Result<[f32; SH_COEFFS], FitError> {
+    let n = SH_COEFFS;
+    let at = |a: &[[f32; SH_COEFFS]; SH_COEFFS], i: usize, j: usize| a.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0);
+    for j in 0..n {
+        let mut d = at(a, j, j);
+        for k in 0..j {
+            d -= at(a, j, k) * at(a, j, k);
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(FitError::Singular);
+        }
+        let d = libm::sqrtf(d);
+        if let Some(e) = a.get_mut(j).and_then(|r| r.get_mut(j)) {
+            *e = d;
+        }
+        for i in j + 1..n {
+            let mut s = at(a, i, j);
+            for k in 0..j {
+                s -= at(a, i, k) * at(a, j, k);
+            }
+            if let Some(e) = a.get_mut(i).and_then(|r| r.get_mut(j)) {
+                *e = s / d;
+            }
+        }
+    }
+    // Forward: L y = b; backward: Lᵀ x = y.
+    let mut y = [0.0f32; SH_COEFFS];
+    for i in 0..n {
+        let mut s = b.get(i).copied().unwrap_or(0.0);
+        for k in 0..i {
+            s -= at(a, i, k) * y.get(k).copied().unwrap_or(0.0);
+        }
+        if let Some(e) = y.get_mut(i) {
+            *e = s / at(a, i, i);
+        }
+    }
+    let mut x = [0.0f32; SH_COEFFS];
+    for i in (0..n).rev() {
+        let mut s = y.get(i).copied().unwrap_or(0.0);
+        for k in i + 1..n {
+            s -= at(a, k, i) * x.get(k).copied().unwrap_or(0.0);
+        }
+        if let Some(e) = x.get_mut(i) {
+            *e = s / at(a, i, i);
+        }
+    }
+    Ok(x)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing, clippy::needless_range_loop)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_solves_a_known_system() {
+        let mut a = [[0.0f32; 9]; 9];
+        for i in 0..9 {
+            for j in 0..9 {
+                a[i][j] = 1.0 / (1.0 + (i as f32 - j as f32).abs());
+            }
+            a[i][i] += 2.0;
+        }
+        let x_true = [1.0, -2.0, 0.5, 0.0, 3.0, -1.0, 0.25, 2.0, -0.75];
+        let mut b = [0.0f32; 9];
+        for i in 0..9 {
+            b[i] = (0..9).map(|j| a[i][j] * x_true[j]).sum();
+        }
+        let x = cholesky_solve(&mut a, &b).unwrap();
+        for (u, v) in x.iter().zip(&x_true) {
+            assert!((u - v).abs() < 1e-4, "{x:?}");
+        }
+        let mut z = [[0.0f32; 9]; 9];
+        assert_eq!(cholesky_solve(&mut z, &b).err(), Some(FitError::Singular));
+    }
+}

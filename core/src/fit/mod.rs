@@ -1,0 +1,83 @@
+//! Model fitting by Markov-chain Monte Carlo (DESIGN.md section 5; Schönborn et al., IJCV 2017).
+//!
+//! The pieces, one module each:
+//! - [`params`]: the parameter vector ([`FitParams`]: pose, focal length, SH light, coefficients).
+//! - [`morph`]: the borrowed [`MorphableModel`] view and the cached per-vertex [`Instance`].
+//! - [`prior`], [`landmarks`], [`image`]: log prior, landmark and image log likelihoods.
+//! - [`proposal`]: the coarse-to-fine mixture of Gaussian drift proposals.
+//! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
+//! - [`chain`]: Metropolis-Hastings with delayed acceptance (prior and landmarks, then the image).
+//! - [`normal`]: uniform and standard-normal samples over any `rand_core` generator.
+//!
+//! All log densities are `f32` and "up to an additive constant" unless stated otherwise; the
+//! chain only ever uses differences. Nothing allocates; every buffer is borrowed or fixed-size.
+
+pub mod chain;
+pub mod image;
+pub mod init;
+pub mod landmarks;
+pub mod light_fit;
+pub mod morph;
+pub mod normal;
+pub mod params;
+pub mod prior;
+pub mod proposal;
+
+pub use chain::{image_chain, image_log_likelihood, landmark_chain, Acceptance, FitResult, ImageProblem, Problem};
+pub use image::{BackgroundModel, ImageEval, ImageLikelihood, TargetImage, DEFAULT_PIXEL_SIGMA};
+pub use init::{initial_guess, landmark_pivot};
+pub use landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
+pub use light_fit::{solve_light, LightSolveConfig};
+pub use morph::{Instance, InstanceBuffers, MorphableModel};
+pub use params::FitParams;
+pub use prior::Prior;
+pub use proposal::{propose, Mixture, Proposal, ProposalContext, ProposalKind, Scale, MAX_PROPOSALS};
+
+use crate::{ModelError, RasterError, VertexError};
+
+/// Why a fit (or one of its parts) was refused. Small and `Copy`; never a panic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FitError {
+    /// Slices that must agree in length do not (per-vertex buffers, landmark lists, image pixels).
+    LengthMismatch,
+    /// A triangle or landmark refers to a vertex that does not exist.
+    IndexOutOfRange,
+    /// A parameter, target landmark or model value is NaN or infinite.
+    NonFinite,
+    /// More landmarks than [`MAX_LANDMARKS`].
+    TooManyLandmarks,
+    /// No target landmark is marked valid.
+    NoValidLandmarks,
+    /// The target image has zero width or height.
+    EmptyImage,
+    /// A standard deviation, focal length or step count is out of range (zero, negative or NaN).
+    BadConfig,
+    /// The initial parameters have zero posterior density (e.g. landmarks behind the camera).
+    ImpossibleStart,
+    /// The least-squares light system is singular.
+    Singular,
+    /// The model's bases refused the coefficients.
+    Model(ModelError),
+    /// The per-vertex stage refused its input.
+    Vertex(VertexError),
+    /// The rasterizer refused the frame.
+    Raster(RasterError),
+}
+
+impl From<ModelError> for FitError {
+    fn from(e: ModelError) -> Self {
+        FitError::Model(e)
+    }
+}
+
+impl From<VertexError> for FitError {
+    fn from(e: VertexError) -> Self {
+        FitError::Vertex(e)
+    }
+}
+
+impl From<RasterError> for FitError {
+    fn from(e: RasterError) -> Self {
+        FitError::Raster(e)
+    }
+}

@@ -1,0 +1,406 @@
+//! Gaussian drift proposals, coarse to fine, and their mixture (after scalismo-faces' standard fit).
+//!
+//! Every proposal changes one block of parameters and reports its log Hastings term
+//! `log q(x | x') − log q(x' | x)` (0 for the symmetric random walks):
+//! - **Yaw / Pitch / Roll**: one Euler angle `+= σ·ε`; the translation is compensated so that a
+//!   model-space pivot (the landmark centroid) stays where it was in camera space:
+//!   `t' = t + R p − R' p`. The shift depends on the angles only, so the map is volume-preserving
+//!   and the proposal stays symmetric.
+//! - **Distance**: the pivot's depth `w` changes by `σ·ε` mm and the focal length follows,
+//!   `f' = f · w'/w`, so the face keeps its size in the image while the perspective changes; the
+//!   Jacobian of that map gives the Hastings term `log(w'/w)`.
+//! - **Scaling**: `f' = f · exp(σ·ε)` (log-normal random walk), Hastings term `σ·ε = log(f'/f)`.
+//! - **Translation**: x and y `+= σ·ε` with σ in pixels converted to mm at the pivot's depth
+//!   (which this proposal does not change, so it stays symmetric).
+//! - **Shape / Color**: every active coefficient `+= σ·ε` (σ 0.2 / 0.1 / 0.025 as scalismo).
+//! - **Light**: every SH coefficient `+= σ·ε`. **LightIntensity**: all 27 scaled by `exp(σ·ε)`,
+//!   Hastings term `27·σ·ε`.
+//! - **LightSolve**: an independence proposal around the least-squares light `L*` of the current
+//!   geometry and albedo ([`super::light_fit`]): `L' = L* + σ·ε`. `L*` depends only on parameters
+//!   a light proposal does not change, so the reverse move draws from the same Gaussian and the
+//!   Hastings term is `log N(L; L*, σ) − log N(L'; L*, σ)`. Detailed balance holds exactly; pick σ
+//!   wider than the light posterior so a far-away current light can still be left.
+
+use super::normal::standard_normal;
+use super::params::FitParams;
+use super::FitError;
+use crate::pose::mat_vec;
+use crate::{ShLight, Vec3};
+use rand_core::Rng;
+
+/// Which block a proposal moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProposalKind {
+    /// Yaw angle (pivot-compensated).
+    Yaw,
+    /// Pitch angle (pivot-compensated).
+    Pitch,
+    /// Roll angle (pivot-compensated).
+    Roll,
+    /// Depth with focal-length compensation (σ in mm).
+    Distance,
+    /// Focal length, multiplicative (σ in log units).
+    Scaling,
+    /// Translation x and y (σ in pixels).
+    Translation,
+    /// All active shape coefficients.
+    Shape,
+    /// All active colour coefficients.
+    Color,
+    /// All SH light coefficients, additive.
+    Light,
+    /// All SH light coefficients, common multiplicative factor (σ in log units).
+    LightIntensity,
+    /// Independence proposal around the least-squares light.
+    LightSolve,
+}
+
+impl ProposalKind {
+    /// A short name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            ProposalKind::Yaw => "yaw",
+            ProposalKind::Pitch => "pitch",
+            ProposalKind::Roll => "roll",
+            ProposalKind::Distance => "distance",
+            ProposalKind::Scaling => "scaling",
+            ProposalKind::Translation => "translation",
+            ProposalKind::Shape => "shape",
+            ProposalKind::Color => "color",
+            ProposalKind::Light => "light",
+            ProposalKind::LightIntensity => "light-intensity",
+            ProposalKind::LightSolve => "light-solve",
+        }
+    }
+
+    /// Whether the proposal changes the shape coefficients (landmark positions must be recomputed).
+    pub fn changes_shape(self) -> bool {
+        self == ProposalKind::Shape
+    }
+
+    /// Whether the proposal can move the projected landmarks (pose, focal length or shape).
+    pub fn changes_geometry(self) -> bool {
+        !matches!(self, ProposalKind::Color | ProposalKind::Light | ProposalKind::LightIntensity | ProposalKind::LightSolve)
+    }
+}
+
+/// Step size class (for reports).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scale {
+    /// Large steps.
+    Coarse,
+    /// Medium steps.
+    Intermediate,
+    /// Small steps.
+    Fine,
+}
+
+impl Scale {
+    /// A short name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scale::Coarse => "coarse",
+            Scale::Intermediate => "intermediate",
+            Scale::Fine => "fine",
+        }
+    }
+}
+
+/// One mixture component.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Proposal {
+    /// The block it moves.
+    pub kind: ProposalKind,
+    /// Its step class.
+    pub scale: Scale,
+    /// Standard deviation (units per [`ProposalKind`]).
+    pub sigma: f32,
+    /// Unnormalized mixture weight (≥ 0).
+    pub weight: f32,
+}
+
+/// Capacity of a [`Mixture`].
+pub const MAX_PROPOSALS: usize = 32;
+
+/// A mixture of at most [`MAX_PROPOSALS`] proposals; the index of a component is its proposal id.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mixture {
+    entries: [Proposal; MAX_PROPOSALS],
+    len: usize,
+    total: f32,
+}
+
+const EMPTY: Proposal = Proposal { kind: ProposalKind::Shape, scale: Scale::Fine, sigma: 0.0, weight: 0.0 };
+
+impl Default for Mixture {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Mixture {
+    /// An empty mixture.
+    pub const fn new() -> Self {
+        Self { entries: [EMPTY; MAX_PROPOSALS], len: 0, total: 0.0 }
+    }
+
+    /// Adds a component (weight and σ must be finite, σ > 0, weight ≥ 0).
+    pub fn push(&mut self, p: Proposal) -> Result<(), FitError> {
+        if !(p.sigma > 0.0 && p.sigma.is_finite() && p.weight >= 0.0 && p.weight.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        let slot = self.entries.get_mut(self.len).ok_or(FitError::BadConfig)?;
+        *slot = p;
+        self.len += 1;
+        self.total += p.weight;
+        Ok(())
+    }
+
+    /// Adds coarse, intermediate and fine components of one kind with weights `share · w_i`.
+    pub fn push3(&mut self, kind: ProposalKind, sigmas: [f32; 3], weights: [f32; 3], share: f32) -> Result<(), FitError> {
+        let sum: f32 = weights.iter().sum();
+        for ((s, w), scale) in sigmas.iter().zip(weights).zip([Scale::Coarse, Scale::Intermediate, Scale::Fine]) {
+            self.push(Proposal { kind, scale, sigma: *s, weight: share * w / sum })?;
+        }
+        Ok(())
+    }
+
+    /// The components.
+    pub fn entries(&self) -> &[Proposal] {
+        self.entries.get(..self.len).unwrap_or(&[])
+    }
+
+    /// Sum of the weights.
+    pub fn total_weight(&self) -> f32 {
+        self.total
+    }
+
+    /// The component for a uniform `u` in `[0, 1)` (by cumulative weight); `None` if the mixture is empty.
+    pub fn choose(&self, u: f32) -> Option<usize> {
+        let mut acc = 0.0f32;
+        let target = u * self.total;
+        let mut last = None;
+        for (i, e) in self.entries().iter().enumerate() {
+            if e.weight <= 0.0 {
+                continue;
+            }
+            acc += e.weight;
+            last = Some(i);
+            if target < acc {
+                return Some(i);
+            }
+        }
+        last
+    }
+
+    fn add_pose(&mut self, image_size: f32, share: f32) -> Result<(), FitError> {
+        let rot_w = [0.1, 0.4, 0.5];
+        let rot_s = [0.75, 0.10, 0.01];
+        self.push3(ProposalKind::Yaw, rot_s, rot_w, 0.3 * share)?;
+        self.push3(ProposalKind::Pitch, rot_s, rot_w, 0.2 * share)?;
+        self.push3(ProposalKind::Roll, rot_s, rot_w, 0.1 * share)?;
+        self.push3(ProposalKind::Distance, [200.0, 50.0, 5.0], [0.2, 0.6, 0.2], 0.05 * share)?;
+        self.push3(ProposalKind::Scaling, [0.15, 0.05, 0.01], [0.2, 0.6, 0.2], 0.15 * share)?;
+        let px = image_size.max(1.0);
+        self.push3(ProposalKind::Translation, [0.1 * px, 0.02 * px, 0.004 * px], [0.2, 0.2, 0.6], 0.2 * share)
+    }
+
+    /// The landmark chain's default: pose (70 %) and shape (30 %) for a working image whose larger side is `image_size` px.
+    pub fn landmark_default(image_size: f32) -> Self {
+        let mut m = Self::new();
+        // 21 components: cannot exceed the capacity, and all σ/weights are valid constants.
+        let _ = m.add_pose(image_size, 0.7);
+        let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.3);
+        m
+    }
+
+    /// The image chain's default: pose 30 %, shape 25 %, colour 20 %, light 25 % (a fifth of it the least-squares light).
+    pub fn image_default(image_size: f32) -> Self {
+        let mut m = Self::new();
+        // 30 components: within the capacity, all σ/weights valid.
+        let _ = m.add_pose(image_size, 0.3);
+        let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.25);
+        let _ = m.push3(ProposalKind::Color, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.2);
+        let _ = m.push3(ProposalKind::Light, [0.05, 0.01, 0.002], [0.2, 0.5, 0.3], 0.12);
+        let _ = m.push(Proposal { kind: ProposalKind::LightIntensity, scale: Scale::Intermediate, sigma: 0.05, weight: 0.08 });
+        let _ = m.push(Proposal { kind: ProposalKind::LightSolve, scale: Scale::Fine, sigma: 0.02, weight: 0.05 });
+        m
+    }
+}
+
+/// What proposals need to know beyond the parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProposalContext {
+    /// Model-space pivot of rotations and distance changes (e.g. the landmark centroid of the mean).
+    pub pivot: Vec3,
+    /// The least-squares light for the current state (needed by [`ProposalKind::LightSolve`] only).
+    pub light_solution: Option<ShLight>,
+}
+
+fn camera_point<const KS: usize, const KC: usize>(p: &FitParams<KS, KC>, v: Vec3) -> Vec3 {
+    let q = mat_vec(&p.pose.rotation(), v);
+    let t = p.pose.translation;
+    [q[0] + t[0], q[1] + t[1], q[2] + t[2]]
+}
+
+/// Draws `x'` from `proposal` at `current` into `out`; returns the log Hastings term
+/// (`−∞` if the move is impossible, e.g. a distance behind the camera, or needs a light solution that is missing).
+pub fn propose<R: Rng + ?Sized, const KS: usize, const KC: usize>(
+    proposal: &Proposal,
+    current: &FitParams<KS, KC>,
+    ctx: &ProposalContext,
+    rng: &mut R,
+    out: &mut FitParams<KS, KC>,
+) -> f32 {
+    *out = *current;
+    let s = proposal.sigma;
+    match proposal.kind {
+        ProposalKind::Yaw | ProposalKind::Pitch | ProposalKind::Roll => {
+            let before = camera_point(current, ctx.pivot);
+            let d = s * standard_normal(rng);
+            match proposal.kind {
+                ProposalKind::Yaw => out.pose.yaw += d,
+                ProposalKind::Pitch => out.pose.pitch += d,
+                _ => out.pose.roll += d,
+            }
+            let after = camera_point(out, ctx.pivot);
+            for ((t, b), a) in out.pose.translation.iter_mut().zip(before).zip(after) {
+                *t += b - a;
+            }
+            0.0
+        }
+        ProposalKind::Distance => {
+            let w = -camera_point(current, ctx.pivot)[2];
+            let d = s * standard_normal(rng);
+            let w2 = w + d;
+            if !(w > 0.0 && w2 > 0.0) {
+                return f32::NEG_INFINITY;
+            }
+            out.pose.translation[2] -= d;
+            out.focal = current.focal * w2 / w;
+            libm::logf(w2 / w)
+        }
+        ProposalKind::Scaling => {
+            let d = s * standard_normal(rng);
+            out.focal = current.focal * libm::expf(d);
+            d
+        }
+        ProposalKind::Translation => {
+            let w = -camera_point(current, ctx.pivot)[2];
+            let mm_per_px = if current.focal > 0.0 { libm::fabsf(w) / current.focal } else { 0.0 };
+            out.pose.translation[0] += s * mm_per_px * standard_normal(rng);
+            out.pose.translation[1] += s * mm_per_px * standard_normal(rng);
+            0.0
+        }
+        ProposalKind::Shape => {
+            for c in out.shape_coeffs_mut() {
+                *c += s * standard_normal(rng);
+            }
+            0.0
+        }
+        ProposalKind::Color => {
+            for c in out.color_coeffs_mut() {
+                *c += s * standard_normal(rng);
+            }
+            0.0
+        }
+        ProposalKind::Light => {
+            for c in out.light.coeffs.iter_mut().flatten() {
+                *c += s * standard_normal(rng);
+            }
+            0.0
+        }
+        ProposalKind::LightIntensity => {
+            let d = s * standard_normal(rng);
+            let f = libm::expf(d);
+            for c in out.light.coeffs.iter_mut().flatten() {
+                *c *= f;
+            }
+            27.0 * d
+        }
+        ProposalKind::LightSolve => {
+            let Some(ls) = ctx.light_solution else {
+                return f32::NEG_INFINITY;
+            };
+            let (mut back, mut fwd) = (0.0f32, 0.0f32);
+            for ((o, c), m) in
+                out.light.coeffs.iter_mut().flatten().zip(current.light.coeffs.iter().flatten()).zip(ls.coeffs.iter().flatten())
+            {
+                let e = standard_normal(rng);
+                *o = m + s * e;
+                fwd += e * e;
+                back += (c - m) * (c - m);
+            }
+            // log N(L; L*, σ) − log N(L'; L*, σ)
+            -0.5 * back / (s * s) + 0.5 * fwd
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+    use crate::Pose;
+    use rand_core::SeedableRng;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    fn params() -> FitParams<4, 4> {
+        FitParams::new(Pose { yaw: 0.2, pitch: -0.1, roll: 0.05, translation: [5.0, -3.0, -600.0] }, 500.0, ShLight::frontal(), 4, 4)
+    }
+
+    #[test]
+    fn rotations_keep_the_pivot_fixed() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let ctx = ProposalContext { pivot: [10.0, 20.0, 30.0], light_solution: None };
+        let p = params();
+        let mut out = p;
+        for kind in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll] {
+            let h = propose(&Proposal { kind, scale: Scale::Coarse, sigma: 0.5, weight: 1.0 }, &p, &ctx, &mut rng, &mut out);
+            assert_eq!(h, 0.0);
+            let (a, b) = (camera_point(&p, ctx.pivot), camera_point(&out, ctx.pivot));
+            for i in 0..3 {
+                assert!((a[i] - b[i]).abs() < 1e-3, "{kind:?} {a:?} {b:?}");
+            }
+            assert_ne!(out.pose, p.pose);
+        }
+    }
+
+    #[test]
+    fn distance_keeps_image_scale_and_reports_jacobian() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
+        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
+        let p = params();
+        let mut out = p;
+        let h = propose(
+            &Proposal { kind: ProposalKind::Distance, scale: Scale::Coarse, sigma: 50.0, weight: 1.0 },
+            &p,
+            &ctx,
+            &mut rng,
+            &mut out,
+        );
+        let (w, w2) = (-p.pose.translation[2], -out.pose.translation[2]);
+        assert!((out.focal / w2 - p.focal / w).abs() < 1e-4);
+        assert!((h - libm::logf(w2 / w)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn light_solve_without_solution_is_impossible_and_mixture_chooses_by_weight() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
+        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
+        let p = params();
+        let mut out = p;
+        let pr = Proposal { kind: ProposalKind::LightSolve, scale: Scale::Fine, sigma: 0.1, weight: 1.0 };
+        assert_eq!(propose(&pr, &p, &ctx, &mut rng, &mut out), f32::NEG_INFINITY);
+        let mut m = Mixture::new();
+        m.push(Proposal { weight: 1.0, ..pr }).unwrap();
+        m.push(Proposal { weight: 3.0, ..pr }).unwrap();
+        assert_eq!(m.choose(0.2), Some(0));
+        assert_eq!(m.choose(0.3), Some(1));
+        assert_eq!(m.choose(0.9999), Some(1));
+        assert!(m.push(Proposal { sigma: -1.0, ..pr }).is_err());
+        assert_eq!(Mixture::new().choose(0.5), None);
+        assert!(Mixture::image_default(128.0).entries().len() <= MAX_PROPOSALS);
+        assert!(Mixture::landmark_default(128.0).total_weight() > 0.99);
+    }
+}
