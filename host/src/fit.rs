@@ -1,0 +1,734 @@
+//! Fitting a model to a photo (`gpmm fit`): crop around the landmarks, the core's landmark chain,
+//! a least-squares light, the core's image chain; `fit.json`, `overlay.png` and `fit.ply`.
+//!
+//! Steps ([`fit_prepared`]):
+//! 1. The photo is cropped and resampled to `size × size` ([`crate::photo`]); the landmarks follow.
+//! 2. Start ([`initial_guess`]): frontal mean face whose landmark centroid and spread match the
+//!    target's, at [`NOMINAL_DISTANCE_MM`] (the focal length follows from that distance).
+//! 3. Landmark chain (`prior × landmarks`, no rendering), [`FitSettings::landmark_steps`] steps.
+//! 4. The SH light of the landmark fit's best sample is solved in closed form (least squares on
+//!    all visible vertices): this "landmark-only result" is the baseline of the pixel RMSE.
+//! 5. Image chain (`prior × landmarks × image`, delayed acceptance), [`FitSettings::image_steps`] steps.
+//!
+//! Both chains run in chunks so progress can be reported; a chunk continues from the previous
+//! chunk's last sample with the same generator, and the best sample over all chunks is kept. The
+//! result is a deterministic function of the inputs, the settings and the seed: `fit.json` is
+//! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
+
+use crate::model::GpModel;
+use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
+use crate::pts::PtsError;
+use crate::render::{Background, HostRasterizer, ImageSink};
+use gpmm_core::fit::{
+    image_chain, image_log_likelihood, initial_guess, landmark_chain, landmark_pivot, solve_light, Acceptance, BackgroundModel, FitError,
+    FitParams, FitResult, ImageProblem, Instance, InstanceBuffers, LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior,
+    Problem, TargetImage, DEFAULT_PIXEL_SIGMA, MAX_LANDMARKS,
+};
+use gpmm_core::{Cull, ProjectedVertex, ShLight};
+use image::{RgbImage, Rgba, RgbaImage};
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Shape coefficient capacity of a fit (a model of higher rank is fitted in its first `KS` components).
+pub const KS: usize = 200;
+/// Colour coefficient capacity of a fit.
+pub const KC: usize = 200;
+/// The parameter vector of a host fit.
+pub type Params = FitParams<KS, KC>;
+
+/// Default working image side (pixels).
+pub const DEFAULT_SIZE: u32 = 128;
+/// Default landmark-chain steps (about 2 µs each: a few ms in all).
+pub const DEFAULT_LANDMARK_STEPS: u32 = 5000;
+/// Default image-chain steps (each renders the model once; about 1 s in all at 128×128 on one core).
+pub const DEFAULT_IMAGE_STEPS: u32 = 600;
+/// Default seed.
+pub const DEFAULT_SEED: u64 = 0;
+/// Default number of shape components fitted (the leading ones; capped by the model's rank and [`KS`]).
+pub const DEFAULT_SHAPE_RANK: usize = 50;
+/// Default number of colour components fitted.
+pub const DEFAULT_COLOR_RANK: usize = 50;
+/// Default landmark σ as a fraction of the working image side (0.64 px at 128; the core's
+/// `LandmarkTarget::default_sigma` of 1.5 % left 5 % inter-ocular landmark error on synthetic faces).
+pub const DEFAULT_LANDMARK_SIGMA: f32 = 0.005;
+/// Distance of the start pose (mm); the start focal length is chosen to match the landmark spread.
+pub const NOMINAL_DISTANCE_MM: f32 = 500.0;
+/// Uniform floor mixed into the background colour histogram.
+pub const BACKGROUND_FLOOR: f32 = 0.01;
+/// Landmark-chain steps per progress report.
+const LANDMARK_CHUNK: u32 = 1000;
+/// Image-chain steps per progress report.
+const IMAGE_CHUNK: u32 = 25;
+
+/// Why a fit failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitRunError {
+    /// The landmark file was refused.
+    #[error(transparent)]
+    Pts(#[from] PtsError),
+    /// The photo was refused.
+    #[error(transparent)]
+    Photo(#[from] PhotoError),
+    /// The settings are out of range.
+    #[error("{0}")]
+    Settings(String),
+    /// The model cannot be fitted (no landmarks, inconsistent arrays).
+    #[error("the model cannot be fitted: {0}")]
+    Model(String),
+    /// The core fitter refused its input.
+    #[error("{stage}: the core fitter refused the input ({error:?})")]
+    Core {
+        /// Which stage.
+        stage: &'static str,
+        /// The core's error.
+        error: FitError,
+    },
+}
+
+fn core(stage: &'static str) -> impl Fn(FitError) -> FitRunError {
+    move |error| FitRunError::Core { stage, error }
+}
+
+/// What a fit does (defaults: the constants above).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FitSettings {
+    /// Working image side (pixels, 16 to 1024).
+    pub size: u32,
+    /// Landmark-chain steps.
+    pub landmark_steps: u32,
+    /// Image-chain steps.
+    pub image_steps: u32,
+    /// Seed of the chains' generator.
+    pub seed: u64,
+    /// Shape components fitted (capped by the model's rank and [`KS`]).
+    pub shape_rank: usize,
+    /// Colour components fitted (capped by the model's rank and [`KC`]).
+    pub color_rank: usize,
+    /// Landmark σ as a fraction of the working image side.
+    pub landmark_sigma: f32,
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self {
+            size: DEFAULT_SIZE,
+            landmark_steps: DEFAULT_LANDMARK_STEPS,
+            image_steps: DEFAULT_IMAGE_STEPS,
+            seed: DEFAULT_SEED,
+            shape_rank: DEFAULT_SHAPE_RANK,
+            color_rank: DEFAULT_COLOR_RANK,
+            landmark_sigma: DEFAULT_LANDMARK_SIGMA,
+        }
+    }
+}
+
+impl FitSettings {
+    /// Checks the ranges.
+    pub fn validate(&self) -> Result<(), FitRunError> {
+        if !(self.landmark_sigma > 0.0 && self.landmark_sigma <= 0.5) {
+            return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", self.landmark_sigma)));
+        }
+        if !(16..=1024).contains(&self.size) {
+            return Err(FitRunError::Settings(format!("working size {} is invalid: it must be 16 to 1024 pixels", self.size)));
+        }
+        Ok(())
+    }
+}
+
+/// A photo cropped and resampled for fitting, with its landmarks in both images.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// The working image (`size × size`).
+    pub image: RgbImage,
+    /// Landmarks in the working image (continuous pixel coordinates).
+    pub landmarks: Vec<[f32; 2]>,
+    /// The crop in the original image.
+    pub crop: CropBox,
+    /// Original image size.
+    pub original_size: [u32; 2],
+    /// Landmarks in the original image.
+    pub original_landmarks: Vec<[f32; 2]>,
+}
+
+/// Crops `image` around `points` (original-image landmarks) and resamples it to `size × size`.
+pub fn prepare(image: &RgbImage, points: &[[f32; 2]], size: u32) -> Result<Prepared, FitRunError> {
+    let crop = crop_box(points, image.width(), image.height())?;
+    Ok(Prepared {
+        image: crop_resize(image, &crop, size),
+        landmarks: points.iter().map(|p| crop.to_working(*p, size)).collect(),
+        crop,
+        original_size: [image.width(), image.height()],
+        original_landmarks: points.to_vec(),
+    })
+}
+
+/// Proposal counts of one proposal kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KindCounts {
+    /// Times drawn.
+    pub proposed: u64,
+    /// Times it passed the prior-and-landmark stage.
+    pub passed: u64,
+    /// Times accepted.
+    pub accepted: u64,
+}
+
+/// Counts per proposal kind name (`yaw`, `shape`, `light-solve`, ...).
+pub type AcceptanceReport = BTreeMap<String, KindCounts>;
+
+fn add_acceptance(report: &mut AcceptanceReport, mixture: &Mixture, acc: &Acceptance) {
+    for (i, e) in mixture.entries().iter().enumerate() {
+        let c = report.entry(e.kind.name().to_string()).or_default();
+        c.proposed += u64::from(acc.proposed.get(i).copied().unwrap_or(0));
+        c.passed += u64::from(acc.passed_filter.get(i).copied().unwrap_or(0));
+        c.accepted += u64::from(acc.accepted.get(i).copied().unwrap_or(0));
+    }
+}
+
+/// The result of [`fit_prepared`] (working-image units unless stated).
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The best sample of the image chain (the fit).
+    pub params: Params,
+    /// The landmark-only result: the landmark chain's best sample with the least-squares light.
+    pub landmark_params: Params,
+    /// Landmark RMSE of the fit (px).
+    pub landmark_rmse_px: f32,
+    /// Landmark RMSE of the landmark-only result (px).
+    pub landmark_rmse_after_landmark_chain_px: f32,
+    /// Per-channel colour RMSE over covered pixels of the landmark-only result.
+    pub pixel_rmse_after_landmark_chain: f32,
+    /// Per-channel colour RMSE over covered pixels of the fit.
+    pub pixel_rmse: f32,
+    /// Log posterior of the fit (up to a constant).
+    pub log_posterior: f32,
+    /// Image log likelihood ratio of the fit (foreground against background).
+    pub image_log_likelihood: f32,
+    /// Landmark log likelihood of the fit.
+    pub landmark_log_likelihood: f32,
+    /// Pixels the fit covers.
+    pub covered_pixels: u32,
+    /// Landmark-chain counts.
+    pub landmark_acceptance: AcceptanceReport,
+    /// Image-chain counts.
+    pub image_acceptance: AcceptanceReport,
+    /// The fit's projected model landmarks.
+    pub fitted_landmarks: Vec<[f32; 2]>,
+    /// The fit rendered (transparent where the model does not cover).
+    pub render: RgbaImage,
+    /// Seconds in the landmark chain.
+    pub landmark_seconds: f64,
+    /// Seconds in the light solve and the image chain.
+    pub image_seconds: f64,
+}
+
+/// Fits `model` to a prepared photo; `progress(phase, done, total)` reports steps per chain.
+pub fn fit_prepared(
+    model: &GpModel,
+    prepared: &Prepared,
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<Outcome, FitRunError> {
+    settings.validate()?;
+    let (w, h) = (settings.size, settings.size);
+    if prepared.image.dimensions() != (w, h) {
+        return Err(FitRunError::Settings(format!("the prepared image is {:?}, not {w}x{h}", prepared.image.dimensions())));
+    }
+    let n_lm = model.landmarks.len();
+    if n_lm == 0 || n_lm > MAX_LANDMARKS {
+        return Err(FitRunError::Model(format!("it has {n_lm} landmarks (1 to {MAX_LANDMARKS} are needed)")));
+    }
+    if prepared.landmarks.len() != n_lm {
+        return Err(FitRunError::Settings(format!("{} target landmarks for a model with {n_lm}", prepared.landmarks.len())));
+    }
+    let mm = morphable(model)?;
+    let shape_len = settings.shape_rank.min(model.shape.rank()).min(KS);
+    let color_len = settings.color_rank.min(model.color.rank()).min(KC);
+
+    let valid = vec![true; n_lm];
+    let lm = LandmarkTarget::new(&prepared.landmarks, &valid, settings.landmark_sigma * w.max(h) as f32).map_err(core("landmarks"))?;
+    // Start: choose the focal length that puts the mean face at the nominal distance.
+    let ambient = ShLight::ambient([0.8; 3]);
+    let probe: Params = initial_guess(&mm, &lm, w as f32, w, h, ambient, shape_len, color_len).map_err(core("initial guess"))?;
+    let pivot = landmark_pivot(&mm, Some(&lm)).map_err(core("initial guess"))?;
+    let depth = -(probe.pose.translation[2] + pivot[2]);
+    let focal = if depth > 0.0 && depth.is_finite() { w as f32 * NOMINAL_DISTANCE_MM / depth } else { w as f32 };
+    let init: Params = initial_guess(&mm, &lm, focal, w, h, ambient, shape_len, color_len).map_err(core("initial guess"))?;
+    let prior = Prior::around(&init);
+    let lm_mix = Mixture::landmark_default(w.max(h) as f32);
+    let problem = Problem { model: mm, landmarks: lm, prior: &prior, mixture: &lm_mix, width: w, height: h };
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
+
+    // Landmark chain, in chunks.
+    let t0 = Instant::now();
+    let mut landmark_acceptance = AcceptanceReport::new();
+    let total_lm = u64::from(settings.landmark_steps);
+    let mut best_lm: Option<FitResult<KS, KC>> = None;
+    let mut cur = init;
+    let mut done = 0u32;
+    loop {
+        let k = LANDMARK_CHUNK.min(settings.landmark_steps - done);
+        let r = landmark_chain(&problem, &cur, k, &mut rng).map_err(core("landmark chain"))?;
+        add_acceptance(&mut landmark_acceptance, &lm_mix, &r.acceptance);
+        cur = r.last;
+        if best_lm.as_ref().is_none_or(|b| r.best_log_posterior > b.best_log_posterior) {
+            best_lm = Some(r);
+        }
+        done += k;
+        progress("landmark chain", u64::from(done), total_lm);
+        if done >= settings.landmark_steps {
+            break;
+        }
+    }
+    let best_lm = best_lm.ok_or(FitRunError::Core { stage: "landmark chain", error: FitError::BadConfig })?;
+    let landmark_seconds = t0.elapsed().as_secs_f64();
+
+    // Least-squares light for the landmark result, then the image chain.
+    let t1 = Instant::now();
+    let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
+    let target = TargetImage::new(&pixels, w, h).map_err(core("target image"))?;
+    let background = BackgroundModel::from_image(&target, BACKGROUND_FLOOR).map_err(core("background model"))?;
+    let ip = ImageProblem { image: target, background: &background, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let nv = mm.vertices();
+    let (mut pos, mut alb, mut nor, mut proj) =
+        (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![ProjectedVertex::INVALID; nv]);
+    let mut inst =
+        Instance::<KS, KC>::new(InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj }, nv)
+            .map_err(core("instance"))?;
+    let mut start = best_lm.best;
+    inst.update(&mm, &start, w, h).map_err(core("light solve"))?;
+    let full = LightSolveConfig { stride: 1, ..LightSolveConfig::default() };
+    if let Ok(l) = solve_light(inst.positions(), inst.normals(), inst.albedos(), &start.pose, &start.camera(w, h), &target, &full) {
+        start.light = l;
+    }
+    let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
+    let img_mix = Mixture::image_default(w.max(h) as f32);
+    let problem = Problem { mixture: &img_mix, ..problem };
+    let start_eval = image_log_likelihood(&problem, &ip, &start, &mut inst, &mut raster).map_err(core("image likelihood"))?;
+    let start_lm = landmark_chain(&problem, &start, 0, &mut Xoshiro256PlusPlus::seed_from_u64(0)).map_err(core("landmark term"))?;
+
+    let mut image_acceptance = AcceptanceReport::new();
+    let total_img = u64::from(settings.image_steps);
+    let mut best: Option<FitResult<KS, KC>> = None;
+    let mut cur = start;
+    let mut done = 0u32;
+    loop {
+        let k = IMAGE_CHUNK.min(settings.image_steps - done);
+        let r = image_chain(&problem, &ip, &cur, k, &mut inst, &mut raster, &mut rng).map_err(core("image chain"))?;
+        add_acceptance(&mut image_acceptance, &img_mix, &r.acceptance);
+        cur = r.last;
+        if best.as_ref().is_none_or(|b| r.best_log_posterior > b.best_log_posterior) {
+            best = Some(r);
+        }
+        done += k;
+        progress("image chain", u64::from(done), total_img);
+        if done >= settings.image_steps {
+            break;
+        }
+    }
+    let best = best.ok_or(FitRunError::Core { stage: "image chain", error: FitError::BadConfig })?;
+    let image_seconds = t1.elapsed().as_secs_f64();
+    let fit = best.best;
+    let img_eval = best.best_image.ok_or(FitRunError::Core { stage: "image chain", error: FitError::BadConfig })?;
+
+    // The fit's render and landmarks.
+    inst.update(&mm, &fit, w, h).map_err(core("final render"))?;
+    let mut sink = ImageSink::new(w, h, Background::Transparent);
+    raster.render(inst.projected(), mm.triangles(), w, h, Cull::Clockwise, &mut sink).map_err(|e| core("final render")(e.into()))?;
+    let fitted_landmarks = project_landmarks(&mm, &fit, w, h)?;
+
+    Ok(Outcome {
+        params: fit,
+        landmark_params: start,
+        landmark_rmse_px: best.best_landmarks.rmse(),
+        landmark_rmse_after_landmark_chain_px: start_lm.best_landmarks.rmse(),
+        pixel_rmse_after_landmark_chain: start_eval.rmse(),
+        pixel_rmse: img_eval.rmse(),
+        log_posterior: best.best_log_posterior,
+        image_log_likelihood: img_eval.log_likelihood,
+        landmark_log_likelihood: best.best_landmarks.log_likelihood,
+        covered_pixels: img_eval.covered,
+        landmark_acceptance,
+        image_acceptance,
+        fitted_landmarks,
+        render: sink.into_image(),
+        landmark_seconds,
+        image_seconds,
+    })
+}
+
+/// The core's view of a model.
+pub fn morphable(model: &GpModel) -> Result<MorphableModel<'_>, FitRunError> {
+    let shape_basis = model.shape.core_basis().map_err(|e| FitRunError::Model(format!("shape basis: {e:?}")))?;
+    let color_basis = model.color.core_basis().map_err(|e| FitRunError::Model(format!("colour basis: {e:?}")))?;
+    MorphableModel::new(&model.shape.mean, &model.color.mean, shape_basis, color_basis, &model.triangles, &model.landmarks)
+        .map_err(|e| FitRunError::Model(format!("{e:?}")))
+}
+
+/// [`project_landmarks`] for a [`GpModel`] and a square `size × size` image.
+pub fn project_landmarks_of(model: &GpModel, params: &Params, size: u32) -> Result<Vec<[f32; 2]>, FitRunError> {
+    project_landmarks(&morphable(model)?, params, size, size)
+}
+
+/// The model landmarks of `params` projected into a `width × height` image (NaN if behind the camera).
+pub fn project_landmarks(mm: &MorphableModel<'_>, params: &Params, width: u32, height: u32) -> Result<Vec<[f32; 2]>, FitRunError> {
+    let mut buf = [[0.0f32; 3]; MAX_LANDMARKS];
+    let n = mm.landmark_positions(params.shape_coeffs(), &mut buf).map_err(core("landmarks"))?;
+    let cam = params.camera(width, height);
+    Ok(buf.iter().take(n).map(|p| cam.project(params.pose.transform_point(*p)).map_or([f32::NAN; 2], |s| [s.x, s.y])).collect())
+}
+
+/// Root-mean-square distance between two point lists (px).
+pub fn rmse(a: &[[f32; 2]], b: &[[f32; 2]]) -> f32 {
+    let n = a.len().min(b.len()).max(1) as f32;
+    let s: f32 = a.iter().zip(b).map(|(p, q)| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sum();
+    (s / n).sqrt()
+}
+
+/// Wall-clock figures of a fit (the only non-deterministic part of `fit.json`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    /// Seconds in the landmark chain.
+    pub landmark_chain_seconds: f64,
+    /// Seconds in the light solve and the image chain.
+    pub image_chain_seconds: f64,
+    /// Microseconds per landmark step.
+    pub landmark_step_us: f64,
+    /// Milliseconds per image step.
+    pub image_step_ms: f64,
+}
+
+/// Log densities of the fit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LogDensities {
+    /// Log posterior (prior + landmarks + image), up to a constant.
+    pub posterior: f32,
+    /// Image log likelihood ratio (foreground against the background model).
+    pub image: f32,
+    /// Landmark log likelihood (no normalization constant).
+    pub landmarks: f32,
+}
+
+/// Acceptance counts of both chains.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AcceptanceBoth {
+    /// The landmark chain.
+    pub landmark_chain: AcceptanceReport,
+    /// The image chain.
+    pub image_chain: AcceptanceReport,
+}
+
+/// The content of `fit.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitReport {
+    /// Always `gpmm-fit`.
+    pub format: String,
+    /// Format version (1).
+    pub version: u32,
+    /// Model file as given.
+    pub model: String,
+    /// The model's kernel.
+    pub model_kernel: String,
+    /// The model's vertices.
+    pub model_vertices: usize,
+    /// The model's shape and colour ranks.
+    pub model_ranks: [usize; 2],
+    /// Shape and colour components fitted.
+    pub fitted_ranks: [usize; 2],
+    /// Image file as given.
+    pub image: String,
+    /// Landmark file as given.
+    pub landmarks_file: String,
+    /// Whether the landmark file was read as 1-based.
+    pub pts_one_based: bool,
+    /// Original image width and height.
+    pub image_size: [u32; 2],
+    /// The crop in the original image.
+    pub crop: CropBox,
+    /// Working image side.
+    pub working_size: u32,
+    /// Seed.
+    pub seed: u64,
+    /// Landmark-chain steps.
+    pub landmark_steps: u32,
+    /// Image-chain steps.
+    pub image_steps: u32,
+    /// Yaw (degrees; positive turns the face toward the image right).
+    pub yaw_deg: f32,
+    /// Pitch (degrees; positive tilts the nose down).
+    pub pitch_deg: f32,
+    /// Roll (degrees; positive is counter-clockwise in the image).
+    pub roll_deg: f32,
+    /// Translation (mm, camera space of the working image).
+    pub translation_mm: [f32; 3],
+    /// Focal length (working-image pixels).
+    pub focal_px: f32,
+    /// SH light `[9][3]` (camera space).
+    pub light: [[f32; 3]; 9],
+    /// Shape coefficients.
+    pub shape: Vec<f32>,
+    /// Colour coefficients.
+    pub color: Vec<f32>,
+    /// Landmark RMSE of the fit in working-image pixels.
+    pub landmark_rmse_px: f32,
+    /// Landmark RMSE of the fit in original-image pixels.
+    pub landmark_rmse_original_px: f32,
+    /// Landmark RMSE of the landmark-only result (working pixels).
+    pub landmark_rmse_after_landmark_chain_px: f32,
+    /// Per-channel colour RMSE on covered pixels, landmark-only result (with least-squares light).
+    pub pixel_rmse_after_landmark_chain: f32,
+    /// Per-channel colour RMSE on covered pixels, the fit.
+    pub pixel_rmse: f32,
+    /// Pixels the fit covers in the working image.
+    pub covered_pixels: u32,
+    /// Landmark + image log likelihood of the fit.
+    pub log_likelihood: f32,
+    /// The log densities separately.
+    pub log_densities: LogDensities,
+    /// Per proposal kind: proposed, passed the prior-and-landmark stage, accepted.
+    pub acceptance: AcceptanceBoth,
+    /// The fit's landmarks in the original image.
+    pub fitted_landmarks: Vec<[f32; 2]>,
+    /// Total wall-clock seconds of crop and fit (absent with `--no-timing`; not deterministic).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub seconds: Option<f64>,
+    /// Per-stage timing (absent with `--no-timing`; not deterministic).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub timing: Option<Timing>,
+}
+
+/// Where the inputs of a report came from.
+#[derive(Debug, Clone)]
+pub struct ReportInputs<'a> {
+    /// Model file as given.
+    pub model_path: &'a str,
+    /// Image file as given.
+    pub image_path: &'a str,
+    /// Landmark file as given.
+    pub pts_path: &'a str,
+    /// Whether the landmarks were read 1-based.
+    pub pts_one_based: bool,
+}
+
+/// Builds `fit.json`'s content; `seconds` is the total wall time (None: no timing fields).
+pub fn report(
+    model: &GpModel,
+    inputs: &ReportInputs<'_>,
+    prepared: &Prepared,
+    settings: &FitSettings,
+    o: &Outcome,
+    seconds: Option<f64>,
+) -> FitReport {
+    let p = &o.params;
+    let size = settings.size;
+    let fitted: Vec<[f32; 2]> = o.fitted_landmarks.iter().map(|q| prepared.crop.to_original(*q, size)).collect();
+    let timing = seconds.map(|_| Timing {
+        landmark_chain_seconds: o.landmark_seconds,
+        image_chain_seconds: o.image_seconds,
+        landmark_step_us: o.landmark_seconds * 1e6 / f64::from(settings.landmark_steps.max(1)),
+        image_step_ms: o.image_seconds * 1e3 / f64::from(settings.image_steps.max(1)),
+    });
+    FitReport {
+        format: "gpmm-fit".into(),
+        version: 1,
+        model: inputs.model_path.to_string(),
+        model_kernel: model.metadata.kernel.clone(),
+        model_vertices: model.vertices(),
+        model_ranks: [model.shape.rank(), model.color.rank()],
+        fitted_ranks: [p.shape_len, p.color_len],
+        image: inputs.image_path.to_string(),
+        landmarks_file: inputs.pts_path.to_string(),
+        pts_one_based: inputs.pts_one_based,
+        image_size: prepared.original_size,
+        crop: prepared.crop,
+        working_size: size,
+        seed: settings.seed,
+        landmark_steps: settings.landmark_steps,
+        image_steps: settings.image_steps,
+        yaw_deg: p.pose.yaw.to_degrees(),
+        pitch_deg: p.pose.pitch.to_degrees(),
+        roll_deg: p.pose.roll.to_degrees(),
+        translation_mm: p.pose.translation,
+        focal_px: p.focal,
+        light: p.light.coeffs,
+        shape: p.shape_coeffs().to_vec(),
+        color: p.color_coeffs().to_vec(),
+        landmark_rmse_px: o.landmark_rmse_px,
+        landmark_rmse_original_px: rmse(&fitted, &prepared.original_landmarks),
+        landmark_rmse_after_landmark_chain_px: o.landmark_rmse_after_landmark_chain_px,
+        pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,
+        pixel_rmse: o.pixel_rmse,
+        covered_pixels: o.covered_pixels,
+        log_likelihood: o.image_log_likelihood + o.landmark_log_likelihood,
+        log_densities: LogDensities { posterior: o.log_posterior, image: o.image_log_likelihood, landmarks: o.landmark_log_likelihood },
+        acceptance: AcceptanceBoth { landmark_chain: o.landmark_acceptance.clone(), image_chain: o.image_acceptance.clone() },
+        fitted_landmarks: fitted,
+        seconds,
+        timing,
+    }
+}
+
+/// Upscaling of the overlay panels (nearest neighbour).
+pub const OVERLAY_SCALE: u32 = 3;
+/// Colour of the target landmarks in the overlay (green dots).
+pub const TARGET_COLOR: Rgba<u8> = Rgba([40, 230, 60, 255]);
+/// Colour of the fitted landmarks in the overlay (red crosses).
+pub const FITTED_COLOR: Rgba<u8> = Rgba([255, 40, 40, 255]);
+
+/// `input crop | rendered fit | 50 % blend`, each upscaled by [`OVERLAY_SCALE`], target landmarks
+/// as green dots and fitted ones as red crosses on the first and last panel, labels on top.
+pub fn overlay(crop: &RgbImage, render: &RgbaImage, target: &[[f32; 2]], fitted: &[[f32; 2]]) -> RgbaImage {
+    let (w, h) = crop.dimensions();
+    let s = OVERLAY_SCALE;
+    let (pw, ph) = (w * s, h * s);
+    let (gap, header) = (4u32, 14u32);
+    let bg = Rgba([24, 24, 24, 255]);
+    let mut out = RgbaImage::from_pixel(3 * pw + 4 * gap, ph + header + gap, bg);
+    let panel = |i: u32| (gap + i * (pw + gap), header);
+    for y in 0..ph {
+        for x in 0..pw {
+            let c = crop.get_pixel(x / s, y / s).0;
+            let r = render.get_pixel(x / s, y / s).0;
+            let covered = r[3] > 0;
+            let ren = if covered { Rgba([r[0], r[1], r[2], 255]) } else { Rgba([0, 0, 0, 255]) };
+            let blend = if covered {
+                let avg = |k: usize| (u16::from(c[k]) + u16::from(r[k])).div_ceil(2) as u8;
+                Rgba([avg(0), avg(1), avg(2), 255])
+            } else {
+                Rgba([c[0], c[1], c[2], 255])
+            };
+            for (i, px) in [Rgba([c[0], c[1], c[2], 255]), ren, blend].into_iter().enumerate() {
+                let (ox, oy) = panel(i as u32);
+                out.put_pixel(ox + x, oy + y, px);
+            }
+        }
+    }
+    let ink = Rgba([230, 230, 230, 255]);
+    for (i, label) in ["input", "fit", "blend"].iter().enumerate() {
+        let (ox, _) = panel(i as u32);
+        crate::figure::draw_text(&mut out, ox, 3, label, 1, ink);
+    }
+    for i in [0u32, 2] {
+        let (ox, oy) = panel(i);
+        let to = |p: &[f32; 2]| -> Option<(i64, i64)> {
+            let (x, y) = (p[0] * s as f32, p[1] * s as f32);
+            (x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0 && x < pw as f32 && y < ph as f32)
+                .then(|| (i64::from(ox) + x as i64, i64::from(oy) + y as i64))
+        };
+        for p in target.iter().filter_map(to) {
+            for dy in -2..=2 {
+                for dx in -2..=2 {
+                    if dx * dx + dy * dy <= 5 {
+                        put(&mut out, p.0 + dx, p.1 + dy, TARGET_COLOR);
+                    }
+                }
+            }
+        }
+        for p in fitted.iter().filter_map(to) {
+            for d in -3..=3 {
+                for t in 0..2 {
+                    put(&mut out, p.0 + d + t, p.1 + d, FITTED_COLOR);
+                    put(&mut out, p.0 + d + t, p.1 - d, FITTED_COLOR);
+                }
+            }
+        }
+    }
+    out
+}
+
+fn put(img: &mut RgbaImage, x: i64, y: i64, c: Rgba<u8>) {
+    if x >= 0 && y >= 0 && x < i64::from(img.width()) && y < i64::from(img.height()) {
+        img.put_pixel(x as u32, y as u32, c);
+    }
+}
+
+/// Inputs of [`fit_files`] (what `gpmm fit` is given).
+#[derive(Debug, Clone)]
+pub struct FitJob {
+    /// Model file.
+    pub model: std::path::PathBuf,
+    /// Photo (PNG, JPEG or PPM).
+    pub image: std::path::PathBuf,
+    /// Landmark file (iBUG `.pts`).
+    pub landmarks: std::path::PathBuf,
+    /// Read the landmark file as 1-based.
+    pub pts_one_based: bool,
+    /// Fit settings.
+    pub settings: FitSettings,
+    /// Output directory (created if needed).
+    pub out_dir: std::path::PathBuf,
+    /// Record timing in `fit.json`.
+    pub timing: bool,
+}
+
+/// Why [`fit_files`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitFilesError {
+    /// The model file.
+    #[error(transparent)]
+    ModelFile(#[from] crate::model_io::ModelIoError),
+    /// The fit.
+    #[error(transparent)]
+    Fit(#[from] FitRunError),
+    /// An output file.
+    #[error("{}: cannot write: {message}", path.display())]
+    Write {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+/// Loads a photo and its landmarks, checked against the model (count, inside the image), and prepares it.
+pub fn load_photo(
+    model: &GpModel,
+    image: &std::path::Path,
+    landmarks: &std::path::Path,
+    one_based: bool,
+    size: u32,
+) -> Result<Prepared, FitRunError> {
+    let pts = crate::pts::read_pts(landmarks, one_based)?;
+    let photo = crate::photo::load_rgb(image)?;
+    pts.check(landmarks, model.landmarks.len(), &model.metadata.landmark_scheme, photo.width(), photo.height(), one_based)?;
+    prepare(&photo, &pts.points, size)
+}
+
+/// `gpmm fit`: loads everything, fits and writes `fit.json`, `overlay.png` and `fit.ply` into the output directory.
+pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Result<FitReport, FitFilesError> {
+    job.settings.validate()?;
+    let model = crate::model_io::load(&job.model)?;
+    let t0 = Instant::now();
+    let prepared = load_photo(&model, &job.image, &job.landmarks, job.pts_one_based, job.settings.size)?;
+    let outcome = fit_prepared(&model, &prepared, &job.settings, progress)?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let inputs = ReportInputs {
+        model_path: &job.model.display().to_string(),
+        image_path: &job.image.display().to_string(),
+        pts_path: &job.landmarks.display().to_string(),
+        pts_one_based: job.pts_one_based,
+    };
+    let rep = report(&model, &inputs, &prepared, &job.settings, &outcome, job.timing.then_some(seconds));
+    let dir = &job.out_dir;
+    let werr =
+        |path: &std::path::Path, e: &dyn std::fmt::Display| FitFilesError::Write { path: path.to_path_buf(), message: e.to_string() };
+    std::fs::create_dir_all(dir).map_err(|e| werr(dir, &e))?;
+    let json_path = dir.join("fit.json");
+    let text = serde_json::to_string_pretty(&rep).map_err(|e| werr(&json_path, &e))?;
+    std::fs::write(&json_path, text + "\n").map_err(|e| werr(&json_path, &e))?;
+    let ov_path = dir.join("overlay.png");
+    let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
+    crate::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
+    let ply_path = dir.join("fit.ply");
+    let mesh = model
+        .instance(outcome.params.shape_coeffs(), outcome.params.color_coeffs())
+        .map_err(|e| FitRunError::Model(format!("instance: {e:?}")))?;
+    let attribution = model.metadata.template.attribution.clone().unwrap_or_default();
+    let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
+    crate::mesh_io::write_ply_with(&ply_path, &mesh, crate::mesh_io::PlyEncoding::BinaryLittleEndian, &comments)
+        .map_err(|e| werr(&ply_path, &e))?;
+    Ok(rep)
+}

@@ -1,0 +1,237 @@
+//! `gpmm bench-fit`: fits every image of a `gpmm synth` directory and compares with the truth.
+//!
+//! Every image goes through exactly the path of `gpmm fit` (its `.pts`, the crop, both chains);
+//! images are fitted in parallel (rayon), each fit on one thread. Figures per image:
+//! - |yaw|, |pitch|, |roll| error (degrees): fitted minus true Euler angles. Both are angles of
+//!   the core's [`gpmm_core::Pose`] relative to a face frame built the same way from the iBUG
+//!   landmarks (the template's in `gpmm build`, each ICT identity's in `gpmm synth`), so they are
+//!   directly comparable; a residual offset comes from how the two faces' landmarks sit relative
+//!   to their frames (e.g. a chin further forward tilts the chin → nose-bridge axis).
+//! - landmark error: mean point-to-point distance between the fit's 68 projected landmarks and
+//!   the true ones, in % of the true outer-eye-corner distance (iBUG 36-45), in the original image;
+//! - pixel RMSE (per channel, covered pixels) of the landmark-only result (landmark chain plus
+//!   least-squares light) and of the image chain's result;
+//! - wall-clock seconds of the fit (crop and both chains).
+
+use crate::fit::{fit_prepared, load_photo, FitSettings};
+use crate::model::GpModel;
+use crate::synth::{read_truth, ImageTruth};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+use std::time::Instant;
+
+/// One image's figures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchImage {
+    /// Image file name.
+    pub image: String,
+    /// True yaw, pitch, roll (degrees).
+    pub truth_deg: [f32; 3],
+    /// Fitted yaw, pitch, roll (degrees).
+    pub fit_deg: [f32; 3],
+    /// Landmark error in % of the inter-ocular (outer eye corner) distance.
+    pub landmark_error_iod_pct: f32,
+    /// Landmark error of the landmark-only result, in % of the inter-ocular distance.
+    pub landmark_error_iod_pct_after_landmark_chain: f32,
+    /// Pixel RMSE of the landmark-only result.
+    pub pixel_rmse_after_landmark_chain: f32,
+    /// Pixel RMSE of the fit.
+    pub pixel_rmse: f32,
+    /// Seconds of this fit.
+    pub seconds: f64,
+}
+
+/// Median and 90th percentile.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Stat {
+    /// Median.
+    pub median: f64,
+    /// 90th percentile (linear interpolation).
+    pub p90: f64,
+}
+
+/// The JSON `gpmm bench-fit` prints.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchSummary {
+    /// Images fitted.
+    pub images: usize,
+    /// Images whose fit failed (their errors are printed).
+    pub failed: usize,
+    /// The fit settings.
+    pub settings: FitSettings,
+    /// |yaw| error (degrees).
+    pub yaw_error_deg: Stat,
+    /// |pitch| error (degrees).
+    pub pitch_error_deg: Stat,
+    /// |roll| error (degrees).
+    pub roll_error_deg: Stat,
+    /// Mean signed yaw, pitch and roll error (degrees): a systematic offset between the frames.
+    pub mean_signed_error_deg: [f64; 3],
+    /// Landmark error after the image chain, % of the inter-ocular distance.
+    pub landmark_error_iod_pct: Stat,
+    /// Landmark error of the landmark-only result, % of the inter-ocular distance.
+    pub landmark_error_iod_pct_after_landmark_chain: Stat,
+    /// Pixel RMSE of the landmark-only result (landmark chain + least-squares light).
+    pub pixel_rmse_after_landmark_chain: Stat,
+    /// Pixel RMSE after the image chain.
+    pub pixel_rmse_after_image_chain: Stat,
+    /// Fraction of images where the image chain lowered the pixel RMSE.
+    pub image_chain_lowered_rmse_fraction: f64,
+    /// Seconds per fit (each fit on one thread).
+    pub seconds_per_fit: Stat,
+    /// Wall-clock seconds of the whole benchmark.
+    pub wall_seconds: f64,
+    /// Threads used.
+    pub jobs: usize,
+}
+
+/// Why the benchmark could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// `truth.json` could not be read.
+    #[error(transparent)]
+    Truth(#[from] crate::synth::SynthError),
+    /// The directory holds no images.
+    #[error("{0}: truth.json lists no images")]
+    Empty(String),
+    /// Every fit failed.
+    #[error("every fit failed; the first error: {0}")]
+    AllFailed(String),
+    /// The thread pool.
+    #[error("cannot start {0} threads: {1}")]
+    Threads(usize, String),
+}
+
+/// Median and 90th percentile of `v` (0 if empty).
+pub fn stat(v: &[f64]) -> Stat {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    s.sort_by(f64::total_cmp);
+    let q = |f: f64| -> f64 {
+        if s.is_empty() {
+            return 0.0;
+        }
+        let pos = f * (s.len() - 1) as f64;
+        let (i, t) = (pos.floor() as usize, pos - pos.floor());
+        let a = s.get(i).copied().unwrap_or(0.0);
+        let b = s.get(i + 1).copied().unwrap_or(a);
+        a + t * (b - a)
+    };
+    Stat { median: q(0.5), p90: q(0.9) }
+}
+
+fn iod_error(fit: &[[f32; 2]], truth: &[[f32; 2]]) -> f32 {
+    let (Some(a), Some(b)) = (truth.get(36), truth.get(45)) else { return f32::NAN };
+    let iod = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    let n = fit.len().min(truth.len()).max(1) as f32;
+    let mean: f32 = fit.iter().zip(truth).map(|(p, q)| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()).sum::<f32>() / n;
+    100.0 * mean / iod
+}
+
+/// Fits one synthetic image (its `.pts` file, the `gpmm fit` path) and compares with its truth.
+pub fn bench_one(model: &GpModel, dir: &Path, truth: &ImageTruth, settings: &FitSettings) -> Result<BenchImage, String> {
+    let t0 = Instant::now();
+    let prepared = load_photo(model, &dir.join(&truth.image), &dir.join(&truth.landmarks_file), false, settings.size)
+        .map_err(|e| format!("{}: {e}", truth.image))?;
+    let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", truth.image))?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let size = settings.size;
+    let fitted: Vec<[f32; 2]> = o.fitted_landmarks.iter().map(|p| prepared.crop.to_original(*p, size)).collect();
+    let shape_only = crate::fit::project_landmarks_of(model, &o.landmark_params, size).map_err(|e| e.to_string())?;
+    let lm_only: Vec<[f32; 2]> = shape_only.iter().map(|p| prepared.crop.to_original(*p, size)).collect();
+    let p = &o.params.pose;
+    Ok(BenchImage {
+        image: truth.image.clone(),
+        truth_deg: [truth.yaw_deg, truth.pitch_deg, truth.roll_deg],
+        fit_deg: [p.yaw, p.pitch, p.roll].map(f32::to_degrees),
+        landmark_error_iod_pct: iod_error(&fitted, &truth.landmarks),
+        landmark_error_iod_pct_after_landmark_chain: iod_error(&lm_only, &truth.landmarks),
+        pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,
+        pixel_rmse: o.pixel_rmse,
+        seconds,
+    })
+}
+
+/// Runs the benchmark on `dir` (a `gpmm synth` output): the first `limit` images, `jobs` threads.
+/// `progress(done, total)` is called after each image; failed fits are returned as messages.
+pub fn bench(
+    model: &GpModel,
+    dir: &Path,
+    settings: &FitSettings,
+    limit: Option<usize>,
+    jobs: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<(BenchSummary, Vec<BenchImage>, Vec<String>), BenchError> {
+    settings.validate().map_err(|e| BenchError::AllFailed(e.to_string()))?;
+    let truth = read_truth(&dir.join("truth.json"))?;
+    let mut images = truth.images;
+    if let Some(l) = limit {
+        images.truncate(l);
+    }
+    if images.is_empty() {
+        return Err(BenchError::Empty(dir.display().to_string()));
+    }
+    let jobs = jobs.max(1);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build().map_err(|e| BenchError::Threads(jobs, e.to_string()))?;
+    let total = images.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let t0 = Instant::now();
+    let results: Vec<Result<BenchImage, String>> = pool.install(|| {
+        images
+            .par_iter()
+            .map(|t| {
+                let r = bench_one(model, dir, t, settings);
+                let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress(d, total);
+                r
+            })
+            .collect()
+    });
+    let wall_seconds = t0.elapsed().as_secs_f64();
+    let mut ok = Vec::new();
+    let mut errors = Vec::new();
+    for r in results {
+        match r {
+            Ok(b) => ok.push(b),
+            Err(e) => errors.push(e),
+        }
+    }
+    if ok.is_empty() {
+        return Err(BenchError::AllFailed(errors.first().cloned().unwrap_or_default()));
+    }
+    let col = |f: &dyn Fn(&BenchImage) -> f64| ok.iter().map(f).collect::<Vec<f64>>();
+    let err = |k: usize| col(&|b: &BenchImage| f64::from((b.fit_deg[k] - b.truth_deg[k]).abs()));
+    let signed = |k: usize| ok.iter().map(|b| f64::from(b.fit_deg[k] - b.truth_deg[k])).sum::<f64>() / ok.len() as f64;
+    let lowered = ok.iter().filter(|b| b.pixel_rmse < b.pixel_rmse_after_landmark_chain).count() as f64 / ok.len() as f64;
+    let summary = BenchSummary {
+        images: ok.len(),
+        failed: errors.len(),
+        settings: *settings,
+        yaw_error_deg: stat(&err(0)),
+        pitch_error_deg: stat(&err(1)),
+        roll_error_deg: stat(&err(2)),
+        mean_signed_error_deg: [signed(0), signed(1), signed(2)],
+        landmark_error_iod_pct: stat(&col(&|b| f64::from(b.landmark_error_iod_pct))),
+        landmark_error_iod_pct_after_landmark_chain: stat(&col(&|b| f64::from(b.landmark_error_iod_pct_after_landmark_chain))),
+        pixel_rmse_after_landmark_chain: stat(&col(&|b| f64::from(b.pixel_rmse_after_landmark_chain))),
+        pixel_rmse_after_image_chain: stat(&col(&|b| f64::from(b.pixel_rmse))),
+        image_chain_lowered_rmse_fraction: lowered,
+        seconds_per_fit: stat(&col(&|b| b.seconds)),
+        wall_seconds,
+        jobs,
+    };
+    Ok((summary, ok, errors))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stat_interpolates() {
+        let s = stat(&[3.0, 1.0, 2.0, 4.0, 5.0]);
+        assert_eq!(s.median, 3.0);
+        assert!((s.p90 - 4.6).abs() < 1e-9);
+        assert_eq!(stat(&[]).median, 0.0);
+    }
+}

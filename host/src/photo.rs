@@ -1,0 +1,165 @@
+//! Photos for fitting: loading (PNG, JPEG, PPM), the square face crop around the landmarks and
+//! its resampling to the working size.
+//!
+//! **Crop rule** ([`crop_box`]): the landmarks' bounding box has centre `c` and larger side `e`;
+//! the crop is the square of side `S = ceil(CROP_FACTOR · e)` pixels centred on
+//! `c − (0, CROP_LIFT · e)` (lifted so the forehead, which no landmark marks, fits), snapped to
+//! whole pixels. If the square fits in the image it is shifted to lie inside it; otherwise the
+//! missing pixels are filled by repeating the nearest border pixel. The crop is resampled to
+//! `size × size` with a Lanczos-3 filter (`image::imageops::resize`, which widens the kernel
+//! when shrinking, so it does not alias). Coordinates map exactly: working = (original − corner) ·
+//! size / S in continuous pixel coordinates (centres at +0.5 in both images).
+
+use image::{imageops::FilterType, RgbImage};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Crop side over the landmarks' larger bounding-box side.
+pub const CROP_FACTOR: f32 = 1.8;
+/// Upward shift of the crop centre, as a fraction of the landmarks' larger bounding-box side.
+pub const CROP_LIFT: f32 = 0.1;
+/// Largest image side accepted (pixels).
+pub const MAX_PHOTO_SIDE: u32 = 16384;
+
+/// Why a photo could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum PhotoError {
+    /// The file could not be opened or decoded.
+    #[error("{}: cannot read the image: {message}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What the decoder said.
+        message: String,
+    },
+    /// The image is empty or too large.
+    #[error("{}: image size {width}x{height} is not supported (each side 1 to {MAX_PHOTO_SIDE} pixels)", path.display())]
+    Size {
+        /// The file.
+        path: PathBuf,
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+    },
+    /// The landmarks span no area (all on one point or line).
+    #[error("the landmarks span no area (bounding box {0} x {1} px): cannot crop a face")]
+    Degenerate(f32, f32),
+}
+
+/// Loads an image as 8-bit RGB (alpha dropped, colours as stored: no gamma conversion).
+pub fn load_rgb(path: &Path) -> Result<RgbImage, PhotoError> {
+    let reader = image::ImageReader::open(path).map_err(|e| PhotoError::Read { path: path.to_path_buf(), message: e.to_string() })?;
+    let reader = reader.with_guessed_format().map_err(|e| PhotoError::Read { path: path.to_path_buf(), message: e.to_string() })?;
+    let img = reader.decode().map_err(|e| PhotoError::Read { path: path.to_path_buf(), message: e.to_string() })?;
+    let (w, h) = (img.width(), img.height());
+    if w == 0 || h == 0 || w > MAX_PHOTO_SIDE || h > MAX_PHOTO_SIDE {
+        return Err(PhotoError::Size { path: path.to_path_buf(), width: w, height: h });
+    }
+    Ok(img.to_rgb8())
+}
+
+/// A square crop in original-image pixels (it may extend past the image: those pixels are padded).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CropBox {
+    /// Left edge (pixels; may be negative).
+    pub x: i64,
+    /// Top edge (pixels; may be negative).
+    pub y: i64,
+    /// Side (pixels).
+    pub side: u32,
+}
+
+impl CropBox {
+    /// An original-image point in the `size × size` working image.
+    pub fn to_working(&self, p: [f32; 2], size: u32) -> [f32; 2] {
+        let s = size as f32 / self.side as f32;
+        [(p[0] - self.x as f32) * s, (p[1] - self.y as f32) * s]
+    }
+
+    /// A working-image point in the original image.
+    pub fn to_original(&self, p: [f32; 2], size: u32) -> [f32; 2] {
+        let s = self.side as f32 / size as f32;
+        [p[0] * s + self.x as f32, p[1] * s + self.y as f32]
+    }
+
+    /// Original pixels per working pixel.
+    pub fn scale(&self, size: u32) -> f32 {
+        self.side as f32 / size as f32
+    }
+}
+
+/// The crop of the module docs for landmarks `points` in a `width × height` image.
+pub fn crop_box(points: &[[f32; 2]], width: u32, height: u32) -> Result<CropBox, PhotoError> {
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for p in points {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let (ew, eh) = (hi[0] - lo[0], hi[1] - lo[1]);
+    let e = ew.max(eh);
+    if !(e >= 1.0 && e.is_finite()) {
+        return Err(PhotoError::Degenerate(ew, eh));
+    }
+    let side = (CROP_FACTOR * e).ceil().max(8.0) as u32;
+    let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]) - CROP_LIFT * e];
+    let place = |centre: f32, extent: u32| -> i64 {
+        let start = (centre - side as f32 * 0.5).round() as i64;
+        if side <= extent {
+            start.clamp(0, i64::from(extent - side))
+        } else {
+            start
+        }
+    };
+    Ok(CropBox { x: place(c[0], width), y: place(c[1], height), side })
+}
+
+/// Cuts `crop` out of `image` (border pixels repeated where it extends past the image) and
+/// resamples it to `size × size` (Lanczos-3).
+pub fn crop_resize(image: &RgbImage, crop: &CropBox, size: u32) -> RgbImage {
+    let (w, h) = image.dimensions();
+    let side = crop.side;
+    let inside = crop.x >= 0 && crop.y >= 0 && crop.x + i64::from(side) <= i64::from(w) && crop.y + i64::from(side) <= i64::from(h);
+    let cut = if inside {
+        image::imageops::crop_imm(image, crop.x as u32, crop.y as u32, side, side).to_image()
+    } else {
+        RgbImage::from_fn(side, side, |i, j| {
+            let x = (crop.x + i64::from(i)).clamp(0, i64::from(w) - 1) as u32;
+            let y = (crop.y + i64::from(j)).clamp(0, i64::from(h) - 1) as u32;
+            *image.get_pixel(x, y)
+        })
+    };
+    if side == size {
+        cut
+    } else {
+        image::imageops::resize(&cut, size, size, FilterType::Lanczos3)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crop_is_square_inside_and_maps_points() {
+        let pts = [[100.0, 100.0], [200.0, 150.0], [150.0, 220.0]];
+        let b = crop_box(&pts, 1000, 1000).unwrap();
+        assert_eq!(b.side, 216);
+        let c = b.to_working([150.0, 160.0 - 12.0], 128);
+        assert!((c[0] - 64.0).abs() < 1.0 && (c[1] - 64.0).abs() < 1.0, "{c:?}");
+        let back = b.to_original(b.to_working([123.0, 45.0], 128), 128);
+        assert!((back[0] - 123.0).abs() < 1e-3 && (back[1] - 45.0).abs() < 1e-3);
+        // Near a border: shifted inside when it fits, padded when it does not.
+        let b = crop_box(&pts, 230, 1000).unwrap();
+        assert_eq!(b.x, 230 - 216);
+        let b = crop_box(&pts, 200, 200).unwrap();
+        assert!(b.side > 200);
+        let img = RgbImage::from_fn(200, 200, |x, y| image::Rgb([x as u8, y as u8, 7]));
+        let out = crop_resize(&img, &b, 64);
+        assert_eq!(out.dimensions(), (64, 64));
+        assert!(crop_box(&[[3.0, 3.0], [3.0, 3.0]], 10, 10).is_err());
+    }
+}

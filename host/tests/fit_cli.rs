@@ -1,0 +1,237 @@
+//! `gpmm fit` and `gpmm bench-fit` end to end: a synthetic face's yaw is recovered, the three
+//! output files are written, repeated runs give the same `fit.json`, bad input gives clear errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+fn gpmm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gpmm")).args(args).output().expect("gpmm runs")
+}
+
+fn ok(out: &Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "gpmm failed: {stderr}");
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn fails(out: &Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "gpmm should have failed");
+    assert!(!stderr.contains("panicked"), "gpmm panicked: {stderr}");
+    stderr
+}
+
+struct Fixture {
+    _dir: tempfile::TempDir,
+    model: PathBuf,
+    synth: PathBuf,
+}
+
+/// A small model (1500 vertices, ranks 20/20) and one synthetic face at yaw 30 plus one at 0, built once.
+fn fixture() -> Option<&'static Fixture> {
+    static F: OnceLock<Option<Fixture>> = OnceLock::new();
+    F.get_or_init(|| {
+        let data = gpmm_host::data::data_dir_for_tests()?;
+        let dir = tempfile::tempdir().unwrap();
+        let t = data.join("template/lee-perry-smith");
+        let model = dir.path().join("small.gpmm");
+        let (ply, lm) = (t.join("lee-perry-smith.ply"), t.join("landmarks_ibug68.json"));
+        ok(&gpmm(&[
+            "build",
+            "--template",
+            ply.to_str().unwrap(),
+            "--landmarks",
+            lm.to_str().unwrap(),
+            "--vertices",
+            "1500",
+            "--rank-shape",
+            "20",
+            "--rank-color",
+            "20",
+            "--nystrom-points",
+            "500",
+            "-o",
+            model.to_str().unwrap(),
+        ]));
+        let synth = dir.path().join("synth");
+        let ict = data.join("ict");
+        ok(&gpmm(&[
+            "synth",
+            "--ict",
+            ict.to_str().unwrap(),
+            "--template-dir",
+            t.to_str().unwrap(),
+            "--count",
+            "1",
+            "--yaws",
+            "30,0",
+            "--seed",
+            "3",
+            "-o",
+            synth.to_str().unwrap(),
+        ]));
+        Some(Fixture { _dir: dir, model, synth })
+    })
+    .as_ref()
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+const FAST: [&str; 4] = ["--landmark-steps", "3000", "--image-steps", "60"];
+
+fn fit(f: &Fixture, image: &Path, pts: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["fit", s(&f.model), s(image), "--landmarks", s(pts), "-o", s(out)];
+    args.extend(FAST);
+    args.extend(extra);
+    gpmm(&args)
+}
+
+fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+}
+
+#[test]
+fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
+    let Some(f) = fixture() else { return };
+    let out = tempfile::tempdir().unwrap();
+    ok(&fit(f, &f.synth.join("0000_yaw30.png"), &f.synth.join("0000_yaw30.pts"), out.path(), &[]));
+    let j = read_json(&out.path().join("fit.json"));
+    for key in [
+        "yaw_deg",
+        "pitch_deg",
+        "roll_deg",
+        "shape",
+        "color",
+        "landmark_rmse_px",
+        "landmark_rmse_original_px",
+        "log_likelihood",
+        "acceptance",
+        "seconds",
+        "timing",
+        "translation_mm",
+        "focal_px",
+        "light",
+        "crop",
+        "seed",
+        "model_kernel",
+    ] {
+        assert!(j.get(key).is_some(), "fit.json lacks {key}: {j}");
+    }
+    let yaw = j["yaw_deg"].as_f64().unwrap();
+    assert!((yaw - 30.0).abs() < 6.0, "yaw {yaw} (truth 30)");
+    assert!(j["landmark_rmse_px"].as_f64().unwrap() < 3.0, "{}", j["landmark_rmse_px"]);
+    assert_eq!(j["shape"].as_array().unwrap().len(), 20);
+    let acc = &j["acceptance"]["image_chain"]["yaw"];
+    assert!(acc["proposed"].as_u64().unwrap() >= acc["passed"].as_u64().unwrap());
+    assert!(j["pixel_rmse"].as_f64().unwrap() <= j["pixel_rmse_after_landmark_chain"].as_f64().unwrap());
+    let overlay = image::open(out.path().join("overlay.png")).unwrap();
+    assert!(overlay.width() > 3 * 128 && overlay.height() > 128);
+    let ply = std::fs::read(out.path().join("fit.ply")).unwrap();
+    assert!(ply.starts_with(b"ply"));
+}
+
+#[test]
+fn same_seed_gives_the_same_fit_json() {
+    let Some(f) = fixture() else { return };
+    let (a, b, c) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let (img, pts) = (f.synth.join("0000_yaw00.png"), f.synth.join("0000_yaw00.pts"));
+    ok(&fit(f, &img, &pts, a.path(), &["--no-timing", "--seed", "9"]));
+    ok(&fit(f, &img, &pts, b.path(), &["--no-timing", "--seed", "9"]));
+    let (ja, jb) = (std::fs::read(a.path().join("fit.json")).unwrap(), std::fs::read(b.path().join("fit.json")).unwrap());
+    assert_eq!(ja, jb, "fit.json differs between identical runs");
+    assert!(!String::from_utf8_lossy(&ja).contains("\"seconds\""));
+    // With timing, only `seconds` and `timing` are added.
+    ok(&fit(f, &img, &pts, c.path(), &["--seed", "9"]));
+    let mut jc = read_json(&c.path().join("fit.json"));
+    let obj = jc.as_object_mut().unwrap();
+    assert!(obj.remove("seconds").is_some() && obj.remove("timing").is_some());
+    assert_eq!(jc, read_json(&a.path().join("fit.json")));
+}
+
+#[test]
+fn bad_input_gives_clear_errors() {
+    let Some(f) = fixture() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let (img, pts) = (f.synth.join("0000_yaw00.png"), f.synth.join("0000_yaw00.pts"));
+    let text = std::fs::read_to_string(&pts).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+
+    // Wrong count: 67 points.
+    let short = dir.path().join("short.pts");
+    let mut body: Vec<&str> = lines.clone();
+    body.remove(10);
+    let body = body.join("\n").replace("n_points:  68", "n_points:  67");
+    std::fs::write(&short, body).unwrap();
+    let e = fails(&fit(f, &img, &short, &out, &[]));
+    assert!(e.contains("short.pts") && e.contains("67") && e.contains("68"), "{e}");
+
+    // A point outside the 128x128 image.
+    let outside = dir.path().join("outside.pts");
+    let mut body: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    body[3 + 5] = "500.0 40.0".into();
+    std::fs::write(&outside, body.join("\n")).unwrap();
+    let e = fails(&fit(f, &img, &outside, &out, &[]));
+    assert!(e.contains("outside.pts") && e.contains("landmark 5") && e.contains("outside"), "{e}");
+
+    // Not a number.
+    let nan = dir.path().join("nan.pts");
+    body[3 + 7] = "12.0 abc".into();
+    std::fs::write(&nan, body.join("\n")).unwrap();
+    let e = fails(&fit(f, &img, &nan, &out, &[]));
+    assert!(e.contains("nan.pts") && e.contains("abc"), "{e}");
+
+    // An image that cannot be read.
+    let bad_img = dir.path().join("broken.png");
+    std::fs::write(&bad_img, b"this is not a picture").unwrap();
+    let e = fails(&fit(f, &bad_img, &pts, &out, &[]));
+    assert!(e.contains("broken.png") && e.contains("cannot read"), "{e}");
+    let e = fails(&fit(f, &dir.path().join("missing.png"), &pts, &out, &[]));
+    assert!(e.contains("missing.png"), "{e}");
+
+    // A corrupted model and a model of another format version.
+    let bytes = std::fs::read(&f.model).unwrap();
+    let corrupt = dir.path().join("corrupt.gpmm");
+    std::fs::write(&corrupt, &bytes[..bytes.len() / 3]).unwrap();
+    let mut args = vec!["fit", s(&corrupt), s(&img), "--landmarks", s(&pts), "-o", s(&out)];
+    let e = fails(&gpmm(&args));
+    assert!(e.contains("corrupt.gpmm"), "{e}");
+    let needle = b"\\\"version\\\":1";
+    if let Some(at) = bytes.windows(needle.len()).position(|w| w == needle) {
+        let mut v = bytes.clone();
+        v[at + needle.len() - 1] = b'9';
+        let other = dir.path().join("v9.gpmm");
+        std::fs::write(&other, v).unwrap();
+        args[1] = s(&other);
+        let e = fails(&gpmm(&args));
+        assert!(e.contains("version 9"), "{e}");
+    }
+    assert!(!out.join("fit.json").exists(), "no output on bad input");
+}
+
+#[test]
+fn bench_fit_prints_the_statistics() {
+    let Some(f) = fixture() else { return };
+    let out =
+        ok(&gpmm(&["bench-fit", s(&f.synth), "--model", s(&f.model), "--jobs", "2", "--landmark-steps", "2000", "--image-steps", "20"]));
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for key in [
+        "yaw_error_deg",
+        "pitch_error_deg",
+        "roll_error_deg",
+        "landmark_error_iod_pct",
+        "pixel_rmse_after_landmark_chain",
+        "pixel_rmse_after_image_chain",
+        "image_chain_lowered_rmse_fraction",
+        "seconds_per_fit",
+    ] {
+        assert!(j.get(key).is_some(), "bench-fit output lacks {key}: {j}");
+    }
+    assert_eq!(j["images"].as_u64(), Some(2));
+    assert!(j["yaw_error_deg"]["median"].as_f64().unwrap() < 10.0, "{j}");
+    let per_image = read_json(&f.synth.join("bench.json"));
+    assert_eq!(per_image["images"].as_array().unwrap().len(), 2);
+}
