@@ -163,8 +163,8 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         &p(&out.join("synth")),
     ])?;
 
-    eprintln!("[6/6] fitting a photo (lenna.png with its 68 landmarks) by MCMC");
-    let (photo, pts) = (data.join("images/lenna.png"), data.join("images/lenna.pts"));
+    eprintln!("[6/6] fitting a photo (astronaut.png, public domain, with its 68 landmarks) by MCMC");
+    let (photo, pts) = (data.join("images/astronaut.png"), data.join("images/astronaut.pts"));
     if photo.is_file() && pts.is_file() {
         let (lm_steps, img_steps) = if a.quick { ("2000", "150") } else { ("5000", "600") };
         step(&[
