@@ -79,7 +79,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::mesh_io::read_landmarks_json;
 use crate::npy::{self, NpyError};
-use crate::template::{load_template, TemplateError, TemplateOptions, IBUG68_COUNT, IBUG68_MIRROR_PAIRS};
+use crate::template::{load_template, TemplateError, TemplateOptions, IBUG68_COUNT};
 
 /// Number of random Gaussian bumps of the per-identity albedo variation.
 pub const ALBEDO_BUMPS: usize = 5;
@@ -998,34 +998,13 @@ fn mean3(colors: impl Iterator<Item = Vec3>) -> Vec3 {
     s.map(|v| v / n.max(1) as f32)
 }
 
-/// The template's face frame from iBUG-68 landmarks: rows x (right), y (up), z (toward the camera), and the origin.
+/// The template's face frame from iBUG-68 landmarks (the same frame `template.rs` normalizes to).
 fn face_frame(lm: &[[f64; 3]]) -> Result<([[f64; 3]; 3], [f64; 3]), String> {
     if lm.len() != IBUG68_COUNT {
         return Err(format!("need {IBUG68_COUNT} landmarks, got {}", lm.len()));
     }
-    let mut xsum = [0.0; 3];
-    let mut mids = [0.0; 3];
-    for &(l, r) in &IBUG68_MIRROR_PAIRS {
-        xsum = add(xsum, sub(lm[r], lm[l]));
-        mids = add(mids, mul(add(lm[l], lm[r]), 0.5));
-    }
-    let xn = norm(xsum);
-    if !(xn.is_finite() && xn > 0.0) {
-        return Err("the mirror landmark pairs give no left-right direction".into());
-    }
-    let x = mul(xsum, 1.0 / xn);
-    let mid = mul(mids, 1.0 / IBUG68_MIRROR_PAIRS.len() as f64);
-    let up = sub(lm[27], lm[8]);
-    let up = sub(up, mul(x, dot(up, x)));
-    let yn = norm(up);
-    if !(yn.is_finite() && yn > 0.0) {
-        return Err("landmarks 8 (chin) and 27 (nose bridge) give no up direction".into());
-    }
-    let y = mul(up, 1.0 / yn);
-    let z = cross(x, y);
-    let c = centroid(lm.iter().copied());
-    let center = sub(c, mul(x, dot(sub(c, mid), x)));
-    Ok(([x, y, z], center))
+    let frame = crate::template::ibug_frame(lm)?;
+    Ok((frame.axes, frame.center))
 }
 
 /// Maps `points` into the face frame of their landmarks `ids` (no scaling).

@@ -294,13 +294,14 @@ pub fn load_template(mesh_path: &Path, landmarks_path: &Path, opts: &TemplateOpt
 // ------------------------------------------------------------ normalization
 
 /// A face frame from iBUG-68 landmarks (in source units).
-struct Frame {
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaceFrame {
     /// Rows: the x (image right), y (up), z (toward the camera) unit axes.
-    axes: [[f64; 3]; 3],
+    pub axes: [[f64; 3]; 3],
     /// The origin: landmark centroid projected onto the mirror plane.
-    center: [f64; 3],
+    pub center: [f64; 3],
     /// Outer canthal distance |p45 - p36|.
-    canthal: f64,
+    pub canthal: f64,
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -326,8 +327,9 @@ fn centroid(points: &[[f64; 3]]) -> [f64; 3] {
     mul(s, 1.0 / points.len().max(1) as f64)
 }
 
-/// Computes the face frame; `lm` are the 68 landmark positions.
-fn ibug_frame(lm: &[[f64; 3]]) -> Result<Frame, &'static str> {
+/// Computes the face frame (x from the mirror pairs, y from chin to nose bridge, origin on
+/// the mirror plane); `lm` are the 68 iBUG landmark positions.
+pub fn ibug_frame(lm: &[[f64; 3]]) -> Result<FaceFrame, &'static str> {
     let p = |i: usize| lm.get(i).copied().unwrap_or([0.0; 3]);
     let canthal = norm(sub(p(45), p(36)));
     if !canthal.is_finite() || canthal <= 0.0 {
@@ -355,7 +357,7 @@ fn ibug_frame(lm: &[[f64; 3]]) -> Result<Frame, &'static str> {
     let z = cross(x, y);
     let c = centroid(lm);
     let center = sub(c, mul(x, dot(sub(c, mid), x)));
-    Ok(Frame { axes: [x, y, z], center, canthal })
+    Ok(FaceFrame { axes: [x, y, z], center, canthal })
 }
 
 /// Maps every vertex `p` to `scale * axes * (p - center)`.

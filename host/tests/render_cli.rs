@@ -5,16 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn data_dir() -> Option<PathBuf> {
-    let dir =
-        std::env::var_os("GPMM_DATA").map(PathBuf::from).unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"));
-    if dir.is_dir() {
-        Some(dir)
-    } else if std::env::var_os("GPMM_REQUIRE_DATA").is_some() {
-        panic!("data directory {} is absent but GPMM_REQUIRE_DATA is set", dir.display());
-    } else {
-        eprintln!("SKIPPED: data directory {} is absent (set GPMM_DATA)", dir.display());
-        None
-    }
+    gpmm_host::data::data_dir_for_tests()
 }
 
 fn gpmm(args: &[&str]) -> Output {
