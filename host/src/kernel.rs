@@ -12,6 +12,7 @@
 //! Nothing here is face-specific: the kernels see only vertex positions (mm)
 //! and template colours (linear RGB in [0,1]).
 
+use crate::geom::dist2;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -51,9 +52,44 @@ pub struct ScalarKernel {
     terms: Vec<(Space, f64, f64)>, // (space, weight, 1/scale²)
 }
 
-fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+/// The distances between one pair of points, each computed at most once.
+struct PairDistances<'a> {
+    a: &'a KernelPoint,
+    b: &'a KernelPoint,
+    cache: [Option<f64>; 3],
+}
+
+impl<'a> PairDistances<'a> {
+    fn new(a: &'a KernelPoint, b: &'a KernelPoint) -> Self {
+        Self { a, b, cache: [None; 3] }
+    }
+
+    /// The squared distance in `space`.
+    #[inline]
+    fn get(&mut self, space: Space) -> f64 {
+        let (a, b) = (self.a, self.b);
+        match space {
+            Space::Position => *self.cache[0].get_or_insert_with(|| dist2(a.position, b.position)),
+            Space::MirroredPosition => {
+                *self.cache[1].get_or_insert_with(|| dist2(a.position, [-b.position[0], b.position[1], b.position[2]]))
+            }
+            Space::Color => *self.cache[2].get_or_insert_with(|| dist2(a.color, b.color)),
+        }
+    }
+}
+
+/// `exp(-d² / s²)` given `d²` and `1/s²`. Below e^-40 (4e-18 of the term's weight) a term is
+/// zero in f64 sums; skipping the call avoids libm's slow underflow path. (`libm::exp`, not
+/// glibc's: glibc's exp right after faer's AVX code stalled on SSE/AVX transitions and took
+/// 80% of a model build.)
+#[inline]
+fn se_value(d2: f64, inv_s2: f64) -> f64 {
+    let arg = d2 * inv_s2;
+    if arg < 40.0 {
+        libm::exp(-arg)
+    } else {
+        0.0
+    }
 }
 
 impl ScalarKernel {
@@ -75,28 +111,8 @@ impl ScalarKernel {
     /// Evaluates the kernel between two points.
     #[inline]
     pub fn eval(&self, a: &KernelPoint, b: &KernelPoint) -> f64 {
-        // Compute each distance at most once.
-        let mut d_pos = None;
-        let mut d_mir = None;
-        let mut d_col = None;
-        let mut sum = 0.0;
-        for &(space, w, inv_s2) in &self.terms {
-            let d2 = match space {
-                Space::Position => *d_pos.get_or_insert_with(|| dist2(&a.position, &b.position)),
-                Space::MirroredPosition => *d_mir.get_or_insert_with(|| {
-                    let m = [-b.position[0], b.position[1], b.position[2]];
-                    dist2(&a.position, &m)
-                }),
-                Space::Color => *d_col.get_or_insert_with(|| dist2(&a.color, &b.color)),
-            };
-            // Below e^-40 (4e-18 of the term's weight) the term is zero in f64 sums; skipping
-            // the call avoids libm's slow underflow path, which dominated build time.
-            let arg = d2 * inv_s2;
-            if arg < 40.0 {
-                sum += w * libm::exp(-arg);
-            }
-        }
-        sum
+        let mut d = PairDistances::new(a, b);
+        self.terms.iter().map(|&(space, w, inv_s2)| w * se_value(d.get(space), inv_s2)).sum()
     }
 
     /// Whether the kernel has no terms.
@@ -159,19 +175,9 @@ impl KernelBank {
     /// `scratch` must hold [`KernelBank::term_count`] values.
     #[inline]
     pub fn eval_into(&self, a: &KernelPoint, b: &KernelPoint, scratch: &mut [f64], out: &mut [f64]) {
-        let mut d_pos = None;
-        let mut d_mir = None;
-        let mut d_col = None;
+        let mut d = PairDistances::new(a, b);
         for (v, &(space, inv_s2)) in scratch.iter_mut().zip(&self.terms) {
-            let d2 = match space {
-                Space::Position => *d_pos.get_or_insert_with(|| dist2(&a.position, &b.position)),
-                Space::MirroredPosition => {
-                    *d_mir.get_or_insert_with(|| dist2(&a.position, &[-b.position[0], b.position[1], b.position[2]]))
-                }
-                Space::Color => *d_col.get_or_insert_with(|| dist2(&a.color, &b.color)),
-            };
-            let arg = d2 * inv_s2;
-            *v = if arg < 40.0 { libm::exp(-arg) } else { 0.0 };
+            *v = se_value(d.get(space), inv_s2);
         }
         for (o, w) in out.iter_mut().zip(&self.weights) {
             *o = w.iter().zip(scratch.iter()).map(|(w, v)| w * v).sum();

@@ -13,6 +13,7 @@ pub mod device_mesh;
 pub mod figure;
 pub mod fit;
 pub mod fit_bench;
+pub mod geom;
 pub mod kernel;
 pub mod lowrank;
 pub mod mesh_io;

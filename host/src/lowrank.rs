@@ -15,6 +15,7 @@
 //! merged and sorted by eigenvalue. The captured fraction is `Σ kept eigenvalues / trace(K)`
 //! with the exact trace of the full `3N x 3N` kernel matrix.
 
+use crate::geom::dist2;
 use crate::kernel::{DiagonalKernel, KernelBank, KernelPoint, ScalarKernel};
 use faer::{Mat, MatRef, Side};
 use rand::seq::index::sample;
@@ -126,7 +127,7 @@ pub fn sample_points(points: &[KernelPoint], m: usize, seed: u64) -> Vec<usize> 
         let p = points[next].position;
         let mut best = (f64::NEG_INFINITY, 0);
         for (i, (d, q)) in nearest.iter_mut().zip(points).enumerate() {
-            *d = d.min(dist2(&p, &q.position));
+            *d = d.min(dist2(p, q.position));
             if *d > best.0 {
                 best = (*d, i);
             }
@@ -134,10 +135,6 @@ pub fn sample_points(points: &[KernelPoint], m: usize, seed: u64) -> Vec<usize> 
         next = best.1;
     }
     chosen
-}
-
-fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
 }
 
 /// Nyström eigendecomposition of one scalar kernel over `points`, keeping at most `max_rank` pairs.

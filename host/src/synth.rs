@@ -77,6 +77,7 @@ use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
+use crate::geom::{add, centroid, cross, dot, mul, norm, sub};
 use crate::mesh_io::read_landmarks_json;
 use crate::npy::{self, NpyError};
 use crate::template::{load_template, TemplateError, TemplateOptions, IBUG68_COUNT};
@@ -971,28 +972,6 @@ impl TileSink<TILE, TILE> for FrameSink {
 
 // ------------------------------------------------------------ geometry
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn mul(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-fn centroid(points: impl Iterator<Item = [f64; 3]>) -> [f64; 3] {
-    let (s, n) = points.fold(([0.0; 3], 0usize), |(s, n), p| (add(s, p), n + 1));
-    mul(s, 1.0 / n.max(1) as f64)
-}
 fn mean3(colors: impl Iterator<Item = Vec3>) -> Vec3 {
     let (s, n) = colors.fold(([0.0f32; 3], 0usize), |(s, n), c| ([s[0] + c[0], s[1] + c[1], s[2] + c[2]], n + 1));
     s.map(|v| v / n.max(1) as f32)

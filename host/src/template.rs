@@ -53,6 +53,7 @@
 //!    attribution (from a `LICENSE.txt` next to the mesh, see
 //!    [`attribution_from_license`]), scale, whether cropped, source vertex count.
 
+use crate::geom::{add, centroid, cross, dot, mul, norm, sub};
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
@@ -248,7 +249,7 @@ pub fn load_template(mesh_path: &Path, landmarks_path: &Path, opts: &TemplateOpt
         scale
     } else {
         let scale = opts.scale.unwrap_or(1.0);
-        let c = centroid(&mesh.positions);
+        let c = centroid(mesh.positions.iter().copied());
         apply_frame(&mut mesh, c, &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], scale);
         scale
     };
@@ -304,29 +305,6 @@ pub struct FaceFrame {
     pub canthal: f64,
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn mul(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-fn centroid(points: &[[f64; 3]]) -> [f64; 3] {
-    let s = points.iter().fold([0.0; 3], |acc, p| add(acc, *p));
-    mul(s, 1.0 / points.len().max(1) as f64)
-}
-
 /// Computes the face frame (x from the mirror pairs, y from chin to nose bridge, origin on
 /// the mirror plane); `lm` are the 68 iBUG landmark positions.
 pub fn ibug_frame(lm: &[[f64; 3]]) -> Result<FaceFrame, &'static str> {
@@ -355,7 +333,7 @@ pub fn ibug_frame(lm: &[[f64; 3]]) -> Result<FaceFrame, &'static str> {
     }
     let y = mul(up, 1.0 / yn);
     let z = cross(x, y);
-    let c = centroid(lm);
+    let c = centroid(lm.iter().copied());
     let center = sub(c, mul(x, dot(sub(c, mid), x)));
     Ok(FaceFrame { axes: [x, y, z], center, canthal })
 }
