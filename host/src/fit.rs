@@ -10,8 +10,7 @@
 //!    all visible vertices): this "landmark-only result" is the baseline of the pixel RMSE.
 //! 5. Image chain (`prior × landmarks × image`, delayed acceptance), [`FitSettings::image_steps`] steps.
 //!
-//! Both chains run in chunks so progress can be reported; a chunk continues from the previous
-//! chunk's last sample with the same generator, and the best sample over all chunks is kept. The
+//! Both chains run once each, reporting progress through the core's step callback. The
 //! result is a deterministic function of the inputs, the settings and the seed: `fit.json` is
 //! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
 
@@ -20,9 +19,9 @@ use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::pts::PtsError;
 use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
-    image_chain, image_log_likelihood, initial_guess, landmark_chain, landmark_pivot, solve_light, Acceptance, BackgroundModel, FitError,
-    FitParams, FitResult, ImageProblem, Instance, InstanceBuffers, LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior,
-    Problem, TargetImage, DEFAULT_PIXEL_SIGMA, MAX_LANDMARKS,
+    image_chain_observed, image_log_likelihood, initial_guess, landmark_chain, landmark_chain_observed, landmark_pivot, solve_light,
+    Acceptance, BackgroundModel, FitError, FitParams, ImageProblem, Instance, InstanceBuffers, LandmarkTarget, LightSolveConfig, Mixture,
+    MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA, MAX_LANDMARKS,
 };
 use gpmm_core::{Cull, ProjectedVertex, ShLight};
 use image::{RgbImage, Rgba, RgbaImage};
@@ -58,9 +57,9 @@ pub const DEFAULT_LANDMARK_SIGMA: f32 = 0.005;
 pub const NOMINAL_DISTANCE_MM: f32 = 500.0;
 /// Uniform floor mixed into the background colour histogram.
 pub const BACKGROUND_FLOOR: f32 = 0.01;
-/// Landmark-chain steps per progress report.
+/// Landmark-chain steps between progress reports.
 const LANDMARK_CHUNK: u32 = 1000;
-/// Image-chain steps per progress report.
+/// Image-chain steps between progress reports.
 const IMAGE_CHUNK: u32 = 25;
 
 /// Why a fit failed.
@@ -262,28 +261,17 @@ pub fn fit_prepared(
     let problem = Problem { model: mm, landmarks: lm, prior: &prior, mixture: &lm_mix, width: w, height: h };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 
-    // Landmark chain, in chunks.
+    // Landmark chain, one run; progress every LANDMARK_CHUNK steps.
     let t0 = Instant::now();
-    let mut landmark_acceptance = AcceptanceReport::new();
     let total_lm = u64::from(settings.landmark_steps);
-    let mut best_lm: Option<FitResult<KS, KC>> = None;
-    let mut cur = init;
-    let mut done = 0u32;
-    loop {
-        let k = LANDMARK_CHUNK.min(settings.landmark_steps - done);
-        let r = landmark_chain(&problem, &cur, k, &mut rng).map_err(core("landmark chain"))?;
-        add_acceptance(&mut landmark_acceptance, &lm_mix, &r.acceptance);
-        cur = r.last;
-        if best_lm.as_ref().is_none_or(|b| r.best_log_posterior > b.best_log_posterior) {
-            best_lm = Some(r);
+    let best_lm = landmark_chain_observed(&problem, &init, settings.landmark_steps, &mut rng, |done| {
+        if done % LANDMARK_CHUNK == 0 || done == settings.landmark_steps {
+            progress("landmark chain", u64::from(done), total_lm);
         }
-        done += k;
-        progress("landmark chain", u64::from(done), total_lm);
-        if done >= settings.landmark_steps {
-            break;
-        }
-    }
-    let best_lm = best_lm.ok_or(FitRunError::Core { stage: "landmark chain", error: FitError::BadConfig })?;
+    })
+    .map_err(core("landmark chain"))?;
+    let mut landmark_acceptance = AcceptanceReport::new();
+    add_acceptance(&mut landmark_acceptance, &lm_mix, &best_lm.acceptance);
     let landmark_seconds = t0.elapsed().as_secs_f64();
 
     // Least-squares light for the landmark result, then the image chain.
@@ -310,26 +298,15 @@ pub fn fit_prepared(
     let start_eval = image_log_likelihood(&problem, &ip, &start, &mut inst, &mut raster).map_err(core("image likelihood"))?;
     let start_lm = landmark_chain(&problem, &start, 0, &mut Xoshiro256PlusPlus::seed_from_u64(0)).map_err(core("landmark term"))?;
 
-    let mut image_acceptance = AcceptanceReport::new();
     let total_img = u64::from(settings.image_steps);
-    let mut best: Option<FitResult<KS, KC>> = None;
-    let mut cur = start;
-    let mut done = 0u32;
-    loop {
-        let k = IMAGE_CHUNK.min(settings.image_steps - done);
-        let r = image_chain(&problem, &ip, &cur, k, &mut inst, &mut raster, &mut rng).map_err(core("image chain"))?;
-        add_acceptance(&mut image_acceptance, &img_mix, &r.acceptance);
-        cur = r.last;
-        if best.as_ref().is_none_or(|b| r.best_log_posterior > b.best_log_posterior) {
-            best = Some(r);
+    let best = image_chain_observed(&problem, &ip, &start, settings.image_steps, &mut inst, &mut raster, &mut rng, |done| {
+        if done % IMAGE_CHUNK == 0 || done == settings.image_steps {
+            progress("image chain", u64::from(done), total_img);
         }
-        done += k;
-        progress("image chain", u64::from(done), total_img);
-        if done >= settings.image_steps {
-            break;
-        }
-    }
-    let best = best.ok_or(FitRunError::Core { stage: "image chain", error: FitError::BadConfig })?;
+    })
+    .map_err(core("image chain"))?;
+    let mut image_acceptance = AcceptanceReport::new();
+    add_acceptance(&mut image_acceptance, &img_mix, &best.acceptance);
     let image_seconds = t1.elapsed().as_secs_f64();
     let fit = best.best;
     let img_eval = best.best_image.ok_or(FitRunError::Core { stage: "image chain", error: FitError::BadConfig })?;

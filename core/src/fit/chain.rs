@@ -238,6 +238,18 @@ pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: u
     steps: u32,
     rng: &mut R,
 ) -> Result<FitResult<KS, KC>, FitError> {
+    landmark_chain_observed(problem, init, steps, rng, |_| {})
+}
+
+/// [`landmark_chain`], calling `on_step(done)` with the number of finished steps before each
+/// step and once at the end (for progress reports).
+pub fn landmark_chain_observed<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I>,
+    init: &FitParams<KS, KC>,
+    steps: u32,
+    rng: &mut R,
+    mut on_step: impl FnMut(u32),
+) -> Result<FitResult<KS, KC>, FitError> {
     check(problem, init)?;
     let ctx = ProposalContext { pivot: landmark_pivot(&problem.model, Some(&problem.landmarks))?, light_solution: None };
     let mut cur = landmark_state(problem, init)?;
@@ -247,7 +259,8 @@ pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: u
     let mut best = cur;
     let mut acc = Acceptance::new();
     let mut prop = *init;
-    for _ in 0..steps {
+    for step in 0..steps {
+        on_step(step);
         let id = pick(problem.mixture, rng)?;
         let Some(entry) = problem.mixture.entries().get(id) else { return Err(FitError::BadConfig) };
         let h = propose(entry, &cur.params, &ctx, rng, &mut prop);
@@ -260,6 +273,7 @@ pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: u
             }
         }
     }
+    on_step(steps);
     Ok(result(&best, &cur, acc, steps))
 }
 
@@ -302,6 +316,31 @@ pub fn image_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     raster: &mut TileRasterizer<TW, TH, BIN>,
     rng: &mut R,
 ) -> Result<FitResult<KS, KC>, FitError> {
+    image_chain_observed(problem, image, init, steps, instance, raster, rng, |_| {})
+}
+
+/// [`image_chain`], calling `on_step(done)` with the number of finished steps before each step
+/// and once at the end: progress reports without restarting the chain (a restart re-renders
+/// its start).
+#[allow(clippy::too_many_arguments)]
+pub fn image_chain_observed<
+    R: Rng + ?Sized,
+    I: TriIndex,
+    const KS: usize,
+    const KC: usize,
+    const TW: usize,
+    const TH: usize,
+    const BIN: usize,
+>(
+    problem: &Problem<'_, I>,
+    image: &ImageProblem<'_>,
+    init: &FitParams<KS, KC>,
+    steps: u32,
+    instance: &mut Instance<'_, KS, KC>,
+    raster: &mut TileRasterizer<TW, TH, BIN>,
+    rng: &mut R,
+    mut on_step: impl FnMut(u32),
+) -> Result<FitResult<KS, KC>, FitError> {
     check(problem, init)?;
     if image.image.width() != problem.width || image.image.height() != problem.height {
         return Err(FitError::LengthMismatch);
@@ -318,7 +357,8 @@ pub fn image_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     let mut best = cur;
     let mut acc = Acceptance::new();
     let mut prop = *init;
-    for _ in 0..steps {
+    for step in 0..steps {
+        on_step(step);
         let id = pick(problem.mixture, rng)?;
         let Some(entry) = problem.mixture.entries().get(id) else { return Err(FitError::BadConfig) };
         ctx.light_solution = None;
@@ -362,5 +402,6 @@ pub fn image_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
             }
         }
     }
+    on_step(steps);
     Ok(result(&best, &cur, acc, steps))
 }

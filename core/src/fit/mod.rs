@@ -23,7 +23,10 @@ pub mod params;
 pub mod prior;
 pub mod proposal;
 
-pub use chain::{image_chain, image_log_likelihood, landmark_chain, Acceptance, FitResult, ImageProblem, Problem};
+pub use chain::{
+    image_chain, image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, Acceptance, FitResult, ImageProblem,
+    Problem,
+};
 pub use image::{BackgroundModel, ImageEval, ImageLikelihood, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use init::{initial_guess, landmark_pivot};
 pub use landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
