@@ -1,9 +1,9 @@
 //! Fitting a model to a photo (`gpmm fit`): crop around the landmarks, the core's landmark chain,
 //! a least-squares light, the core's image chain; `fit.json`, `overlay.png` and `fit.ply`.
 //!
-//! Steps ([`fit_prepared`]):
+//! Steps ([`fit_prepared`]; 2 to 5 are the core's [`standard_fit`], which the firmware runs too):
 //! 1. The photo is cropped and resampled to `size × size` ([`crate::photo`]); the landmarks follow.
-//! 2. Start ([`initial_guess`]): frontal mean face whose landmark centroid and spread match the
+//! 2. Start ([`gpmm_core::fit::initial_guess`]): frontal mean face whose landmark centroid and spread match the
 //!    target's, at [`NOMINAL_DISTANCE_MM`] (the focal length follows from that distance).
 //! 3. Landmark chain (`prior × landmarks`, no rendering), [`FitSettings::landmark_steps`] steps.
 //! 4. The SH light of the landmark fit's best sample is solved in closed form (least squares on
@@ -19,17 +19,18 @@ use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::pts::PtsError;
 use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
-    image_chain_observed, image_log_likelihood, initial_guess, landmark_chain, landmark_chain_observed, landmark_pivot, solve_light,
-    Acceptance, BackgroundModel, FitError, FitParams, ImageProblem, Instance, InstanceBuffers, LandmarkTarget, LightSolveConfig, Mixture,
-    MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA, MAX_LANDMARKS,
+    standard_fit, Acceptance, FitError, FitParams, Instance, InstanceBuffers, Mixture, MorphableModel, Stage, TargetImage, MAX_LANDMARKS,
 };
-use gpmm_core::{Cull, ProjectedVertex, ShLight};
+use gpmm_core::{Cull, ProjectedVertex};
 use image::{RgbImage, Rgba, RgbaImage};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
+
+/// The core's settings of the standard fit (the defaults below are its defaults).
+pub use gpmm_core::fit::FitSettings as CoreSettings;
 
 /// Shape coefficient capacity of a fit (a model of higher rank is fitted in its first `KS` components).
 pub const KS: usize = 200;
@@ -41,22 +42,27 @@ pub type Params = FitParams<KS, KC>;
 /// Default working image side (pixels).
 pub const DEFAULT_SIZE: u32 = 128;
 /// Default landmark-chain steps (about 2 µs each: a few ms in all).
-pub const DEFAULT_LANDMARK_STEPS: u32 = 5000;
+pub const DEFAULT_LANDMARK_STEPS: u32 = CoreSettings::DEFAULT.landmark_steps;
 /// Default image-chain steps (each renders the model once; about 1 s in all at 128×128 on one core).
-pub const DEFAULT_IMAGE_STEPS: u32 = 600;
+pub const DEFAULT_IMAGE_STEPS: u32 = CoreSettings::DEFAULT.image_steps;
 /// Default seed.
 pub const DEFAULT_SEED: u64 = 0;
 /// Default number of shape components fitted (the leading ones; capped by the model's rank and [`KS`]).
-pub const DEFAULT_SHAPE_RANK: usize = 50;
+///
+/// All of a default model's 200: on synthetic ICT faces (three seeds, 52 faces each) 50 components
+/// left 3.5 % inter-ocular landmark error and compressed yaw (the template's jaw-corner landmarks sit
+/// up to 20 mm deeper than ICT's mean face, beyond what 50 components express); 200 gave 2.8 % and a
+/// median yaw error of 2°, for about 15 % more time per fit.
+pub const DEFAULT_SHAPE_RANK: usize = CoreSettings::DEFAULT.shape_rank;
 /// Default number of colour components fitted.
-pub const DEFAULT_COLOR_RANK: usize = 50;
+pub const DEFAULT_COLOR_RANK: usize = CoreSettings::DEFAULT.color_rank;
 /// Default landmark σ as a fraction of the working image side (0.64 px at 128; the core's
 /// `LandmarkTarget::default_sigma` of 1.5 % left 5 % inter-ocular landmark error on synthetic faces).
-pub const DEFAULT_LANDMARK_SIGMA: f32 = 0.005;
+pub const DEFAULT_LANDMARK_SIGMA: f32 = CoreSettings::DEFAULT.landmark_sigma;
 /// Distance of the start pose (mm); the start focal length is chosen to match the landmark spread.
-pub const NOMINAL_DISTANCE_MM: f32 = 500.0;
+pub const NOMINAL_DISTANCE_MM: f32 = CoreSettings::DEFAULT.nominal_distance_mm;
 /// Uniform floor mixed into the background colour histogram.
-pub const BACKGROUND_FLOOR: f32 = 0.01;
+pub const BACKGROUND_FLOOR: f32 = CoreSettings::DEFAULT.background_floor;
 /// Landmark-chain steps between progress reports.
 const LANDMARK_CHUNK: u32 = 1000;
 /// Image-chain steps between progress reports.
@@ -125,6 +131,18 @@ impl Default for FitSettings {
 }
 
 impl FitSettings {
+    /// The core's settings for this fit (ranks capped at [`KS`] / [`KC`]).
+    pub fn core(&self) -> CoreSettings {
+        CoreSettings {
+            landmark_steps: self.landmark_steps,
+            image_steps: self.image_steps,
+            shape_rank: self.shape_rank.min(KS),
+            color_rank: self.color_rank.min(KC),
+            landmark_sigma: self.landmark_sigma,
+            ..CoreSettings::DEFAULT
+        }
+    }
+
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), FitRunError> {
         if !(self.landmark_sigma > 0.0 && self.landmark_sigma <= 0.5) {
@@ -244,70 +262,49 @@ pub fn fit_prepared(
         return Err(FitRunError::Settings(format!("{} target landmarks for a model with {n_lm}", prepared.landmarks.len())));
     }
     let mm = morphable(model)?;
-    let shape_len = settings.shape_rank.min(model.shape.rank()).min(KS);
-    let color_len = settings.color_rank.min(model.color.rank()).min(KC);
-
-    let valid = vec![true; n_lm];
-    let lm = LandmarkTarget::new(&prepared.landmarks, &valid, settings.landmark_sigma * w.max(h) as f32).map_err(core("landmarks"))?;
-    // Start: choose the focal length that puts the mean face at the nominal distance.
-    let ambient = ShLight::ambient([0.8; 3]);
-    let probe: Params = initial_guess(&mm, &lm, w as f32, w, h, ambient, shape_len, color_len).map_err(core("initial guess"))?;
-    let pivot = landmark_pivot(&mm, Some(&lm)).map_err(core("initial guess"))?;
-    let depth = -(probe.pose.translation[2] + pivot[2]);
-    let focal = if depth > 0.0 && depth.is_finite() { w as f32 * NOMINAL_DISTANCE_MM / depth } else { w as f32 };
-    let init: Params = initial_guess(&mm, &lm, focal, w, h, ambient, shape_len, color_len).map_err(core("initial guess"))?;
-    let prior = Prior::around(&init);
-    let lm_mix = Mixture::landmark_default(w.max(h) as f32);
-    let problem = Problem { model: mm, landmarks: lm, prior: &prior, mixture: &lm_mix, width: w, height: h };
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
-
-    // Landmark chain, one run; progress every LANDMARK_CHUNK steps.
-    let t0 = Instant::now();
-    let total_lm = u64::from(settings.landmark_steps);
-    let best_lm = landmark_chain_observed(&problem, &init, settings.landmark_steps, &mut rng, |done| {
-        if done % LANDMARK_CHUNK == 0 || done == settings.landmark_steps {
-            progress("landmark chain", u64::from(done), total_lm);
-        }
-    })
-    .map_err(core("landmark chain"))?;
-    let mut landmark_acceptance = AcceptanceReport::new();
-    add_acceptance(&mut landmark_acceptance, &lm_mix, &best_lm.acceptance);
-    let landmark_seconds = t0.elapsed().as_secs_f64();
-
-    // Least-squares light for the landmark result, then the image chain.
-    let t1 = Instant::now();
+    let core_settings = settings.core();
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
     let target = TargetImage::new(&pixels, w, h).map_err(core("target image"))?;
-    let background = BackgroundModel::from_image(&target, BACKGROUND_FLOOR).map_err(core("background model"))?;
-    let ip = ImageProblem { image: target, background: &background, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let valid = vec![true; n_lm];
     let nv = mm.vertices();
     let (mut pos, mut alb, mut nor, mut proj) =
         (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![ProjectedVertex::INVALID; nv]);
     let mut inst =
         Instance::<KS, KC>::new(InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj }, nv)
             .map_err(core("instance"))?;
-    let mut start = best_lm.best;
-    inst.update(&mm, &start, w, h).map_err(core("light solve"))?;
-    let full = LightSolveConfig { stride: 1, ..LightSolveConfig::default() };
-    if let Ok(l) = solve_light(inst.positions(), inst.normals(), inst.albedos(), &start.pose, &start.camera(w, h), &target, &full) {
-        start.light = l;
-    }
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
-    let img_mix = Mixture::image_default(w.max(h) as f32);
-    let problem = Problem { mixture: &img_mix, ..problem };
-    let start_eval = image_log_likelihood(&problem, &ip, &start, &mut inst, &mut raster).map_err(core("image likelihood"))?;
-    let start_lm = landmark_chain(&problem, &start, 0, &mut Xoshiro256PlusPlus::seed_from_u64(0)).map_err(core("landmark term"))?;
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 
-    let total_img = u64::from(settings.image_steps);
-    let best = image_chain_observed(&problem, &ip, &start, settings.image_steps, &mut inst, &mut raster, &mut rng, |done| {
-        if done % IMAGE_CHUNK == 0 || done == settings.image_steps {
-            progress("image chain", u64::from(done), total_img);
+    // One run of the core's standard fit; the observer reports progress and splits the time.
+    let t0 = Instant::now();
+    let mut landmark_seconds = 0.0;
+    let mut observer = |stage: Stage, done: u32, total: u32| match stage {
+        Stage::LandmarkChain => {
+            if done.is_multiple_of(LANDMARK_CHUNK) || done == total {
+                progress("landmark chain", u64::from(done), u64::from(total));
+            }
+            if done == total {
+                landmark_seconds = t0.elapsed().as_secs_f64();
+            }
         }
-    })
-    .map_err(core("image chain"))?;
+        Stage::ImageChain => {
+            if done.is_multiple_of(IMAGE_CHUNK) || done == total {
+                progress("image chain", u64::from(done), u64::from(total));
+            }
+        }
+    };
+    let result = standard_fit(&mm, target, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut rng, &mut observer)
+        .map_err(core("fit"))?;
+    let image_seconds = t0.elapsed().as_secs_f64() - landmark_seconds;
+    let lm_mix = Mixture::landmark_default(w.max(h) as f32);
+    let img_mix = Mixture::image_default(w.max(h) as f32);
+    let mut landmark_acceptance = AcceptanceReport::new();
+    add_acceptance(&mut landmark_acceptance, &lm_mix, &result.landmark.acceptance);
     let mut image_acceptance = AcceptanceReport::new();
-    add_acceptance(&mut image_acceptance, &img_mix, &best.acceptance);
-    let image_seconds = t1.elapsed().as_secs_f64();
+    add_acceptance(&mut image_acceptance, &img_mix, &result.image.acceptance);
+    let best = result.image;
+    let start = result.start;
+    let start_eval = result.start_image;
     let fit = best.best;
     let img_eval = best.best_image.ok_or(FitRunError::Core { stage: "image chain", error: FitError::BadConfig })?;
 
@@ -321,7 +318,7 @@ pub fn fit_prepared(
         params: fit,
         landmark_params: start,
         landmark_rmse_px: best.best_landmarks.rmse(),
-        landmark_rmse_after_landmark_chain_px: start_lm.best_landmarks.rmse(),
+        landmark_rmse_after_landmark_chain_px: result.start_landmarks.rmse(),
         pixel_rmse_after_landmark_chain: start_eval.rmse(),
         pixel_rmse: img_eval.rmse(),
         log_posterior: best.best_log_posterior,

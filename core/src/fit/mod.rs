@@ -7,6 +7,7 @@
 //! - [`proposal`]: the coarse-to-fine mixture of Gaussian drift proposals.
 //! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
 //! - [`chain`]: Metropolis-Hastings with delayed acceptance (prior and landmarks, then the image).
+//! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
 //! - [`normal`]: uniform and standard-normal samples over any `rand_core` generator.
 //!
 //! All log densities are `f32` and "up to an additive constant" unless stated otherwise; the
@@ -22,6 +23,7 @@ pub mod normal;
 pub mod params;
 pub mod prior;
 pub mod proposal;
+pub mod recipe;
 
 pub use chain::{
     image_chain, image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, Acceptance, FitResult, ImageProblem,
@@ -35,6 +37,7 @@ pub use morph::{Instance, InstanceBuffers, MorphableModel};
 pub use params::FitParams;
 pub use prior::Prior;
 pub use proposal::{propose, Mixture, Proposal, ProposalContext, ProposalKind, Scale, MAX_PROPOSALS};
+pub use recipe::{standard_fit, FitObserver, FitSettings, Stage, StandardFit};
 
 use crate::{ModelError, RasterError, VertexError};
 

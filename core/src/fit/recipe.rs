@@ -1,0 +1,185 @@
+//! The standard fit, end to end, as one function: the host's `gpmm fit` and the firmware run
+//! exactly this, so a seed gives the same fit on both (the parity test compares them).
+//!
+//! 1. Start: a frontal pose whose focal length puts the mean face at
+//!    [`FitSettings::nominal_distance_mm`] ([`initial_guess`] twice: the first probe measures the
+//!    depth at which the landmark spread matches), ambient light, zero coefficients; the prior is
+//!    centred on it ([`Prior::around`]).
+//! 2. The landmark chain (prior × landmarks, no rendering).
+//! 3. Its best sample gets the closed-form least-squares SH light on every visible vertex.
+//! 4. The image chain from there (prior × landmarks × image, delayed acceptance).
+//!
+//! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
+
+use super::chain::{image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, FitResult, ImageProblem, Problem};
+use super::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
+use super::init::{initial_guess, landmark_pivot};
+use super::landmarks::{LandmarkEval, LandmarkTarget};
+use super::light_fit::{solve_light, LightSolveConfig};
+use super::morph::{Instance, MorphableModel};
+use super::params::FitParams;
+use super::prior::Prior;
+use super::proposal::Mixture;
+use super::FitError;
+use crate::shading::TriIndex;
+use crate::{ShLight, TileRasterizer};
+use rand_core::Rng;
+
+/// Settings of [`standard_fit`] (defaults: the documented default fit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitSettings {
+    /// Landmark-chain steps.
+    pub landmark_steps: u32,
+    /// Image-chain steps (each renders the model at most once).
+    pub image_steps: u32,
+    /// Shape components fitted (the leading ones; capped by the model's rank and `KS`).
+    pub shape_rank: usize,
+    /// Colour components fitted (capped by the model's rank and `KC`).
+    pub color_rank: usize,
+    /// Landmark σ as a fraction of the larger image side.
+    pub landmark_sigma: f32,
+    /// Foreground σ of the image likelihood on [0, 1] colours.
+    pub pixel_sigma: f32,
+    /// Uniform floor mixed into the background colour histogram.
+    pub background_floor: f32,
+    /// Distance of the start pose (mm); the start focal length is chosen to match it.
+    pub nominal_distance_mm: f32,
+}
+
+impl FitSettings {
+    /// The default fit: 5000 landmark steps, 600 image steps, 200 shape and 50 colour components,
+    /// landmark σ 0.5 % of the image side, pixel σ 0.043, background floor 0.01, start at 500 mm.
+    pub const DEFAULT: Self = Self {
+        landmark_steps: 5000,
+        image_steps: 600,
+        shape_rank: 200,
+        color_rank: 50,
+        landmark_sigma: 0.005,
+        pixel_sigma: DEFAULT_PIXEL_SIGMA,
+        background_floor: 0.01,
+        nominal_distance_mm: 500.0,
+    };
+
+    /// Checks ranges (σ > 0 and finite, distance > 0); `BadConfig` otherwise.
+    pub fn validate(&self) -> Result<(), FitError> {
+        let positive = |v: f32| v > 0.0 && v.is_finite();
+        if positive(self.landmark_sigma) && positive(self.pixel_sigma) && positive(self.nominal_distance_mm) && self.background_floor >= 0.0
+        {
+            Ok(())
+        } else {
+            Err(FitError::BadConfig)
+        }
+    }
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// The stage a progress report is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// The landmark chain.
+    LandmarkChain,
+    /// The least-squares light and the image chain.
+    ImageChain,
+}
+
+/// Receives progress: `step(stage, done, total)` before each step of a chain and once with
+/// `done == total` when it ends (the firmware reads its instruction counter here).
+pub trait FitObserver {
+    /// One report.
+    fn step(&mut self, stage: Stage, done: u32, total: u32);
+}
+
+impl<F: FnMut(Stage, u32, u32)> FitObserver for F {
+    fn step(&mut self, stage: Stage, done: u32, total: u32) {
+        self(stage, done, total)
+    }
+}
+
+/// Everything [`standard_fit`] found.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StandardFit<const KS: usize, const KC: usize> {
+    /// The start of the landmark chain.
+    pub init: FitParams<KS, KC>,
+    /// The landmark chain.
+    pub landmark: FitResult<KS, KC>,
+    /// The landmark chain's best sample with the least-squares light: the image chain's start.
+    pub start: FitParams<KS, KC>,
+    /// The image term of `start`.
+    pub start_image: ImageEval,
+    /// The landmark term of `start`.
+    pub start_landmarks: LandmarkEval,
+    /// The image chain (its `best` is the fit).
+    pub image: FitResult<KS, KC>,
+}
+
+impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
+    /// The fit: the image chain's best sample.
+    pub fn params(&self) -> &FitParams<KS, KC> {
+        &self.image.best
+    }
+}
+
+/// Runs the standard fit of `model` to `image` with target `landmarks` (working-image pixels, one
+/// per model landmark; `valid` marks the usable ones). `instance` must be built for `model`.
+#[allow(clippy::too_many_arguments)]
+pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    model: &MorphableModel<'_, I>,
+    image: TargetImage<'_>,
+    landmarks: &[[f32; 2]],
+    valid: &[bool],
+    settings: &FitSettings,
+    instance: &mut Instance<'_, KS, KC>,
+    raster: &mut TileRasterizer<TW, TH, BIN>,
+    rng: &mut R,
+    observer: &mut dyn FitObserver,
+) -> Result<StandardFit<KS, KC>, FitError> {
+    settings.validate()?;
+    let (w, h) = (image.width(), image.height());
+    let side = w.max(h) as f32;
+    let lm = LandmarkTarget::new(landmarks, valid, settings.landmark_sigma * side)?;
+    let (shape_len, color_len) = (settings.shape_rank, settings.color_rank);
+
+    // 1. The start and the prior.
+    let ambient = ShLight::ambient([0.8; 3]);
+    let probe: FitParams<KS, KC> = initial_guess(model, &lm, w as f32, w, h, ambient, shape_len, color_len)?;
+    let pivot = landmark_pivot(model, Some(&lm))?;
+    let depth = -(probe.pose.translation[2] + pivot[2]);
+    let focal = if depth > 0.0 && depth.is_finite() { w as f32 * settings.nominal_distance_mm / depth } else { w as f32 };
+    let init: FitParams<KS, KC> = initial_guess(model, &lm, focal, w, h, ambient, shape_len, color_len)?;
+    let prior = Prior::around(&init);
+
+    // 2. The landmark chain.
+    let lm_mix = Mixture::landmark_default(side);
+    let problem = Problem { model: *model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: w, height: h };
+    let lm_steps = settings.landmark_steps;
+    let landmark = landmark_chain_observed(&problem, &init, lm_steps, rng, |done| observer.step(Stage::LandmarkChain, done, lm_steps))?;
+
+    // 3. The least-squares light of its best sample (kept only if the solve succeeds).
+    let background = BackgroundModel::from_image(&image, settings.background_floor)?;
+    let ip = ImageProblem { image, background: &background, sigma: settings.pixel_sigma, light_solve: LightSolveConfig::default() };
+    let mut start = landmark.best;
+    instance.update(model, &start, w, h)?;
+    let every_vertex = LightSolveConfig { stride: 1, ..LightSolveConfig::default() };
+    if let Ok(l) =
+        solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &start.camera(w, h), &image, &every_vertex)
+    {
+        start.light = l;
+    }
+
+    // 4. The image chain.
+    let img_mix = Mixture::image_default(side);
+    let problem = Problem { mixture: &img_mix, ..problem };
+    let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
+    // Zero steps draw nothing from the generator: this only evaluates the landmark term.
+    let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
+    let img_steps = settings.image_steps;
+    let image = image_chain_observed(&problem, &ip, &start, img_steps, instance, raster, rng, |done| {
+        observer.step(Stage::ImageChain, done, img_steps)
+    })?;
+    Ok(StandardFit { init, landmark, start, start_image, start_landmarks, image })
+}
