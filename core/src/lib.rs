@@ -9,6 +9,7 @@
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
+pub mod blob;
 pub mod camera;
 pub mod checksum;
 pub mod fit;
@@ -19,10 +20,11 @@ pub mod raster;
 pub mod shading;
 pub mod tile;
 
+pub use blob::{BlobError, ModelBlob};
 pub use camera::{Camera, ScreenPoint};
 pub use checksum::{crc32, FrameChecksum};
 pub use light::ShLight;
-pub use model::{Basis, DenseBasis, FactoredBasis, ModelError, Vec3};
+pub use model::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
 pub use pose::{Mat3, Pose};
 pub use raster::{Cull, FrameStats, RasterError, TileRasterizer};
 pub use shading::{project_vertices, shade_vertices, vertex_normals, vertex_stage, ProjectedVertex, TriIndex, VertexError};

@@ -166,13 +166,234 @@ impl<'a> DenseBasis<'a> {
     }
 }
 
-/// Either basis layout.
+/// Quantized basis values, borrowed (e.g. in place from a model blob in flash).
+#[derive(Debug, Clone, Copy)]
+pub enum QuantValues<'a> {
+    /// 8-bit signed values.
+    I8(&'a [i8]),
+    /// 16-bit signed values.
+    I16(&'a [i16]),
+}
+
+impl QuantValues<'_> {
+    /// Number of values.
+    pub fn len(&self) -> usize {
+        match self {
+            QuantValues::I8(v) => v.len(),
+            QuantValues::I16(v) => v.len(),
+        }
+    }
+
+    /// Whether there are no values.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bits per value (8 or 16).
+    pub fn bits(&self) -> u8 {
+        match self {
+            QuantValues::I8(_) => 8,
+            QuantValues::I16(_) => 16,
+        }
+    }
+
+    /// Value `i` as `f32` (0 past the end).
+    pub fn get(&self, i: usize) -> f32 {
+        match self {
+            QuantValues::I8(v) => v.get(i).map_or(0.0, |&q| f32::from(q)),
+            QuantValues::I16(v) => v.get(i).map_or(0.0, |&q| f32::from(q)),
+        }
+    }
+}
+
+/// Multiply-adds `out[v][a] += d[a] · q[v]` (factored) over one component's values.
+fn fold_factored<Q: Copy + Into<f32>>(d: Vec3, values: &[Q], out: &mut [Vec3]) {
+    for (o, &q) in out.iter_mut().zip(values) {
+        let q: f32 = q.into();
+        o[0] += d[0] * q;
+        o[1] += d[1] * q;
+        o[2] += d[2] * q;
+    }
+}
+
+/// Multiply-adds `out[v][a] += m · q[v][a]` (dense) over one component's values.
+fn fold_dense<Q: Copy + Into<f32>>(m: f32, values: &[Q], out: &mut [Vec3]) {
+    for (o, q) in out.iter_mut().zip(values.chunks_exact(3)) {
+        if let [x, y, z] = *q {
+            o[0] += m * x.into();
+            o[1] += m * y.into();
+            o[2] += m * z.into();
+        }
+    }
+}
+
+/// A quantized basis: component `k` is `scales[k] · q_k`, with integer values `q_k`.
+///
+/// With `directions` (factored layout) `values` is `rank × vertices` and component `k` is
+/// `scales[k] · q_k ⊗ directions[k]`; without (dense layout) `values` is `rank × vertices × 3`.
+/// The dequantized value of `q` is `scales[k] · q`; sums fold `c_k · scales[k] (· e_k)` into
+/// at most three floats per component, then do one multiply-add per stored value.
+#[derive(Debug, Clone, Copy)]
+pub struct QuantizedBasis<'a> {
+    values: QuantValues<'a>,
+    scales: &'a [f32],
+    directions: Option<&'a [Vec3]>,
+    vertices: usize,
+}
+
+impl<'a> QuantizedBasis<'a> {
+    /// Wraps borrowed data; the rank is `scales.len()`, and `directions` (if any) and `values` must agree.
+    pub fn new(values: QuantValues<'a>, scales: &'a [f32], directions: Option<&'a [Vec3]>, vertices: usize) -> Result<Self, ModelError> {
+        let rank = scales.len();
+        let per_component = match directions {
+            Some(d) if d.len() != rank => return Err(ModelError::LengthMismatch),
+            Some(_) => Some(vertices),
+            None => vertices.checked_mul(3),
+        };
+        if per_component.and_then(|p| p.checked_mul(rank)) != Some(values.len()) {
+            return Err(ModelError::LengthMismatch);
+        }
+        Ok(Self { values, scales, directions, vertices })
+    }
+
+    /// Number of components.
+    pub fn rank(&self) -> usize {
+        self.scales.len()
+    }
+
+    /// Number of vertices each component covers.
+    pub fn vertices(&self) -> usize {
+        self.vertices
+    }
+
+    /// The integer values.
+    pub fn values(&self) -> QuantValues<'a> {
+        self.values
+    }
+
+    /// Per-component scales.
+    pub fn scales(&self) -> &'a [f32] {
+        self.scales
+    }
+
+    /// Per-component unit directions (factored layout), or `None` (dense layout).
+    pub fn directions(&self) -> Option<&'a [Vec3]> {
+        self.directions
+    }
+
+    fn check(&self, coeffs: &[f32]) -> Result<(), ModelError> {
+        if coeffs.len() > self.rank() {
+            return Err(ModelError::TooManyCoefficients);
+        }
+        Ok(())
+    }
+
+    /// Adds `Σ_k coeffs[k] · scales[k] · q_k` to `out` (one entry per vertex).
+    pub fn add_instance(&self, coeffs: &[f32], out: &mut [Vec3]) -> Result<(), ModelError> {
+        if out.len() != self.vertices {
+            return Err(ModelError::LengthMismatch);
+        }
+        self.check(coeffs)?;
+        if self.vertices == 0 {
+            return Ok(());
+        }
+        let n = self.vertices;
+        match self.directions {
+            Some(dirs) => {
+                for (k, ((c, s), e)) in coeffs.iter().zip(self.scales).zip(dirs).enumerate() {
+                    let m = c * s;
+                    if m == 0.0 {
+                        continue;
+                    }
+                    let d = [m * e[0], m * e[1], m * e[2]];
+                    let range = k * n..(k + 1) * n;
+                    match self.values {
+                        QuantValues::I8(v) => fold_factored(d, v.get(range).unwrap_or(&[]), out),
+                        QuantValues::I16(v) => fold_factored(d, v.get(range).unwrap_or(&[]), out),
+                    }
+                }
+            }
+            None => {
+                for (k, (c, s)) in coeffs.iter().zip(self.scales).enumerate() {
+                    let m = c * s;
+                    if m == 0.0 {
+                        continue;
+                    }
+                    let range = 3 * k * n..3 * (k + 1) * n;
+                    match self.values {
+                        QuantValues::I8(v) => fold_dense(m, v.get(range).unwrap_or(&[]), out),
+                        QuantValues::I16(v) => fold_dense(m, v.get(range).unwrap_or(&[]), out),
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds `Σ_k coeffs[k] · scales[k] · q_k[vertex]` to `out`: one vertex of the instance alone.
+    pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
+        if vertex >= self.vertices {
+            return Err(ModelError::LengthMismatch);
+        }
+        self.check(coeffs)?;
+        let n = self.vertices;
+        match self.directions {
+            Some(dirs) => {
+                for (k, ((c, s), e)) in coeffs.iter().zip(self.scales).zip(dirs).enumerate() {
+                    let m = c * s;
+                    let q = self.values.get(k * n + vertex);
+                    out[0] += m * e[0] * q;
+                    out[1] += m * e[1] * q;
+                    out[2] += m * e[2] * q;
+                }
+            }
+            None => {
+                for (k, (c, s)) in coeffs.iter().zip(self.scales).enumerate() {
+                    let m = c * s;
+                    let at = (k * n + vertex) * 3;
+                    out[0] += m * self.values.get(at);
+                    out[1] += m * self.values.get(at + 1);
+                    out[2] += m * self.values.get(at + 2);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Multiply-adds `out[i][a] += d[a] · values[ids[i]]` (factored) over one component's values.
+fn gather_factored<Q: Copy + Into<f32>>(d: Vec3, values: &[Q], ids: &[u32], out: &mut [Vec3]) {
+    for (o, &v) in out.iter_mut().zip(ids) {
+        if let Some(&q) = values.get(v as usize) {
+            let q: f32 = q.into();
+            o[0] += d[0] * q;
+            o[1] += d[1] * q;
+            o[2] += d[2] * q;
+        }
+    }
+}
+
+/// Multiply-adds `out[i][a] += m · values[ids[i]][a]` (dense) over one component's values.
+fn gather_dense<Q: Copy + Into<f32>>(m: f32, values: &[Q], ids: &[u32], out: &mut [Vec3]) {
+    for (o, &v) in out.iter_mut().zip(ids) {
+        let at = v as usize * 3;
+        if let Some(&[x, y, z]) = values.get(at..at + 3) {
+            o[0] += m * x.into();
+            o[1] += m * y.into();
+            o[2] += m * z.into();
+        }
+    }
+}
+
+/// Any basis layout.
 #[derive(Debug, Clone, Copy)]
 pub enum Basis<'a> {
     /// Scalar field times a fixed direction per component.
     Factored(FactoredBasis<'a>),
     /// Full 3-vector per vertex per component.
     Dense(DenseBasis<'a>),
+    /// Integer values with per-component scales (factored or dense), e.g. from a model blob.
+    Quantized(QuantizedBasis<'a>),
 }
 
 impl Basis<'_> {
@@ -181,6 +402,7 @@ impl Basis<'_> {
         match self {
             Basis::Factored(b) => b.rank(),
             Basis::Dense(b) => b.rank(),
+            Basis::Quantized(b) => b.rank(),
         }
     }
 
@@ -189,6 +411,7 @@ impl Basis<'_> {
         match self {
             Basis::Factored(b) => b.vertices(),
             Basis::Dense(b) => b.vertices(),
+            Basis::Quantized(b) => b.vertices(),
         }
     }
 
@@ -197,7 +420,51 @@ impl Basis<'_> {
         match self {
             Basis::Factored(b) => b.add_vertex(coeffs, vertex, out),
             Basis::Dense(b) => b.add_vertex(coeffs, vertex, out),
+            Basis::Quantized(b) => b.add_vertex(coeffs, vertex, out),
         }
+    }
+
+    /// Adds the linear combination of components at the vertices `ids` to `out` (one entry per
+    /// id), with the component loop outside: the same sums as [`Basis::add_instance`] at those
+    /// vertices, for `rank × ids` multiply-adds (the fitter's landmarks).
+    pub fn add_vertices(&self, coeffs: &[f32], ids: &[u32], out: &mut [Vec3]) -> Result<(), ModelError> {
+        let n = self.vertices();
+        if out.len() != ids.len() || ids.iter().any(|&v| v as usize >= n) {
+            return Err(ModelError::LengthMismatch);
+        }
+        if coeffs.len() > self.rank() {
+            return Err(ModelError::TooManyCoefficients);
+        }
+        match self {
+            Basis::Factored(b) => {
+                for ((c, e), field) in coeffs.iter().zip(b.directions).zip(b.fields.chunks_exact(n.max(1))) {
+                    gather_factored([c * e[0], c * e[1], c * e[2]], field, ids, out);
+                }
+            }
+            Basis::Dense(b) => {
+                for (c, comp) in coeffs.iter().zip(b.values.chunks_exact((3 * n).max(1))) {
+                    gather_dense(*c, comp, ids, out);
+                }
+            }
+            Basis::Quantized(b) => {
+                let per = if b.directions.is_some() { n } else { 3 * n };
+                for (k, (c, s)) in coeffs.iter().zip(b.scales).enumerate() {
+                    let m = c * s;
+                    let range = k * per..(k + 1) * per;
+                    match (b.directions.and_then(|d| d.get(k)), b.values) {
+                        (Some(e), QuantValues::I8(v)) => {
+                            gather_factored([m * e[0], m * e[1], m * e[2]], v.get(range).unwrap_or(&[]), ids, out)
+                        }
+                        (Some(e), QuantValues::I16(v)) => {
+                            gather_factored([m * e[0], m * e[1], m * e[2]], v.get(range).unwrap_or(&[]), ids, out)
+                        }
+                        (None, QuantValues::I8(v)) => gather_dense(m, v.get(range).unwrap_or(&[]), ids, out),
+                        (None, QuantValues::I16(v)) => gather_dense(m, v.get(range).unwrap_or(&[]), ids, out),
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Adds the linear combination of components to `out`.
@@ -205,6 +472,7 @@ impl Basis<'_> {
         match self {
             Basis::Factored(b) => b.add_instance(coeffs, out),
             Basis::Dense(b) => b.add_instance(coeffs, out),
+            Basis::Quantized(b) => b.add_instance(coeffs, out),
         }
     }
 }
@@ -213,6 +481,38 @@ impl Basis<'_> {
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn add_vertices_equals_add_vertex_for_every_layout() {
+        let fields = [1.0, 2.0, 3.0, 0.5, -1.0, 0.25];
+        let dirs = [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]];
+        let dense = [0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7, 0.8, -0.9, 1.0, 1.1, 1.2, 1.3, -1.4, 1.5, 1.6, 1.7, 1.8];
+        let q8: [i8; 6] = [12, -7, 127, -128, 0, 55];
+        let q16: [i16; 18] = [1, -2, 3, 400, -500, 600, 7, 8, 9, -10, 11, 12, 13, 14, 15, 16, 17, -32767];
+        let scales = [0.01, 0.002];
+        let bases = [
+            Basis::Factored(FactoredBasis::new(&fields, &dirs, 3).unwrap()),
+            Basis::Dense(DenseBasis::new(&dense, 2, 3).unwrap()),
+            Basis::Quantized(QuantizedBasis::new(QuantValues::I8(&q8), &scales, Some(&dirs), 3).unwrap()),
+            Basis::Quantized(QuantizedBasis::new(QuantValues::I16(&q16), &scales, None, 3).unwrap()),
+        ];
+        let ids = [2u32, 0, 2, 1];
+        for b in bases {
+            let c = [0.7, -2.0];
+            let mut many = [[0.5f32; 3]; 4];
+            b.add_vertices(&c, &ids, &mut many).unwrap();
+            for (o, &v) in many.iter().zip(&ids) {
+                let mut one = [0.5f32; 3];
+                b.add_vertex(&c, v as usize, &mut one).unwrap();
+                for a in 0..3 {
+                    assert!((o[a] - one[a]).abs() <= 1e-6 * (1.0 + one[a].abs()), "{b:?}: {o:?} vs {one:?}");
+                }
+            }
+            assert_eq!(b.add_vertices(&c, &[3], &mut [[0.0; 3]]), Err(ModelError::LengthMismatch));
+            assert_eq!(b.add_vertices(&c, &[0, 1], &mut [[0.0; 3]]), Err(ModelError::LengthMismatch));
+            assert_eq!(b.add_vertices(&[1.0; 3], &[0], &mut [[0.0; 3]]), Err(ModelError::TooManyCoefficients));
+        }
+    }
 
     #[test]
     fn factored_matches_dense_expansion() {
@@ -246,5 +546,67 @@ mod tests {
         assert_eq!(f.add_instance(&[1.0], &mut out), Err(ModelError::LengthMismatch));
         let mut out = [[0.0f32; 3]; 3];
         assert_eq!(f.add_instance(&[1.0; 3], &mut out), Err(ModelError::TooManyCoefficients));
+    }
+
+    /// Dequantized f32 bases and quantized ones give the same sums exactly (power-of-two scales
+    /// make every dequantized value exact, so the two evaluation orders round identically).
+    #[test]
+    fn quantized_equals_dequantized_f32_basis() {
+        let n = 4;
+        let q8: [i8; 8] = [127, -128, 3, 0, -5, 64, -1, 100];
+        let q16: [i16; 8] = [32767, -32768, 300, 0, -5000, 6400, -1, 10000];
+        let scales = [0.25f32, 1.0 / 1024.0];
+        let dirs = [[0.0, 0.6, 0.8], [1.0, 0.0, 0.0]];
+        let coeffs = [0.37f32, -1.9];
+        for values in [QuantValues::I8(&q8), QuantValues::I16(&q16)] {
+            let fields: std::vec::Vec<f32> = (0..8).map(|i| scales[i / n] * values.get(i)).collect();
+            let f = FactoredBasis::new(&fields, &dirs, n).unwrap();
+            let q = Basis::Quantized(QuantizedBasis::new(values, &scales, Some(&dirs), n).unwrap());
+            assert_eq!((q.rank(), q.vertices()), (2, n));
+            let (mut a, mut b) = ([[0.5f32; 3]; 4], [[0.5f32; 3]; 4]);
+            f.add_instance(&coeffs, &mut a).unwrap();
+            q.add_instance(&coeffs, &mut b).unwrap();
+            assert_eq!(a, b);
+            assert_ne!(a, [[0.5f32; 3]; 4]);
+            for (v, want) in b.iter().enumerate() {
+                let mut p = [0.5f32; 3];
+                q.add_vertex(&coeffs, v, &mut p).unwrap();
+                assert_eq!(&p, want, "vertex {v}");
+            }
+        }
+        // Dense layout: rank 2, 2 vertices, 3 values each.
+        let qd: [i16; 12] = [1, -2, 3, 32767, 0, -32768, 7, 8, -9, 10, 11, 12];
+        let dense: std::vec::Vec<f32> = (0..12).map(|i| scales[i / 6] * f32::from(qd[i])).collect();
+        let d = DenseBasis::new(&dense, 2, 2).unwrap();
+        let q = QuantizedBasis::new(QuantValues::I16(&qd), &scales, None, 2).unwrap();
+        let (mut a, mut b) = ([[1.0f32; 3]; 2], [[1.0f32; 3]; 2]);
+        d.add_instance(&coeffs, &mut a).unwrap();
+        q.add_instance(&coeffs, &mut b).unwrap();
+        assert_eq!(a, b);
+        let mut p = [1.0f32; 3];
+        q.add_vertex(&coeffs, 1, &mut p).unwrap();
+        assert_eq!(p, b[1]);
+        // Fewer coefficients: the rest are zero.
+        let (mut a, mut b) = ([[0.0f32; 3]; 2], [[0.0f32; 3]; 2]);
+        d.add_instance(&coeffs[..1], &mut a).unwrap();
+        q.add_instance(&coeffs[..1], &mut b).unwrap();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn quantized_lengths_are_checked() {
+        let v = [0i8; 6];
+        let s = [1.0f32; 2];
+        assert!(QuantizedBasis::new(QuantValues::I8(&v), &s, Some(&[[1.0, 0.0, 0.0]; 2]), 3).is_ok());
+        assert!(QuantizedBasis::new(QuantValues::I8(&v), &s, None, 1).is_ok());
+        assert_eq!(QuantizedBasis::new(QuantValues::I8(&v), &s, Some(&[[1.0, 0.0, 0.0]; 1]), 3).err(), Some(ModelError::LengthMismatch));
+        assert_eq!(QuantizedBasis::new(QuantValues::I8(&v), &s, None, 3).err(), Some(ModelError::LengthMismatch));
+        assert_eq!(QuantizedBasis::new(QuantValues::I8(&v), &s, None, usize::MAX).err(), Some(ModelError::LengthMismatch));
+        let q = QuantizedBasis::new(QuantValues::I8(&v), &s, None, 1).unwrap();
+        let mut out = [[0.0f32; 3]; 2];
+        assert_eq!(q.add_instance(&[1.0], &mut out), Err(ModelError::LengthMismatch));
+        let mut out = [[0.0f32; 3]; 1];
+        assert_eq!(q.add_instance(&[1.0; 3], &mut out), Err(ModelError::TooManyCoefficients));
+        assert_eq!(q.add_vertex(&[1.0], 1, &mut out[0]), Err(ModelError::LengthMismatch));
     }
 }

@@ -1,15 +1,18 @@
 //! gpmm firmware, simulated: Cortex-M4F under QEMU (mps2-an386), or on a board.
 //!
-//! What it does now (the smoke test of the renderer; fitting comes later):
+//! What it does (the data partition decides: a device mesh is rendered, a model blob is fitted):
 //! 1. calibrates SysTick against a loop of known instruction count (under QEMU with
 //!    `-icount shift=0` one SysTick tick is 40 instructions: 1 instruction = 1 ns of
 //!    virtual time, SysTick runs on the 25 MHz system clock);
 //! 2. reads the data partition (`GPMM_DATA` in memory.x), flashed separately from the
 //!    program: nothing there (first word erased) logs "no data partition" and exits ok;
-//!    otherwise it must hold a valid device mesh (`mesh.rs`), else the firmware fails;
-//! 3. renders the mesh with gpmm-core exactly as the host does: the vertex stage (normals,
-//!    SH shading, projection) into static buffers, then `TileRasterizer<16, 16, BIN>` into a
+//!    a device mesh (`mesh.rs`, magic `GPDM`) is rendered, anything else must be a model blob
+//!    followed by a fit input (`fit.rs`, `fit_input.rs`), which is fitted;
+//! 3. a device mesh: renders it with gpmm-core exactly as the host does: the vertex stage (normals,
+//!    SH shading, projection) into static buffers, then `TileRasterizer<32, 32, BIN>` into a
 //!    `FrameChecksum` sink; both stages are timed in instructions (`clock::measure`, ±4);
+//!    a model blob: runs the core's standard fit (the same function as `gpmm fit`) and logs the
+//!    fitted pose, coefficients, landmarks, log-likelihood, acceptance and the instructions of every stage;
 //! 4. measures the stack's high-water mark (cortex-m-rt's `paint-stack`);
 //! 5. logs `key=value` figures with defmt over semihosting and exits through
 //!    semihosting: status 0 on success, 1 on any failure (bad data, panic, fault, bad calibration).
@@ -17,6 +20,8 @@
 #![no_main]
 
 mod clock;
+mod fit;
+mod fit_input;
 mod mesh;
 mod partition;
 mod stack;
@@ -28,19 +33,25 @@ use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasteriz
 /// The device profile this image was linked for (memory.x or memory-m7.x).
 const PROFILE: &str = if cfg!(feature = "m7") { "m7" } else { "m4f" };
 
-/// Largest mesh the static buffers hold (36 bytes of RAM per vertex: normal + projected vertex).
-/// `m4f`: 4,352 vertices = 153 KiB of the 192 KiB RAM (the cropped template has 4,249); with the
-/// renderer (23 KiB) that leaves about 14 KiB for the stack (peak measured: 1.6 KiB).
-const MAX_VERTICES: usize = if cfg!(feature = "m7") { 12_288 } else { 4_352 };
-/// Tile size of the renderer.
-const TILE: usize = 16;
+/// Largest mesh the static buffers hold: a `Vec3` pool and a projected-vertex array of this
+/// many entries (36 bytes of RAM per entry). A render needs one `Vec3` (normal) and one projected
+/// vertex per vertex; a fit three `Vec3` (positions, albedos, normals) and one projected vertex,
+/// so it takes models of up to `MAX_VERTICES / 3` vertices: 1,024 on `m4f` (the m4f blob has at
+/// most 1,000), 4,096 on `m7`. `m4f`: 108 KiB of buffers + the renderer's 45 KiB leave 39 KiB of
+/// the 192 KiB for the stack (the fit's peak is 34 KiB: chain states and parameter copies).
+const MAX_VERTICES: usize = if cfg!(feature = "m7") { 12_288 } else { 3_072 };
+/// Tile size of the renderer: 32×32 (28 KiB of tile buffers). Each tile row scans the whole
+/// triangle list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M
+/// instructions, at 32×32 2.59 M (same fit). The host's `HostRasterizer` uses 32×32 too, so
+/// the likelihood sums tile by tile in the same order on both.
+const TILE: usize = 32;
 /// Triangles binned per tile row (8 bytes each); a row with more scans the whole list instead
 /// (never lossy, but slow: with 1,024 the template's frame overflowed 2 rows and took 80 M
 /// instead of 28 M instructions).
 const BIN: usize = 2048;
 
 /// The renderer of this firmware (tile buffers + bin).
-type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
+pub(crate) type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
 
 #[entry]
 fn main() -> ! {
@@ -73,6 +84,8 @@ fn main() -> ! {
     defmt::info!("data_partition_addr=0x{=u32:08x} data_partition_bytes={=u32}", part.as_ptr() as u32, part.len() as u32);
     if partition::is_erased(part) {
         defmt::info!("no data partition (first word erased)");
+    } else if !mesh::is_device_mesh(part) {
+        fit::run(part, NORMALS, PROJECTED, RASTERIZER);
     } else {
         let m = match mesh::parse(part, MAX_VERTICES) {
             Ok(m) => m,
@@ -160,7 +173,7 @@ fn raster_error_name(e: gpmm_core::RasterError) -> &'static str {
 }
 
 /// Ends the program with failure (QEMU exits with status 1).
-fn fail() -> ! {
+pub(crate) fn fail() -> ! {
     defmt::error!("status=failed");
     semihosting::process::exit(1)
 }

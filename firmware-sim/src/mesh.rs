@@ -27,6 +27,11 @@ const HEADER_BYTES: usize = 168;
 /// Scene floats after the 20-byte fixed header: pose 6, camera 4, light 27.
 const SCENE_FLOATS: usize = 6 + 4 + 3 * SH_COEFFS;
 
+/// Whether `part` starts with the device mesh's magic (anything else is read as a model blob).
+pub fn is_device_mesh(part: &[u8]) -> bool {
+    part.get(..4) == Some(&MAGIC[..])
+}
+
 /// Why the partition's content was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
 pub enum MeshError {

@@ -63,6 +63,72 @@ pub enum Command {
     Fit(FitArgs),
     /// Fit every image of a `gpmm synth` directory (in parallel) and print error statistics as JSON.
     BenchFit(BenchFitArgs),
+    /// Quantize a model for a device profile and write its flash image (a model blob).
+    ///
+    /// Simplifies the model to the vertex budget (meshoptimizer; the landmark vertices are kept,
+    /// in the same order), keeps the leading shape and colour components, and stores each
+    /// component as 8- or 16-bit integers with its own scale (symmetric: scale = max|value| /
+    /// 127 or / 32767). Means stay f32, triangle indices become u16. Refuses a blob over the
+    /// profile's budget (m4f: 400 KiB of its 512 KiB data partition; m7: 800 KiB of 1 MiB),
+    /// which leaves room for the test image and landmarks. Prints a summary on stderr and, on
+    /// stdout, JSON with the blob size and the quantization error (float model of the kept
+    /// vertices and ranks against the blob, over --draws random N(0,1) coefficient vectors)
+    /// and the simplification error (source mean surface against the simplified one).
+    /// Format: docs/blob-format.md.
+    Quantize(QuantizeArgs),
+    /// Validate a model blob with the device's parser and print its header and metadata as JSON.
+    ///
+    /// Exits with status 1 and the parser's message if the blob is invalid; the JSON is still
+    /// printed when the header is readable (with "crc_ok": false for a corrupted blob).
+    Inspect(InspectArgs),
+    /// Fit a model blob to a photo on the simulated device: Cortex-M firmware under QEMU.
+    ///
+    /// Crops the photo around its landmarks to the profile's image size (m4f: 128x128, m7:
+    /// 256x256), writes the data partition (the blob, then the image, landmarks, seed and step
+    /// counts), builds the firmware for the profile, runs the core's standard fit under QEMU
+    /// (instructions counted with -icount) and prints JSON: flash and RAM use against the
+    /// profile's budget, instructions per stage and per image step, the fitted pose,
+    /// log-likelihood and 68 landmarks. --compare-host runs the same fit on the host core too.
+    /// Needs a gpmm source checkout (firmware-sim/) and installs QEMU and the toolchain if missing.
+    DeviceFit(crate::device_fit::DeviceFitArgs),
+}
+
+/// Arguments of `gpmm quantize`.
+#[derive(Debug, Args)]
+pub struct QuantizeArgs {
+    /// Model file (from `gpmm build`).
+    pub model: PathBuf,
+    /// Device profile: m4f (1000 vertices, ranks 50/50, 16 bits, blob <= 400 KiB) or m7 (2000 vertices, ranks 80/80, 16 bits, blob <= 800 KiB).
+    #[arg(long, value_name = "m4f|m7")]
+    pub profile: crate::quantize::Profile,
+    /// Vertex budget instead of the profile's (at most 65535).
+    #[arg(long, value_name = "N")]
+    pub vertices: Option<usize>,
+    /// Shape components instead of the profile's (default: the profile's, or the model's rank if lower).
+    #[arg(long, value_name = "K")]
+    pub rank_shape: Option<usize>,
+    /// Colour components instead of the profile's (default: the profile's, or the model's rank if lower).
+    #[arg(long, value_name = "K")]
+    pub rank_color: Option<usize>,
+    /// Bits per basis value: 8 or 16 (default: the profile's, 16).
+    #[arg(long, value_name = "8|16", value_parser = crate::quantize::parse_bits)]
+    pub bits: Option<crate::quantize::Bits>,
+    /// Random coefficient draws for the quantization error.
+    #[arg(long, default_value_t = 100, value_name = "N")]
+    pub draws: usize,
+    /// Seed of the draws.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output blob file.
+    #[arg(short, long, value_name = "BLOB")]
+    pub output: PathBuf,
+}
+
+/// Arguments of `gpmm inspect`.
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// Model blob file (from `gpmm quantize`).
+    pub blob: PathBuf,
 }
 
 /// Arguments of `gpmm fit`.
@@ -456,6 +522,9 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Demo(a) => crate::demo::demo(a),
         Command::Fit(a) => fit(a),
         Command::BenchFit(a) => bench_fit(a),
+        Command::Quantize(a) => quantize(a),
+        Command::Inspect(a) => inspect(a),
+        Command::DeviceFit(a) => crate::device_fit::device_fit(a),
         Command::Render(a) => render(a),
         Command::Figure(a) => match a.figure {
             FigureCommand::Kernels(k) => figure_kernels(k),
@@ -796,4 +865,68 @@ fn bench_fit(a: BenchFitArgs) -> Result<()> {
     }
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())
+}
+
+fn quantize(a: QuantizeArgs) -> Result<()> {
+    use crate::quantize::{self as q, QuantizeOptions};
+    let model = model_io::load(&a.model)?;
+    let mut opts = QuantizeOptions::for_profile(a.profile);
+    opts.vertices = a.vertices.unwrap_or(opts.vertices);
+    opts.rank_shape = a.rank_shape.unwrap_or(opts.rank_shape.min(model.shape.rank()));
+    opts.rank_color = a.rank_color.unwrap_or(opts.rank_color.min(model.color.rank()));
+    opts.bits = a.bits.unwrap_or(opts.bits);
+    opts.source = a.model.file_name().map(|f| f.to_string_lossy().into_owned());
+    let pb = spinner("simplifying and quantizing");
+    let quantized = q::quantize(&model, &opts);
+    pb.finish_and_clear();
+    let quantized = quantized?;
+    let blob = quantized.to_blob()?;
+    let view = blob.view().context("the written blob does not validate (a bug)")?;
+    let pb = spinner("measuring the quantization and simplification error");
+    let stats = q::quantization_error(&quantized.reduced, &view, a.draws, a.seed)?;
+    let simp = q::simplification_error(&model, &quantized);
+    pb.finish_and_clear();
+    blob.write(&a.output)?;
+    eprintln!(
+        "{}: {} bytes ({:.1} KiB of the {} budget {:.0} KiB); {} of {} vertices, {} triangles, ranks {}/{}, {} bits",
+        a.output.display(),
+        blob.len(),
+        blob.len() as f64 / 1024.0,
+        a.profile,
+        a.profile.blob_budget() as f64 / 1024.0,
+        view.vertices(),
+        model.vertices(),
+        view.triangles().len(),
+        view.rank_shape(),
+        view.rank_color(),
+        view.bits()
+    );
+    eprintln!(
+        "quantization error over {} draws: shape RMS {:.5} mm (max {:.5}), colour RMS {:.6} (max {:.6}); simplification: mean-shape surface RMS {:.3} mm (max {:.3})",
+        stats.draws, stats.shape_rms_mm, stats.shape_max_mm, stats.color_rms, stats.color_max, simp.mean_shape_rms_mm, simp.mean_shape_max_mm
+    );
+    let json = serde_json::json!({
+        "output": a.output.display().to_string(),
+        "bytes": blob.len(),
+        "profile": a.profile.name(),
+        "budget_bytes": a.profile.blob_budget(),
+        "partition_bytes": a.profile.partition_bytes(),
+        "vertices": view.vertices(),
+        "triangles": view.triangles().len(),
+        "landmarks": view.landmarks().len(),
+        "rank_shape": view.rank_shape(),
+        "rank_color": view.rank_color(),
+        "bits": view.bits(),
+        "quantization": stats,
+        "simplification": simp,
+    });
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    Ok(())
+}
+
+fn inspect(a: InspectArgs) -> Result<()> {
+    let blob = crate::quantize::BlobBuf::read(&a.blob)?;
+    let (json, result) = crate::quantize::inspect(&blob);
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    result.with_context(|| format!("{} is not a valid model blob", a.blob.display()))
 }

@@ -349,10 +349,10 @@ pub fn project_landmarks_of(model: &GpModel, params: &Params, size: u32) -> Resu
 
 /// The model landmarks of `params` projected into a `width × height` image (NaN if behind the camera).
 pub fn project_landmarks(mm: &MorphableModel<'_>, params: &Params, width: u32, height: u32) -> Result<Vec<[f32; 2]>, FitRunError> {
-    let mut buf = [[0.0f32; 3]; MAX_LANDMARKS];
-    let n = mm.landmark_positions(params.shape_coeffs(), &mut buf).map_err(core("landmarks"))?;
-    let cam = params.camera(width, height);
-    Ok(buf.iter().take(n).map(|p| cam.project(params.pose.transform_point(*p)).map_or([f32::NAN; 2], |s| [s.x, s.y])).collect())
+    let mut out = vec![[0.0f32; 2]; mm.landmarks().len()];
+    let n = gpmm_core::fit::project_landmarks(mm, params, width, height, &mut out).map_err(core("landmarks"))?;
+    out.truncate(n);
+    Ok(out)
 }
 
 /// Root-mean-square distance between two point lists (px).

@@ -9,6 +9,7 @@
 pub mod cli;
 pub mod data;
 pub mod demo;
+pub mod device_fit;
 pub mod device_mesh;
 pub mod figure;
 pub mod fit;
@@ -22,6 +23,7 @@ pub mod model_io;
 pub mod npy;
 pub mod photo;
 pub mod pts;
+pub mod quantize;
 pub mod render;
 pub mod synth;
 pub mod template;

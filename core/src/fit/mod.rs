@@ -37,7 +37,7 @@ pub use morph::{Instance, InstanceBuffers, MorphableModel};
 pub use params::FitParams;
 pub use prior::Prior;
 pub use proposal::{propose, Mixture, Proposal, ProposalContext, ProposalKind, Scale, MAX_PROPOSALS};
-pub use recipe::{standard_fit, FitObserver, FitSettings, Stage, StandardFit};
+pub use recipe::{project_landmarks, standard_fit, FitObserver, FitSettings, Stage, StandardFit};
 
 use crate::{ModelError, RasterError, VertexError};
 

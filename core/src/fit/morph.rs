@@ -93,15 +93,13 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
     /// Instance positions of the landmark vertices only (`rank × landmarks` multiply-adds) into
     /// `out[..landmarks]`; returns the number written.
     pub fn landmark_positions(&self, coeffs: &[f32], out: &mut [Vec3]) -> Result<usize, FitError> {
-        if out.len() < self.landmarks.len() {
-            return Err(FitError::LengthMismatch);
-        }
+        let n = self.landmarks.len();
+        let out = out.get_mut(..n).ok_or(FitError::LengthMismatch)?;
         for (o, &l) in out.iter_mut().zip(self.landmarks) {
-            let v = l as usize;
-            *o = self.shape_mean.get(v).copied().ok_or(FitError::IndexOutOfRange)?;
-            self.shape.add_vertex(coeffs, v, o)?;
+            *o = self.shape_mean.get(l as usize).copied().ok_or(FitError::IndexOutOfRange)?;
         }
-        Ok(self.landmarks.len())
+        self.shape.add_vertices(coeffs, self.landmarks, out)?;
+        Ok(n)
     }
 }
 

@@ -12,11 +12,41 @@ pub fn uniform<R: Rng + ?Sized>(rng: &mut R) -> f32 {
     (rng.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-/// A standard-normal sample by the Box–Muller transform (one of the pair is used; two `u32` draws per sample).
+/// Attempts of the polar method before [`standard_normal_pair`] gives up and returns zeros (each
+/// attempt succeeds with probability π/4: 64 failures in a row happen with probability 1e-43).
+const POLAR_TRIES: u32 = 64;
+
+/// Two independent standard-normal samples by Marsaglia's polar method.
+///
+/// No trigonometry: one `logf` and one `sqrtf` per pair, all in `f32`. (Box–Muller's `cosf` is
+/// computed in `f64` by libm, which a Cortex-M4F emulates in software: it cost more than the
+/// rest of a landmark-chain shape proposal.)
+pub fn standard_normal_pair<R: Rng + ?Sized>(rng: &mut R) -> [f32; 2] {
+    for _ in 0..POLAR_TRIES {
+        let u = 2.0 * uniform(rng) - 1.0;
+        let v = 2.0 * uniform(rng) - 1.0;
+        let s = u * u + v * v;
+        if s > 0.0 && s < 1.0 {
+            let m = libm::sqrtf(-2.0 * libm::logf(s) / s);
+            return [u * m, v * m];
+        }
+    }
+    [0.0; 2]
+}
+
+/// One standard-normal sample (the first of a [`standard_normal_pair`]).
 pub fn standard_normal<R: Rng + ?Sized>(rng: &mut R) -> f32 {
-    let u1 = uniform_open0(rng);
-    let u2 = uniform(rng);
-    libm::sqrtf(-2.0 * libm::logf(u1)) * libm::cosf(core::f32::consts::TAU * u2)
+    standard_normal_pair(rng)[0]
+}
+
+/// Adds `scale · z` to every entry of `out`, with independent standard-normal `z` drawn in pairs.
+pub fn add_normals<R: Rng + ?Sized>(rng: &mut R, scale: f32, out: &mut [f32]) {
+    for chunk in out.chunks_mut(2) {
+        let z = standard_normal_pair(rng);
+        for (c, z) in chunk.iter_mut().zip(z) {
+            *c += scale * z;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -42,6 +72,24 @@ mod tests {
         assert!((s / n).abs() < 0.01);
         assert!((s2 / n - 1.0).abs() < 0.02);
         assert!((s4 / n - 3.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn pairs_are_standard_and_uncorrelated() {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let n = 100_000;
+        let (mut s2, mut cross) = (0.0f64, 0.0f64);
+        let mut v = [0.0f32; 5];
+        for _ in 0..n {
+            v = [0.0; 5];
+            add_normals(&mut rng, 2.0, &mut v);
+            s2 += v.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>() / 5.0;
+            cross += f64::from(v[0]) * f64::from(v[1]);
+        }
+        let n = f64::from(n);
+        assert!((s2 / n - 4.0).abs() < 0.08, "variance of 2z: {}", s2 / n);
+        assert!((cross / n).abs() < 0.08, "pair correlation: {}", cross / n);
+        assert!(v.iter().all(|x| x.is_finite() && *x != 0.0));
     }
 
     #[test]

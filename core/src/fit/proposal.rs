@@ -21,7 +21,7 @@
 //!   Hastings term is `log N(L; L*, σ) − log N(L'; L*, σ)`. Detailed balance holds exactly; pick σ
 //!   wider than the light posterior so a far-away current light can still be left.
 
-use super::normal::standard_normal;
+use super::normal::{add_normals, standard_normal};
 use super::params::FitParams;
 use super::FitError;
 use crate::pose::mat_vec;
@@ -288,26 +288,19 @@ pub fn propose<R: Rng + ?Sized, const KS: usize, const KC: usize>(
         ProposalKind::Translation => {
             let w = -camera_point(current, ctx.pivot)[2];
             let mm_per_px = if current.focal > 0.0 { libm::fabsf(w) / current.focal } else { 0.0 };
-            out.pose.translation[0] += s * mm_per_px * standard_normal(rng);
-            out.pose.translation[1] += s * mm_per_px * standard_normal(rng);
+            add_normals(rng, s * mm_per_px, out.pose.translation.get_mut(..2).unwrap_or(&mut []));
             0.0
         }
         ProposalKind::Shape => {
-            for c in out.shape_coeffs_mut() {
-                *c += s * standard_normal(rng);
-            }
+            add_normals(rng, s, out.shape_coeffs_mut());
             0.0
         }
         ProposalKind::Color => {
-            for c in out.color_coeffs_mut() {
-                *c += s * standard_normal(rng);
-            }
+            add_normals(rng, s, out.color_coeffs_mut());
             0.0
         }
         ProposalKind::Light => {
-            for c in out.light.coeffs.iter_mut().flatten() {
-                *c += s * standard_normal(rng);
-            }
+            add_normals(rng, s, out.light.coeffs.as_flattened_mut());
             0.0
         }
         ProposalKind::LightIntensity => {

@@ -183,3 +183,24 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     })?;
     Ok(StandardFit { init, landmark, start, start_image, start_landmarks, image })
 }
+
+/// Projects the model landmarks of `params` into a `width × height` image: `out[i]` gets landmark
+/// `i` in pixels (NaN if it is behind the camera). Returns the number written.
+pub fn project_landmarks<I: TriIndex, const KS: usize, const KC: usize>(
+    model: &MorphableModel<'_, I>,
+    params: &FitParams<KS, KC>,
+    width: u32,
+    height: u32,
+    out: &mut [[f32; 2]],
+) -> Result<usize, FitError> {
+    let mut lm = [[0.0f32; 3]; super::MAX_LANDMARKS];
+    let n = model.landmark_positions(params.shape_coeffs(), &mut lm)?;
+    if out.len() < n {
+        return Err(FitError::LengthMismatch);
+    }
+    let cam = params.camera(width, height);
+    for (o, p) in out.iter_mut().zip(lm.iter().take(n)) {
+        *o = cam.project(params.pose.transform_point(*p)).map_or([f32::NAN; 2], |s| [s.x, s.y]);
+    }
+    Ok(n)
+}

@@ -1,0 +1,139 @@
+//! The fit on the device against the fit on the host.
+//!
+//! A symmetric-full model is built from the template (simplified to 1,000 vertices, 50 + 50
+//! components), quantized for the `m4f` profile into a blob, and fitted to synthetic ICT faces
+//! (`gpmm_host::synth`, known truth):
+//! 1. the same blob, image, landmarks and seed on the host core and in the Cortex-M4F firmware
+//!    under QEMU (the default fit: 5000 landmark + 600 image steps): fitted landmarks within
+//!    0.5 px, best image log-likelihood within 1 %; the firmware's flash, RAM and instruction
+//!    figures are printed and checked against the m4f budget;
+//! 2. the float model and the quantized blob on the host, on several synthetic faces: fitted
+//!    landmarks within 1 px;
+//! 3. a corrupted blob makes the firmware fail with the core's error, not a fault.
+//!
+//! Needs QEMU and the thumbv7em toolchain (`tests/run.sh` installs them); missing tools fail,
+//! never skip. Data from `$GPMM_DATA` (default `../shared/data`).
+
+use gpmm_host::data::{data_dir_for_tests, template_dir};
+use gpmm_host::device_fit::{fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
+use gpmm_host::fit::{fit_prepared, prepare, FitSettings, Prepared};
+use gpmm_host::kernel::ModelKernel;
+use gpmm_host::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::model::{build_model, BuildOptions, GpModel};
+use gpmm_host::quantize::{quantize, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
+use gpmm_host::synth::{synthesize, SynthFace, SynthOptions};
+use gpmm_host::template::{load_template, TemplateOptions};
+use std::path::Path;
+use std::sync::OnceLock;
+
+/// The m4f blob and the float model it was quantized from (built once per test binary).
+fn models() -> &'static (QuantizedModel, BlobBuf) {
+    static M: OnceLock<(QuantizedModel, BlobBuf)> = OnceLock::new();
+    M.get_or_init(|| {
+        let data = data_dir_for_tests().expect("data directory (GPMM_DATA)");
+        let dir = template_dir(&data);
+        let opts = TemplateOptions { vertices: Some(1000), ..Default::default() };
+        let template = load_template(&dir.join("lee-perry-smith.ply"), &dir.join("landmarks_ibug68.json"), &opts).expect("template");
+        let build = BuildOptions {
+            kernel: ModelKernel::SymmetricFull,
+            hyperparameters: Default::default(),
+            rank_shape: RankSpec::Count(50),
+            rank_color: RankSpec::Count(50),
+            nystrom: NystromOptions { points: 600, ..Default::default() },
+        };
+        let gp: GpModel = build_model(&template, &build, |_, _, _| {});
+        let q = quantize(&gp, &QuantizeOptions::for_profile(Profile::M4f)).expect("quantize for m4f");
+        let blob = q.to_blob().expect("blob");
+        (q, blob)
+    })
+}
+
+fn faces(count: usize, seed: u64) -> Vec<SynthFace> {
+    let data = data_dir_for_tests().expect("data directory (GPMM_DATA)");
+    let opts = SynthOptions { count, seed, yaws_deg: vec![0.0, 30.0], size: 128, ..SynthOptions::with_data_dir(&data) };
+    synthesize(&opts, |_, _| {}).expect("synthetic faces")
+}
+
+fn prepared(face: &SynthFace) -> Prepared {
+    prepare(&face.image, &face.truth.landmarks, 128).expect("prepare")
+}
+
+fn max_distance(a: &[[f32; 2]], b: &[[f32; 2]]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0, f32::max)
+}
+
+#[test]
+fn firmware_fit_matches_the_host_within_the_m4f_budget() {
+    let (q, blob) = models();
+    let face = &faces(1, 11)[1];
+    let prep = prepared(face);
+    let settings = FitSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..FitSettings::default() };
+
+    let (host, host_lm) = host_fit(blob, &prep, &settings).expect("host fit");
+    let host_ll = host.image.best_image.expect("image term").log_likelihood;
+
+    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings));
+    let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f.partition");
+    std::fs::write(&file, &part).expect("write partition");
+    let log = run_firmware("m4f", &file, 1200).unwrap_or_else(|e| panic!("firmware run: {e}"));
+    let dev = parse_report("m4f", &log).unwrap_or_else(|e| panic!("{e}\n{log}"));
+    println!("{}", serde_json::to_string_pretty(&dev).expect("json"));
+
+    // Parity.
+    let d = max_distance(&host_lm, &dev.landmarks_px);
+    let rel = ((host_ll - dev.log_likelihood) / host_ll.abs()).abs();
+    println!("host vs firmware: landmarks differ by at most {d} px; log-likelihood {host_ll} vs {} ({rel:e})", dev.log_likelihood);
+    assert!(d <= 0.5, "fitted landmarks differ by {d} px between host and firmware");
+    assert!(rel <= 0.01, "log-likelihood differs by {rel} (host {host_ll}, firmware {})", dev.log_likelihood);
+    assert!((host.params().pose.yaw.to_degrees() - dev.yaw_deg).abs() < 0.1);
+
+    // Budgets (m4f: 1 MiB flash for code + blob, 192 KiB RAM for statics + stack).
+    assert_eq!(dev.flash_budget_bytes, 1024 * 1024);
+    assert!(dev.flash_total_bytes <= dev.flash_budget_bytes, "flash {} > {}", dev.flash_total_bytes, dev.flash_budget_bytes);
+    assert_eq!(dev.ram_budget_bytes, 192 * 1024);
+    assert!(dev.ram_total_bytes <= dev.ram_budget_bytes, "RAM {} > {}", dev.ram_total_bytes, dev.ram_budget_bytes);
+    assert!(dev.instructions_total > 100_000_000, "implausibly few instructions: {}", dev.instructions_total);
+    assert!(dev.instructions_landmark_chain + dev.instructions_image_chain < dev.instructions_total, "the stages are part of the total");
+    println!(
+        "m4f default fit: {} instructions ({:.1} s at 168 MHz, 1 instruction per cycle); {} per image step; flash {} + blob {} B; RAM {} + stack {} B",
+        dev.instructions_total,
+        dev.seconds_at_168mhz,
+        dev.instructions_per_image_step,
+        dev.flash_bytes,
+        dev.blob_bytes,
+        dev.ram_static_bytes,
+        dev.stack_peak_bytes
+    );
+}
+
+#[test]
+fn float_model_and_blob_fit_the_same_landmarks() {
+    let (q, blob) = models();
+    let settings = FitSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..FitSettings::default() };
+    let mut worst = 0.0f32;
+    for face in faces(3, 5) {
+        let prep = prepared(&face);
+        let (_, blob_lm) = host_fit(blob, &prep, &settings).expect("blob fit");
+        let float = fit_prepared(&q.reduced, &prep, &settings, &mut |_, _, _| {}).expect("float fit");
+        let d = max_distance(&float.fitted_landmarks, &blob_lm);
+        println!("{}: float vs blob landmarks differ by at most {d:.3} px", face.truth.image);
+        worst = worst.max(d);
+    }
+    assert!(worst <= 1.0, "float model and blob fits differ by {worst} px");
+}
+
+#[test]
+fn firmware_rejects_a_corrupted_blob() {
+    let (_, blob) = models();
+    let face = &faces(1, 11)[0];
+    let prep = prepared(face);
+    let settings = FitSettings { landmark_steps: 10, image_steps: 2, ..FitSettings::default() };
+    let mut part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings));
+    part[5000] ^= 0x10;
+    let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-corrupt.partition");
+    std::fs::write(&file, &part).expect("write partition");
+    let err = run_firmware("m4f", &file, 300).expect_err("a corrupted blob must fail").to_string();
+    assert!(err.contains("not a valid model blob") && err.contains("CRC"), "{err}");
+    assert!(!err.contains("panic") && !err.contains("hard fault"), "{err}");
+}
