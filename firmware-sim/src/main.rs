@@ -37,9 +37,11 @@ const PROFILE: &str = if cfg!(feature = "m7") { "m7" } else { "m4f" };
 /// many entries (36 bytes of RAM per entry). A render needs one `Vec3` (normal) and one projected
 /// vertex per vertex; a fit three `Vec3` (positions, albedos, normals) and one projected vertex,
 /// so it takes models of up to `MAX_VERTICES / 3` vertices: 1,024 on `m4f` (the m4f blob has at
-/// most 1,000), 4,096 on `m7`. `m4f`: 108 KiB of buffers + the renderer's 45 KiB leave 39 KiB of
-/// the 192 KiB for the stack (the fit's peak is 34 KiB: chain states and parameter copies).
-const MAX_VERTICES: usize = if cfg!(feature = "m7") { 12_288 } else { 3_072 };
+/// most 1,000), 3,072 on `m7` (its blob has at most 2,000). `m4f`: 108 KiB of buffers + the
+/// renderer's 45 KiB leave 39 KiB of the 192 KiB for the stack (the fit's peak is 34 KiB: chain
+/// states and parameter copies); `m7`: 324 KiB + 45 KiB leave 143 KiB (peak 42 KiB). Nothing
+/// guards the stack's end, so these margins are checked by the tests (static + peak ≤ RAM).
+const MAX_VERTICES: usize = if cfg!(feature = "m7") { 9_216 } else { 3_072 };
 /// Tile size of the renderer: 32×32 (28 KiB of tile buffers). Each tile row scans the whole
 /// triangle list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M
 /// instructions, at 32×32 2.59 M (same fit). The host's `HostRasterizer` uses 32×32 too, so

@@ -2,7 +2,7 @@
 //! steps at 128x128, one thread) of a synthetic face at yaw 30, and the landmark chain alone.
 //!
 //! `cargo bench -p gpmm-host --bench fit` (data from `$GPMM_DATA` or `../shared/data`). The model
-//! is the cropped template at full resolution, symmetric-full, ranks 50/50 (the ranks a default fit uses).
+//! is the cropped template at full resolution, symmetric-full, ranks 200/50 (the ranks a default fit uses).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gpmm_host::fit::{fit_prepared, prepare, FitSettings};
@@ -27,7 +27,7 @@ fn bench(c: &mut Criterion) {
     let opts = BuildOptions {
         kernel: ModelKernel::SymmetricFull,
         hyperparameters: Default::default(),
-        rank_shape: RankSpec::Count(50),
+        rank_shape: RankSpec::Count(200),
         rank_color: RankSpec::Count(50),
         nystrom: NystromOptions { points: 1000, ..Default::default() },
     };
