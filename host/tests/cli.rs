@@ -1,20 +1,12 @@
 //! End-to-end tests of the `gpmm` program: build (all nine kernels), info, sample, bad input.
 
+mod common;
+use common::{gpmm, ok};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 fn data_dir() -> Option<PathBuf> {
     gpmm_host::data::data_dir_for_tests()
-}
-
-fn gpmm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gpmm")).args(args).output().expect("gpmm runs")
-}
-
-fn ok(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "gpmm failed: {stderr}");
-    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 fn template_args(data: &Path) -> (String, String) {

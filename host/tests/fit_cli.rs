@@ -1,26 +1,12 @@
 //! `gpmm fit` and `gpmm bench-fit` end to end: a synthetic face's yaw is recovered, the three
 //! output files are written, repeated runs give the same `fit.json`, bad input gives clear errors.
 
+mod common;
+use common::{fails, gpmm, ok};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 use std::sync::OnceLock;
-
-fn gpmm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gpmm")).args(args).output().expect("gpmm runs")
-}
-
-fn ok(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "gpmm failed: {stderr}");
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "gpmm should have failed");
-    assert!(!stderr.contains("panicked"), "gpmm panicked: {stderr}");
-    stderr
-}
 
 struct Fixture {
     _dir: tempfile::TempDir,

@@ -1,25 +1,12 @@
 //! `gpmm quantize` and `gpmm inspect`: blobs from a small built model, their accuracy, corrupted
 //! blobs, profile budgets and bad arguments.
 
+mod common;
+use common::{fails, gpmm, ok};
+
 use gpmm_host::quantize::{quantization_error, quantize, Bits, BlobBuf, Profile, QuantizeError, QuantizeOptions};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
-
-fn gpmm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gpmm")).args(args).output().expect("gpmm runs")
-}
-
-fn ok(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "gpmm failed: {stderr}");
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails(out: &Output) -> String {
-    assert!(!out.status.success(), "gpmm should have failed; stdout: {}", String::from_utf8_lossy(&out.stdout));
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
 
 fn json(s: &str) -> serde_json::Value {
     serde_json::from_str(s).unwrap_or_else(|e| panic!("not JSON ({e}): {s}"))
