@@ -1101,7 +1101,7 @@ fn transfer_albedo(options: &SynthOptions, neutral_face: &[[f64; 3]], landmarks:
 }
 
 /// The closest point to `p` on triangle `t` and its barycentric coordinates (Ericson, Real-Time Collision Detection 5.1.5).
-fn closest_on_triangle(p: [f64; 3], t: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
+pub fn closest_on_triangle(p: [f64; 3], t: [[f64; 3]; 3]) -> ([f64; 3], [f64; 3]) {
     let [a, b, c] = t;
     let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
     let (d1, d2) = (dot(ab, ap), dot(ac, ap));
@@ -1209,7 +1209,7 @@ impl Similarity {
 }
 
 /// A uniform grid over points for nearest-neighbour queries.
-struct Grid {
+pub struct Grid {
     lo: [f64; 3],
     cell: f64,
     dims: [usize; 3],
@@ -1219,7 +1219,8 @@ struct Grid {
 }
 
 impl Grid {
-    fn new(points: &[[f64; 3]], cell: f64) -> Self {
+    /// Bins `points` into cubic cells of side `cell` (enlarged so that no side has more than 256 cells).
+    pub fn new(points: &[[f64; 3]], cell: f64) -> Self {
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
         for p in points {
@@ -1266,7 +1267,7 @@ impl Grid {
     }
 
     /// Index of the point nearest to `q` (searching shells of cells outward).
-    fn nearest(&self, points: &[[f64; 3]], q: [f64; 3]) -> Option<usize> {
+    pub fn nearest(&self, points: &[[f64; 3]], q: [f64; 3]) -> Option<usize> {
         let c = self.coords(q);
         let maxr = self.dims.iter().copied().max().unwrap_or(1) as i64;
         let mut best: Option<(f64, usize)> = None;

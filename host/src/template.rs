@@ -444,6 +444,25 @@ fn point_in_polygon(poly: &[[f64; 2]], q: [f64; 2]) -> bool {
     inside
 }
 
+/// The vertices (ascending original indices) that the default face crop of step 3 keeps of a mesh
+/// already in the normalized frame (mm, x right, y up, z toward the camera) with iBUG-68 `landmarks`.
+pub fn face_crop_indices(mesh: &Mesh, landmarks: &[u32]) -> Result<Vec<u32>, String> {
+    if landmarks.len() != IBUG68_COUNT || landmarks.iter().any(|&i| i as usize >= mesh.positions.len()) {
+        return Err(format!("the face crop needs {IBUG68_COUNT} landmark ids inside the mesh"));
+    }
+    let lm: Vec<[f64; 3]> = landmarks.iter().map(|&i| mesh.positions[i as usize]).collect();
+    let region = FaceRegion::new(&lm, &CropParams::default());
+    let inside: Vec<bool> = mesh.positions.iter().map(|p| region.contains(p)).collect();
+    // Crop a copy whose colours carry the vertex indices (exact in f64), then read them back.
+    let tagged = Mesh {
+        positions: mesh.positions.clone(),
+        colors: (0..mesh.positions.len()).map(|i| [i as f64, 0.0, 0.0]).collect(),
+        triangles: mesh.triangles.clone(),
+    };
+    let (kept, _) = crop(&tagged, landmarks, &inside)?;
+    Ok(kept.colors.iter().map(|c| c[0] as u32).collect())
+}
+
 /// Keeps triangles with all vertices inside, then the connected components
 /// containing landmark vertices; compacts and remaps the landmarks.
 fn crop(mesh: &Mesh, landmarks: &[u32], inside: &[bool]) -> Result<(Mesh, Vec<u32>), String> {

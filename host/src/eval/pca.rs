@@ -1,0 +1,177 @@
+//! Statistical models from examples in correspondence: principal component analysis with dense
+//! bases ([`covariance_basis`], [`pca_model`]), as the 10-scan PCA baseline of the paper.
+//!
+//! For `m` deviation vectors `d_j` (3N values each) and a factor `f`, the covariance is
+//! `C = f Σ_j d_j d_jᵀ`. Its non-zero eigenpairs come from the small `m × m` Gram matrix
+//! `G = f DᵀD = V Λ Vᵀ`: `C (D v_k) = λ_k (D v_k)` and `|D v_k|² = λ_k / f`, so the basis scaled by
+//! `sqrt(λ_k)` (what a model file stores) is `sqrt(f) D v_k`.
+
+use crate::kernel::Hyperparameters;
+use crate::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
+use crate::template::{Mesh, Provenance};
+
+use super::EvalError;
+
+/// Eigenvalues (descending) and the scaled dense basis (`rank × values`, row-major) of `f Σ d_j d_jᵀ`.
+///
+/// Keeps at most `max_rank` components and drops those below `1e-10` of the largest eigenvalue.
+pub fn covariance_basis(deviations: &[Vec<f64>], factor: f64, max_rank: usize) -> Result<(Vec<f64>, Vec<Vec<f64>>), EvalError> {
+    let m = deviations.len();
+    let Some(len) = deviations.first().map(Vec::len) else {
+        return Ok((Vec::new(), Vec::new()));
+    };
+    if deviations.iter().any(|d| d.len() != len) {
+        return Err(EvalError::Invalid("the examples do not have the same number of values".into()));
+    }
+    if !(factor.is_finite() && factor > 0.0) {
+        return Err(EvalError::Invalid(format!("covariance factor {factor} must be positive")));
+    }
+    let gram = faer::Mat::from_fn(m, m, |i, j| factor * deviations[i].iter().zip(&deviations[j]).map(|(a, b)| a * b).sum::<f64>());
+    let eig = gram.self_adjoint_eigen(faer::Side::Lower).map_err(|e| EvalError::Invalid(format!("eigendecomposition failed: {e:?}")))?;
+    let values = eig.S().column_vector();
+    let mut order: Vec<usize> = (0..m).collect();
+    order.sort_by(|&a, &b| values[b].total_cmp(&values[a]));
+    let top = order.first().map_or(0.0, |&k| values[k]).max(0.0);
+    let mut eigenvalues = Vec::new();
+    let mut basis = Vec::new();
+    let u = eig.U();
+    for &k in order.iter().take(max_rank) {
+        let lambda = values[k];
+        if !(lambda > 1e-10 * top && lambda > 0.0) {
+            break;
+        }
+        let mut b = vec![0.0f64; len];
+        for (j, d) in deviations.iter().enumerate() {
+            let w = factor.sqrt() * u[(j, k)];
+            for (bi, di) in b.iter_mut().zip(d) {
+                *bi += w * di;
+            }
+        }
+        eigenvalues.push(lambda);
+        basis.push(b);
+    }
+    Ok((eigenvalues, basis))
+}
+
+/// A model part from a mean and a scaled dense basis.
+pub fn dense_part(mean: &[[f64; 3]], eigenvalues: Vec<f64>, basis: &[Vec<f64>]) -> ModelPart {
+    ModelPart {
+        mean: mean.iter().map(|p| p.map(|v| v as f32)).collect(),
+        eigenvalues,
+        basis: PartBasis::Dense { values: basis.iter().flatten().map(|&v| v as f32).collect() },
+    }
+}
+
+/// Metadata of a model that was not built from a kernel (`kernel` names what it is).
+pub fn learned_metadata(kernel: &str, shape_trace: f64, color_trace: f64, source: &str, attribution: &str) -> ModelMetadata {
+    ModelMetadata {
+        format: "gpmm-model".into(),
+        version: MODEL_VERSION,
+        kernel: kernel.into(),
+        hyperparameters: Hyperparameters::default(),
+        nystrom_points: 0,
+        nystrom_seed: 0,
+        shape_trace,
+        color_trace,
+        landmark_scheme: "ibug68".into(),
+        template: Provenance {
+            source: source.into(),
+            attribution: Some(attribution.into()),
+            scale_mm_per_unit: 1.0,
+            cropped: true,
+            ..Provenance::default()
+        },
+        units: "mm".into(),
+        created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION")).into(),
+    }
+}
+
+fn mean_of(items: &[&[[f64; 3]]]) -> Vec<[f64; 3]> {
+    let n = items.first().map_or(0, |v| v.len());
+    let mut mean = vec![[0.0; 3]; n];
+    for v in items {
+        for (m, p) in mean.iter_mut().zip(v.iter()) {
+            for k in 0..3 {
+                m[k] += p[k] / items.len() as f64;
+            }
+        }
+    }
+    mean
+}
+
+fn deviations(items: &[&[[f64; 3]]], mean: &[[f64; 3]]) -> Vec<Vec<f64>> {
+    items.iter().map(|v| v.iter().zip(mean).flat_map(|(p, m)| [p[0] - m[0], p[1] - m[1], p[2] - m[2]]).collect()).collect()
+}
+
+/// PCA model (shape and colour, sample covariance `1/(m-1)`) of meshes in correspondence
+/// (same vertex count and order); the topology and `landmarks` are taken as given.
+pub fn pca_model(
+    meshes: &[Mesh],
+    triangles: &[[u32; 3]],
+    landmarks: &[u32],
+    kernel: &str,
+    source: &str,
+    attribution: &str,
+) -> Result<GpModel, EvalError> {
+    if meshes.len() < 2 {
+        return Err(EvalError::Invalid(format!("a PCA model needs at least 2 examples, got {}", meshes.len())));
+    }
+    let n = meshes[0].positions.len();
+    if meshes.iter().any(|m| m.positions.len() != n || m.colors.len() != n) {
+        return Err(EvalError::Invalid("the PCA examples are not in correspondence (vertex counts differ)".into()));
+    }
+    let factor = 1.0 / (meshes.len() - 1) as f64;
+    let shapes: Vec<&[[f64; 3]]> = meshes.iter().map(|m| m.positions.as_slice()).collect();
+    let colors: Vec<&[[f64; 3]]> = meshes.iter().map(|m| m.colors.as_slice()).collect();
+    let (ms, mc) = (mean_of(&shapes), mean_of(&colors));
+    let (es, bs) = covariance_basis(&deviations(&shapes, &ms), factor, meshes.len())?;
+    let (ec, bc) = covariance_basis(&deviations(&colors, &mc), factor, meshes.len())?;
+    let (ts, tc) = (es.iter().sum(), ec.iter().sum());
+    Ok(GpModel {
+        shape: dense_part(&ms, es, &bs),
+        color: dense_part(&mc, ec, &bc),
+        triangles: triangles.to_vec(),
+        landmarks: landmarks.to_vec(),
+        metadata: learned_metadata(kernel, ts, tc, source, attribution),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covariance_basis_reproduces_the_covariance() {
+        let d: Vec<Vec<f64>> = (0..4).map(|j| (0..9).map(|i| ((i * 7 + j * 3) as f64 * 0.37).sin()).collect()).collect();
+        let f = 0.25;
+        let (ev, b) = covariance_basis(&d, f, 10).unwrap();
+        assert!(ev.windows(2).all(|w| w[0] >= w[1]));
+        for i in 0..9 {
+            for j in 0..9 {
+                let c: f64 = f * d.iter().map(|v| v[i] * v[j]).sum::<f64>();
+                let r: f64 = b.iter().map(|v| v[i] * v[j]).sum();
+                assert!((c - r).abs() < 1e-10, "{c} {r}");
+            }
+        }
+        for (e, v) in ev.iter().zip(&b) {
+            assert!((v.iter().map(|x| x * x).sum::<f64>() - e).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn pca_of_two_meshes_has_one_component_through_both() {
+        let m = |s: f64| Mesh {
+            positions: vec![[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, 1.0]],
+            colors: vec![[0.5; 3]; 3],
+            triangles: vec![[0, 1, 2]],
+        };
+        let model = pca_model(&[m(1.0), m(3.0)], &[[0, 1, 2]], &[0, 1, 2], "pca", "test", "test").unwrap();
+        assert_eq!(model.shape.rank(), 1);
+        assert_eq!(model.color.rank(), 0);
+        let a = model.instance(&[1.0], &[]).unwrap();
+        let b = model.instance(&[-1.0], &[]).unwrap();
+        let (hi, lo) = if a.positions[0][0] > b.positions[0][0] { (a, b) } else { (b, a) };
+        // Sample variance of {1, 3} is 2 per coordinate: the mean ± one standard deviation per coordinate.
+        assert!((hi.positions[0][0] - (2.0 + 2f64.sqrt())).abs() < 1e-5 && (lo.positions[1][1] - (2.0 - 2f64.sqrt())).abs() < 1e-5);
+    }
+}
