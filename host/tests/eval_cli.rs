@@ -2,26 +2,11 @@
 //! (`--quick`): the tables and figures are written and consistent, cached fits are reused with the
 //! same result, registration recovers a known instance, bad input gives clear errors.
 
+mod common;
+use common::{fails, gpmm, ok};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
-
-fn gpmm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gpmm")).args(args).output().expect("gpmm runs")
-}
-
-fn ok(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "gpmm failed: {stderr}");
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn fails(out: &Output) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "gpmm should have failed");
-    assert!(!stderr.contains("panicked"), "gpmm panicked: {stderr}");
-    stderr
-}
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
