@@ -119,14 +119,14 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(input.seed);
     let mut marks = Marks::default();
     let mut observer = |stage: Stage, done: u32, total: u32| {
-        let now = || instructions_now();
-        match (stage, done == 0, done == total) {
-            (Stage::LandmarkChain, true, _) => marks.landmark_start = now(),
-            (Stage::LandmarkChain, _, true) => marks.landmark_end = now(),
-            (Stage::ImageChain, true, _) => marks.image_start = now(),
-            (Stage::ImageChain, _, true) => marks.image_end = now(),
-            _ => {}
-        }
+        let mark = match (stage, done == 0, done == total) {
+            (Stage::LandmarkChain, true, _) => &mut marks.landmark_start,
+            (Stage::LandmarkChain, _, true) => &mut marks.landmark_end,
+            (Stage::ImageChain, true, _) => &mut marks.image_start,
+            (Stage::ImageChain, _, true) => &mut marks.image_end,
+            _ => return,
+        };
+        *mark = instructions_now();
     };
     let t_fit = instructions_now();
     let result = standard_fit(
