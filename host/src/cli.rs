@@ -187,6 +187,11 @@ pub struct FitSettingsArgs {
     /// Landmark standard deviation as a fraction of the working image side.
     #[arg(long, default_value_t = crate::fit::DEFAULT_LANDMARK_SIGMA, value_name = "FRACTION")]
     pub landmark_sigma: f32,
+    /// Factor on the landmark σ of the 17 jaw-contour points (iBUG-68) while the landmark chain
+    /// fits the pose: where a detector puts them depends on the view, so they say less about the
+    /// pose than the inner points (1 treats them like the others).
+    #[arg(long, default_value_t = crate::fit::DEFAULT_CONTOUR_SIGMA, value_name = "FACTOR")]
+    pub contour_sigma: f32,
 }
 
 impl FitSettingsArgs {
@@ -200,6 +205,7 @@ impl FitSettingsArgs {
             shape_rank: self.shape_rank,
             color_rank: self.color_rank,
             landmark_sigma: self.landmark_sigma,
+            contour_sigma: self.contour_sigma,
         }
     }
 }
@@ -1204,6 +1210,7 @@ fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         shape_rank: a.shape_rank,
         color_rank: a.color_rank,
         landmark_sigma: crate::fit::DEFAULT_LANDMARK_SIGMA,
+        contour_sigma: crate::fit::DEFAULT_CONTOUR_SIGMA,
     };
     settings.validate()?;
     let kde_settings = crate::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.image_steps), ..settings };

@@ -3,9 +3,11 @@
 //!
 //! Steps ([`fit_prepared`]; 2 to 5 are the core's [`standard_fit`], which the firmware runs too):
 //! 1. The photo is cropped and resampled to `size × size` ([`crate::photo`]); the landmarks follow.
-//! 2. Start ([`gpmm_core::fit::initial_guess`]): frontal mean face whose landmark centroid and spread match the
-//!    target's, at [`NOMINAL_DISTANCE_MM`] (the focal length follows from that distance).
-//! 3. Landmark chain (`prior × landmarks`, no rendering), [`FitSettings::landmark_steps`] steps.
+//! 2. Start ([`gpmm_core::fit::initial_guess`]): the scaled-orthographic pose of the mean face's
+//!    landmarks, at [`NOMINAL_DISTANCE_MM`] (the focal length follows from that distance).
+//! 3. Landmark chain (`prior × landmarks`, no rendering), [`FitSettings::landmark_steps`] steps:
+//!    the pose first (40 %; jaw contour σ × 3, no distance changes), then the shape with yaw and
+//!    distance held.
 //! 4. The SH light of the landmark fit's best sample is solved in closed form (least squares on
 //!    all visible vertices): this "landmark-only result" is the baseline of the pixel RMSE.
 //! 5. Image chain (`prior × landmarks × image`, delayed acceptance), [`FitSettings::image_steps`] steps.
@@ -59,6 +61,8 @@ pub const DEFAULT_COLOR_RANK: usize = CoreSettings::DEFAULT.color_rank;
 /// Default landmark σ as a fraction of the working image side (0.64 px at 128; the core's
 /// `LandmarkTarget::default_sigma` of 1.5 % left 5 % inter-ocular landmark error on synthetic faces).
 pub const DEFAULT_LANDMARK_SIGMA: f32 = CoreSettings::DEFAULT.landmark_sigma;
+/// Default σ factor of the jaw-contour landmarks in the landmark chain's pose phase.
+pub const DEFAULT_CONTOUR_SIGMA: f32 = CoreSettings::DEFAULT.contour_sigma_factor;
 /// Distance of the start pose (mm); the start focal length is chosen to match the landmark spread.
 pub const NOMINAL_DISTANCE_MM: f32 = CoreSettings::DEFAULT.nominal_distance_mm;
 /// Uniform floor mixed into the background colour histogram.
@@ -114,6 +118,13 @@ pub struct FitSettings {
     pub color_rank: usize,
     /// Landmark σ as a fraction of the working image side.
     pub landmark_sigma: f32,
+    /// σ factor of the 17 jaw-contour landmarks while the landmark chain fits the pose.
+    #[serde(default = "default_contour_sigma")]
+    pub contour_sigma: f32,
+}
+
+fn default_contour_sigma() -> f32 {
+    DEFAULT_CONTOUR_SIGMA
 }
 
 impl Default for FitSettings {
@@ -126,6 +137,7 @@ impl Default for FitSettings {
             shape_rank: DEFAULT_SHAPE_RANK,
             color_rank: DEFAULT_COLOR_RANK,
             landmark_sigma: DEFAULT_LANDMARK_SIGMA,
+            contour_sigma: DEFAULT_CONTOUR_SIGMA,
         }
     }
 }
@@ -139,12 +151,16 @@ impl FitSettings {
             shape_rank: self.shape_rank.min(KS),
             color_rank: self.color_rank.min(KC),
             landmark_sigma: self.landmark_sigma,
+            contour_sigma_factor: self.contour_sigma,
             ..CoreSettings::DEFAULT
         }
     }
 
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), FitRunError> {
+        if !(self.contour_sigma > 0.0 && self.contour_sigma <= 100.0) {
+            return Err(FitRunError::Settings(format!("contour sigma factor {} is invalid: it must be in (0, 100]", self.contour_sigma)));
+        }
         if !(self.landmark_sigma > 0.0 && self.landmark_sigma <= 0.5) {
             return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", self.landmark_sigma)));
         }
@@ -296,10 +312,10 @@ pub fn fit_prepared(
     let result = standard_fit(&mm, target, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut rng, &mut observer)
         .map_err(core("fit"))?;
     let image_seconds = t0.elapsed().as_secs_f64() - landmark_seconds;
-    let lm_mix = Mixture::landmark_default(w.max(h) as f32);
     let img_mix = Mixture::image_default(w.max(h) as f32);
     let mut landmark_acceptance = AcceptanceReport::new();
-    add_acceptance(&mut landmark_acceptance, &lm_mix, &result.landmark.acceptance);
+    add_acceptance(&mut landmark_acceptance, &Mixture::landmark_pose(w.max(h) as f32), &result.pose_acceptance);
+    add_acceptance(&mut landmark_acceptance, &Mixture::landmark_shape(w.max(h) as f32), &result.landmark.acceptance);
     let mut image_acceptance = AcceptanceReport::new();
     add_acceptance(&mut image_acceptance, &img_mix, &result.image.acceptance);
     let best = result.image;

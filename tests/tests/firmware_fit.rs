@@ -107,20 +107,36 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     );
 }
 
+fn rmse_to(fitted: &[[f32; 2]], target: &[[f32; 2]]) -> f32 {
+    assert_eq!(fitted.len(), target.len());
+    let sq: f32 = fitted.iter().zip(target).map(|(p, q)| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sum();
+    (sq / fitted.len() as f32).sqrt()
+}
+
+/// The int16 blob fits like the float model it was made from. Not bit for bit: the chains are
+/// chaotic, so a 1e-4 mm quantization difference may flip one accept decision, after which the
+/// two runs are two draws of the same posterior. Most faces do follow the same trajectory
+/// (identical landmarks), and every face fits the target landmarks equally well.
 #[test]
 fn float_model_and_blob_fit_the_same_landmarks() {
     let (q, blob) = models();
     let settings = FitSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..FitSettings::default() };
-    let mut worst = 0.0f32;
-    for face in faces(3, 5) {
-        let prep = prepared(&face);
+    let (mut worst, mut same, mut worst_quality) = (0.0f32, 0, 0.0f32);
+    let faces = faces(3, 5);
+    for face in &faces {
+        let prep = prepared(face);
         let (_, blob_lm) = host_fit(blob, &prep, &settings).expect("blob fit");
         let float = fit_prepared(&q.reduced, &prep, &settings, &mut |_, _, _| {}).expect("float fit");
         let d = max_distance(&float.fitted_landmarks, &blob_lm);
-        println!("{}: float vs blob landmarks differ by at most {d:.3} px", face.truth.image);
+        let (rf, rb) = (rmse_to(&float.fitted_landmarks, &prep.landmarks), rmse_to(&blob_lm, &prep.landmarks));
+        println!("{}: float vs blob landmarks differ by at most {d:.3} px; RMSE to the target {rf:.3} vs {rb:.3} px", face.truth.image);
         worst = worst.max(d);
+        worst_quality = worst_quality.max((rf - rb).abs());
+        same += usize::from(d < 0.01);
     }
-    assert!(worst <= 1.0, "float model and blob fits differ by {worst} px");
+    assert!(2 * same > faces.len(), "only {same} of {} faces kept the same trajectory", faces.len());
+    assert!(worst <= 3.0, "float model and blob fits differ by {worst} px");
+    assert!(worst_quality <= 0.25, "the blob fits the target landmarks worse or better by {worst_quality} px");
 }
 
 #[test]

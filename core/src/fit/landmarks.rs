@@ -12,6 +12,7 @@ pub struct LandmarkTarget<'a> {
     points: &'a [[f32; 2]],
     valid: &'a [bool],
     sigma: f32,
+    factors: &'a [f32],
 }
 
 impl<'a> LandmarkTarget<'a> {
@@ -33,7 +34,24 @@ impl<'a> LandmarkTarget<'a> {
         if !valid.iter().any(|&v| v) {
             return Err(FitError::NoValidLandmarks);
         }
-        Ok(Self { points, valid, sigma })
+        Ok(Self { points, valid, sigma, factors: &[] })
+    }
+
+    /// The same target with landmark `i`'s σ multiplied by `factors[i]` (one finite factor > 0
+    /// per landmark; e.g. a larger σ for points whose definition depends on the view).
+    pub fn with_sigma_factors(self, factors: &'a [f32]) -> Result<Self, FitError> {
+        if factors.len() != self.points.len() {
+            return Err(FitError::LengthMismatch);
+        }
+        if !factors.iter().all(|f| *f > 0.0 && f.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        Ok(Self { factors, ..self })
+    }
+
+    /// The σ factor of landmark `i` (1 unless set by [`Self::with_sigma_factors`]).
+    pub fn sigma_factor(&self, i: usize) -> f32 {
+        self.factors.get(i).copied().unwrap_or(1.0)
     }
 
     /// A landmark σ for a `width × height` working image: 1.5 % of the larger side (about 1.9 px at 128).
@@ -87,7 +105,8 @@ impl<'a> LandmarkTarget<'a> {
 /// The landmark term of one sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LandmarkEval {
-    /// `−½ Σ_valid |x_i − t_i|² / σ²` (no normalization constant; `−∞` if a valid landmark cannot be projected).
+    /// `−½ Σ_valid |x_i − t_i|² / (σ f_i)²` with the per-landmark factors `f_i` (no normalization
+    /// constant; `−∞` if a valid landmark cannot be projected).
     pub log_likelihood: f32,
     /// `Σ_valid |x_i − t_i|²` in px² (`∞` if a landmark cannot be projected).
     pub sq_err: f32,
@@ -111,17 +130,21 @@ pub fn evaluate_landmarks(positions: &[Vec3], pose: &Pose, camera: &Camera, targ
     let r = pose.rotation();
     let t = pose.translation;
     let mut sq = 0.0f32;
+    let mut weighted = 0.0f32;
     let mut count = 0u32;
-    for ((p, tp), _) in positions.iter().zip(target.points).zip(target.valid).filter(|(_, &v)| v) {
+    for (i, ((p, tp), _)) in positions.iter().zip(target.points).zip(target.valid).enumerate().filter(|(_, (_, &v))| v) {
         let q = crate::pose::mat_vec(&r, *p);
         let Some(s) = camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) else {
             return Ok(LandmarkEval { log_likelihood: f32::NEG_INFINITY, sq_err: f32::INFINITY, count: count + 1 });
         };
         let (dx, dy) = (s.x - tp[0], s.y - tp[1]);
-        sq += dx * dx + dy * dy;
+        let d2 = dx * dx + dy * dy;
+        sq += d2;
+        let f = target.sigma_factor(i);
+        weighted += d2 / (f * f);
         count += 1;
     }
-    let ll = -0.5 * sq / (target.sigma * target.sigma);
+    let ll = -0.5 * weighted / (target.sigma * target.sigma);
     let ll = if ll.is_nan() { f32::NEG_INFINITY } else { ll };
     Ok(LandmarkEval { log_likelihood: ll, sq_err: sq, count })
 }
@@ -148,6 +171,14 @@ mod tests {
         // A masked point does not count.
         let t = LandmarkTarget::new(&shifted, &[false, true], 2.0).unwrap();
         assert!(evaluate_landmarks(&pts, &pose, &cam, &t).unwrap().sq_err < 1e-6);
+        // A σ factor of 2 on the shifted point quarters its log-likelihood but not its error.
+        let t = LandmarkTarget::new(&shifted, &[true, true], 2.0).unwrap().with_sigma_factors(&[2.0, 1.0]).unwrap();
+        let e = evaluate_landmarks(&pts, &pose, &cam, &t).unwrap();
+        assert!((e.log_likelihood + 0.125).abs() < 1e-4, "{e:?}");
+        assert!((e.rmse() - libm::sqrtf(2.0)).abs() < 1e-4);
+        assert_eq!(t.with_sigma_factors(&[1.0]).err(), Some(FitError::LengthMismatch));
+        assert_eq!(t.with_sigma_factors(&[1.0, 0.0]).err(), Some(FitError::BadConfig));
+        assert_eq!(t.with_sigma_factors(&[1.0, f32::NAN]).err(), Some(FitError::BadConfig));
     }
 
     #[test]

@@ -194,15 +194,45 @@ impl Mixture {
     }
 
     fn add_pose(&mut self, image_size: f32, share: f32) -> Result<(), FitError> {
+        self.add_pose_parts(image_size, share, true, true)
+    }
+
+    /// Pitch, roll, scaling and translation components, and yaw and distance ones if asked;
+    /// weights are fractions of `share` (yaw 0.3, pitch 0.2, roll 0.1, distance 0.05, scaling
+    /// 0.15, translation 0.2), so leaving parts out lowers the total.
+    fn add_pose_parts(&mut self, image_size: f32, share: f32, yaw: bool, distance: bool) -> Result<(), FitError> {
         let rot_w = [0.1, 0.4, 0.5];
         let rot_s = [0.75, 0.10, 0.01];
-        self.push3(ProposalKind::Yaw, rot_s, rot_w, 0.3 * share)?;
+        if yaw {
+            self.push3(ProposalKind::Yaw, rot_s, rot_w, 0.3 * share)?;
+        }
         self.push3(ProposalKind::Pitch, rot_s, rot_w, 0.2 * share)?;
         self.push3(ProposalKind::Roll, rot_s, rot_w, 0.1 * share)?;
-        self.push3(ProposalKind::Distance, [200.0, 50.0, 5.0], [0.2, 0.6, 0.2], 0.05 * share)?;
+        if distance {
+            self.push3(ProposalKind::Distance, [200.0, 50.0, 5.0], [0.2, 0.6, 0.2], 0.05 * share)?;
+        }
         self.push3(ProposalKind::Scaling, [0.15, 0.05, 0.01], [0.2, 0.6, 0.2], 0.15 * share)?;
         let px = image_size.max(1.0);
         self.push3(ProposalKind::Translation, [0.1 * px, 0.02 * px, 0.004 * px], [0.2, 0.2, 0.6], 0.2 * share)
+    }
+
+    /// The pose phase of the landmark chain: rotation, scaling (focal length) and translation, no
+    /// distance changes (landmarks hardly tell perspective from shape) and no shape.
+    pub fn landmark_pose(image_size: f32) -> Self {
+        let mut m = Self::new();
+        // 15 components: within the capacity, all σ/weights valid.
+        let _ = m.add_pose_parts(image_size, 1.0, true, false);
+        m
+    }
+
+    /// The shape phase of the landmark chain: shape drift (60 %) with the pose free except for
+    /// yaw and distance, the directions along which the landmarks trade pose for shape.
+    pub fn landmark_shape(image_size: f32) -> Self {
+        let mut m = Self::new();
+        // 15 components: within the capacity, all σ/weights valid.
+        let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.6);
+        let _ = m.add_pose_parts(image_size, 0.6, false, false);
+        m
     }
 
     /// The landmark chain's default: pose (70 %) and shape (30 %) for a working image whose larger side is `image_size` px.
@@ -375,6 +405,22 @@ mod tests {
         let (w, w2) = (-p.pose.translation[2], -out.pose.translation[2]);
         assert!((out.focal / w2 - p.focal / w).abs() < 1e-4);
         assert!((h - libm::logf(w2 / w)).abs() < 1e-5);
+    }
+
+    #[test]
+    fn landmark_phases_split_pose_and_shape() {
+        let has = |m: &Mixture, k: ProposalKind| m.entries().iter().any(|e| e.kind == k && e.weight > 0.0);
+        let pose = Mixture::landmark_pose(128.0);
+        for k in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll, ProposalKind::Scaling, ProposalKind::Translation] {
+            assert!(has(&pose, k), "pose phase lacks {}", k.name());
+        }
+        assert!(!has(&pose, ProposalKind::Shape) && !has(&pose, ProposalKind::Distance));
+        let shape = Mixture::landmark_shape(128.0);
+        assert!(has(&shape, ProposalKind::Shape) && has(&shape, ProposalKind::Pitch));
+        // Yaw and distance are what the landmarks trade for shape: the shape phase holds them.
+        assert!(!has(&shape, ProposalKind::Yaw) && !has(&shape, ProposalKind::Distance));
+        let share: f32 = shape.entries().iter().filter(|e| e.kind == ProposalKind::Shape).map(|e| e.weight).sum();
+        assert!((share / shape.total_weight() - 0.6 / 0.99).abs() < 1e-4, "{share}");
     }
 
     #[test]

@@ -1,17 +1,26 @@
 //! The standard fit, end to end, as one function: the host's `gpmm fit` and the firmware run
 //! exactly this, so a seed gives the same fit on both (the parity test compares them).
 //!
-//! 1. Start: a frontal pose whose focal length puts the mean face at
-//!    [`FitSettings::nominal_distance_mm`] ([`initial_guess`] twice: the first probe measures the
-//!    depth at which the landmark spread matches), ambient light, zero coefficients; the prior is
-//!    centred on it ([`Prior::around`]).
-//! 2. The landmark chain (prior × landmarks, no rendering).
-//! 3. Its best sample gets the closed-form least-squares SH light on every visible vertex.
-//! 4. The image chain from there (prior × landmarks × image, delayed acceptance).
+//! 1. Start: a scaled-orthographic least-squares pose of the mean face's landmarks
+//!    ([`initial_guess`]; run twice, the first probe measures the depth at which the focal length
+//!    puts the face at [`FitSettings::nominal_distance_mm`]), ambient light, zero coefficients;
+//!    the prior is centred on it ([`Prior::around`]).
+//! 2. The landmark chain (prior × landmarks, no rendering) in two phases, as the paper's fit
+//!    script fits the pose to the landmarks before anything else: first the pose alone
+//!    ([`Mixture::landmark_pose`]: no shape, no distance changes; the jaw contour's σ scaled by
+//!    [`FitSettings::contour_sigma_factor`]), then the shape with yaw and distance held
+//!    ([`Mixture::landmark_shape`]). Letting shape and yaw move together trades one for the
+//!    other: on faces from another model (ICT) such a joint chain underestimated a 30° yaw by
+//!    5–7°, because the template's landmark depths (the silhouette contour above all) differ from
+//!    the face's.
+//! 3. The shape phase's best sample gets the closed-form least-squares SH light on every visible vertex.
+//! 4. The image chain from there (prior × landmarks × image, delayed acceptance; all parameters).
 //!
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
-use super::chain::{image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, FitResult, ImageProblem, Problem};
+use super::chain::{
+    image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, Acceptance, FitResult, ImageProblem, Problem,
+};
 use super::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
@@ -25,11 +34,24 @@ use crate::shading::TriIndex;
 use crate::{ShLight, TileRasterizer};
 use rand_core::Rng;
 
+/// Landmark count of the iBUG-68 scheme, whose first 17 points are the jaw contour.
+const IBUG68: usize = 68;
+
 /// Settings of [`standard_fit`] (defaults: the documented default fit).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitSettings {
-    /// Landmark-chain steps.
+    /// Landmark-chain steps, both phases: the first [`Self::pose_share`] of them move the pose, the
+    /// rest the shape.
     pub landmark_steps: u32,
+    /// Fraction of the landmark steps spent on the pose phase (0 to 1; the rest fit the shape
+    /// with yaw and distance held).
+    pub pose_share: f32,
+    /// Leading landmarks that follow the face's silhouette (17 for iBUG-68: the jaw contour);
+    /// only used when the model has exactly 68 landmarks.
+    pub contour_landmarks: usize,
+    /// σ factor of the contour landmarks in the pose phase (their 3-D definition is view
+    /// dependent, so they say less about the pose than the inner points).
+    pub contour_sigma_factor: f32,
     /// Image-chain steps (each renders the model at most once).
     pub image_steps: u32,
     /// Shape components fitted (the leading ones; capped by the model's rank and `KS`).
@@ -47,10 +69,14 @@ pub struct FitSettings {
 }
 
 impl FitSettings {
-    /// The default fit: 5000 landmark steps, 600 image steps, 200 shape and 50 colour components,
-    /// landmark σ 0.5 % of the image side, pixel σ 0.043, background floor 0.01, start at 500 mm.
+    /// The default fit: 5000 landmark steps (2000 pose, 3000 shape; contour σ × 3 for the pose),
+    /// 600 image steps, 200 shape and 50 colour components, landmark σ 0.5 % of the image side,
+    /// pixel σ 0.043, background floor 0.01, start at 500 mm.
     pub const DEFAULT: Self = Self {
         landmark_steps: 5000,
+        pose_share: 0.4,
+        contour_landmarks: 17,
+        contour_sigma_factor: 3.0,
         image_steps: 600,
         shape_rank: 200,
         color_rank: 50,
@@ -60,10 +86,16 @@ impl FitSettings {
         nominal_distance_mm: 500.0,
     };
 
-    /// Checks ranges (σ > 0 and finite, distance > 0); `BadConfig` otherwise.
+    /// Checks ranges (σ and factors > 0 and finite, distance > 0, pose share in [0, 1]);
+    /// `BadConfig` otherwise.
     pub fn validate(&self) -> Result<(), FitError> {
         let positive = |v: f32| v > 0.0 && v.is_finite();
-        if positive(self.landmark_sigma) && positive(self.pixel_sigma) && positive(self.nominal_distance_mm) && self.background_floor >= 0.0
+        if positive(self.landmark_sigma)
+            && positive(self.pixel_sigma)
+            && positive(self.nominal_distance_mm)
+            && positive(self.contour_sigma_factor)
+            && self.background_floor >= 0.0
+            && (0.0..=1.0).contains(&self.pose_share)
         {
             Ok(())
         } else {
@@ -105,9 +137,11 @@ impl<F: FnMut(Stage, u32, u32)> FitObserver for F {
 pub struct StandardFit<const KS: usize, const KC: usize> {
     /// The start of the landmark chain.
     pub init: FitParams<KS, KC>,
-    /// The landmark chain.
+    /// Proposal counts of the landmark chain's pose phase (its mixture: [`Mixture::landmark_pose`]).
+    pub pose_acceptance: Acceptance,
+    /// The landmark chain's shape phase (started from the pose phase's best sample).
     pub landmark: FitResult<KS, KC>,
-    /// The landmark chain's best sample with the least-squares light: the image chain's start.
+    /// The shape phase's best sample with the least-squares light: the image chain's start.
     pub start: FitParams<KS, KC>,
     /// The image term of `start`.
     pub start_image: ImageEval,
@@ -153,11 +187,8 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let init: FitParams<KS, KC> = initial_guess(model, &lm, focal, w, h, ambient, shape_len, color_len)?;
     let prior = Prior::around(&init);
 
-    // 2. The landmark chain.
-    let lm_mix = Mixture::landmark_default(side);
-    let problem = Problem { model: *model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: w, height: h };
-    let lm_steps = settings.landmark_steps;
-    let landmark = landmark_chain_observed(&problem, &init, lm_steps, rng, |done| observer.step(Stage::LandmarkChain, done, lm_steps))?;
+    // 2. The landmark chain: the pose (contour σ scaled), then the shape with yaw and distance held.
+    let (pose_acceptance, landmark) = landmark_phases(model, lm, &prior, &init, settings, w, h, rng, observer)?;
 
     // 3. The least-squares light of its best sample (kept only if the solve succeeds).
     let background = BackgroundModel::from_image(&image, settings.background_floor)?;
@@ -173,7 +204,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
 
     // 4. The image chain.
     let img_mix = Mixture::image_default(side);
-    let problem = Problem { mixture: &img_mix, ..problem };
+    let problem = Problem { model: *model, landmarks: lm, prior: &prior, mixture: &img_mix, width: w, height: h };
     let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
@@ -181,7 +212,49 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let image = image_chain_observed(&problem, &ip, &start, img_steps, instance, raster, rng, |done| {
         observer.step(Stage::ImageChain, done, img_steps)
     })?;
-    Ok(StandardFit { init, landmark, start, start_image, start_landmarks, image })
+    Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
+}
+
+/// The two phases of the landmark chain (step 2 of [`standard_fit`]): returns the pose phase's
+/// proposal counts and the shape phase's result. A function of its own so that its mixtures and
+/// σ factors leave the stack before the image chain runs (the M4F's stack is tight).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
+    model: &MorphableModel<'_, I>,
+    lm: LandmarkTarget<'_>,
+    prior: &Prior,
+    init: &FitParams<KS, KC>,
+    settings: &FitSettings,
+    w: u32,
+    h: u32,
+    rng: &mut R,
+    observer: &mut dyn FitObserver,
+) -> Result<(Acceptance, FitResult<KS, KC>), FitError> {
+    let n = lm.len();
+    let mut factors = [1.0f32; super::MAX_LANDMARKS];
+    if n == IBUG68 {
+        for f in factors.iter_mut().take(settings.contour_landmarks) {
+            *f = settings.contour_sigma_factor;
+        }
+    }
+    let pose_lm = lm.with_sigma_factors(factors.get(..n).ok_or(FitError::TooManyLandmarks)?)?;
+    let pose_mix = Mixture::landmark_pose(w.max(h) as f32);
+    let pose_problem = Problem { model: *model, landmarks: pose_lm, prior, mixture: &pose_mix, width: w, height: h };
+    let total = settings.landmark_steps;
+    // The pose phase's share, rounded down (f32 → u32 saturates; the share is checked to be ≤ 1).
+    let pose_steps = ((total as f32 * settings.pose_share) as u32).min(total);
+    let pose = landmark_chain_observed(&pose_problem, init, pose_steps, rng, |done| {
+        if done < pose_steps {
+            observer.step(Stage::LandmarkChain, done, total)
+        }
+    })?;
+    let shape_mix = Mixture::landmark_shape(w.max(h) as f32);
+    let shape_problem = Problem { landmarks: lm, mixture: &shape_mix, ..pose_problem };
+    let landmark = landmark_chain_observed(&shape_problem, &pose.best, total - pose_steps, rng, |done| {
+        observer.step(Stage::LandmarkChain, pose_steps + done, total)
+    })?;
+    Ok((pose.acceptance, landmark))
 }
 
 /// Projects the model landmarks of `params` into a `width × height` image: `out[i]` gets landmark
