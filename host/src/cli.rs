@@ -210,6 +210,9 @@ impl FitSettingsArgs {
     }
 }
 
+/// Shape components of a recognition fit (the paper's 50).
+pub const RECOGNITION_SHAPE_RANK: usize = 50;
+
 /// Arguments of `gpmm bench-fit`.
 #[derive(Debug, Args)]
 pub struct BenchFitArgs {
@@ -1055,8 +1058,10 @@ pub struct RecognitionArgs {
     /// Image-chain steps per fit of a KDE component (default: as --image-steps).
     #[arg(long, value_name = "N")]
     pub kde_image_steps: Option<u32>,
-    /// Shape components fitted.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SHAPE_RANK, value_name = "K")]
+    /// Shape components fitted and compared: 50, as the paper's fit script (`gpmm fit` fits 200
+    /// for the best landmark fit, but components past ~50 are not determined by a 128-pixel
+    /// image and add noise to the cosine).
+    #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted.
     #[arg(long, default_value_t = crate::fit::DEFAULT_COLOR_RANK, value_name = "K")]
