@@ -277,3 +277,28 @@ pub fn project_landmarks<I: TriIndex, const KS: usize, const KC: usize>(
     }
     Ok(n)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_are_checked() {
+        assert_eq!(FitSettings::DEFAULT.validate(), Ok(()));
+        let bad = [
+            FitSettings { pose_share: 1.5, ..FitSettings::DEFAULT },
+            FitSettings { pose_share: -0.1, ..FitSettings::DEFAULT },
+            FitSettings { pose_share: f32::NAN, ..FitSettings::DEFAULT },
+            FitSettings { contour_sigma_factor: 0.0, ..FitSettings::DEFAULT },
+            FitSettings { contour_sigma_factor: f32::INFINITY, ..FitSettings::DEFAULT },
+            FitSettings { landmark_sigma: -1.0, ..FitSettings::DEFAULT },
+            FitSettings { background_floor: -0.5, ..FitSettings::DEFAULT },
+        ];
+        for s in bad {
+            assert_eq!(s.validate(), Err(FitError::BadConfig), "{s:?}");
+        }
+        // The extremes of the pose share are allowed: all pose or all shape.
+        assert_eq!(FitSettings { pose_share: 0.0, ..FitSettings::DEFAULT }.validate(), Ok(()));
+        assert_eq!(FitSettings { pose_share: 1.0, ..FitSettings::DEFAULT }.validate(), Ok(()));
+    }
+}
