@@ -16,7 +16,7 @@
 
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::device_fit::{fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
-use gpmm_host::fit::{fit_prepared, prepare, FitSettings, Prepared};
+use gpmm_host::fit::{fit_prepared, prepare, rmse, FitSettings, Prepared};
 use gpmm_host::kernel::ModelKernel;
 use gpmm_host::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::model::{build_model, BuildOptions, GpModel};
@@ -107,12 +107,6 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     );
 }
 
-fn rmse_to(fitted: &[[f32; 2]], target: &[[f32; 2]]) -> f32 {
-    assert_eq!(fitted.len(), target.len());
-    let sq: f32 = fitted.iter().zip(target).map(|(p, q)| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sum();
-    (sq / fitted.len() as f32).sqrt()
-}
-
 /// The int16 blob fits like the float model it was made from. Not bit for bit: the chains are
 /// chaotic, so a 1e-4 mm quantization difference may flip one accept decision, after which the
 /// two runs are two draws of the same posterior. Most faces do follow the same trajectory
@@ -128,7 +122,7 @@ fn float_model_and_blob_fit_the_same_landmarks() {
         let (_, blob_lm) = host_fit(blob, &prep, &settings).expect("blob fit");
         let float = fit_prepared(&q.reduced, &prep, &settings, &mut |_, _, _| {}).expect("float fit");
         let d = max_distance(&float.fitted_landmarks, &blob_lm);
-        let (rf, rb) = (rmse_to(&float.fitted_landmarks, &prep.landmarks), rmse_to(&blob_lm, &prep.landmarks));
+        let (rf, rb) = (rmse(&float.fitted_landmarks, &prep.landmarks), rmse(&blob_lm, &prep.landmarks));
         println!("{}: float vs blob landmarks differ by at most {d:.3} px; RMSE to the target {rf:.3} vs {rb:.3} px", face.truth.image);
         worst = worst.max(d);
         worst_quality = worst_quality.max((rf - rb).abs());

@@ -235,7 +235,9 @@ impl Mixture {
         m
     }
 
-    /// The landmark chain's default: pose (70 %) and shape (30 %) for a working image whose larger side is `image_size` px.
+    /// A joint landmark mixture: pose (70 %) and shape (30 %) for a working image whose larger side
+    /// is `image_size` px. [`crate::fit::standard_fit`] no longer uses it: moving yaw and shape
+    /// together biases yaw, so it runs [`Self::landmark_pose`] and then [`Self::landmark_shape`].
     pub fn landmark_default(image_size: f32) -> Self {
         let mut m = Self::new();
         // 21 components: cannot exceed the capacity, and all σ/weights are valid constants.
