@@ -140,10 +140,13 @@ pub fn evaluate_landmarks(positions: &[Vec3], pose: &Pose, camera: &Camera, targ
         let (dx, dy) = (s.x - tp[0], s.y - tp[1]);
         let d2 = dx * dx + dy * dy;
         sq += d2;
-        let f = target.sigma_factor(i);
-        weighted += d2 / (f * f);
+        if let Some(f) = target.factors.get(i) {
+            weighted += d2 / (f * f);
+        }
         count += 1;
     }
+    // Without factors (every chain but the pose phase) no per-landmark division is needed.
+    let weighted = if target.factors.is_empty() { sq } else { weighted };
     let ll = -0.5 * weighted / (target.sigma * target.sigma);
     let ll = if ll.is_nan() { f32::NEG_INFINITY } else { ll };
     Ok(LandmarkEval { log_likelihood: ll, sq_err: sq, count })
