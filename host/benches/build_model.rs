@@ -4,10 +4,10 @@
 //! `cargo bench -p gpmm-host --bench build_model` (data from `$GPMM_DATA` or `../shared/data`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use gpmm_host::kernel::ModelKernel;
-use gpmm_host::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::model::{build_model, BuildOptions};
-use gpmm_host::template::{load_template, TemplateOptions};
+use gpmm_host::gp::kernel::ModelKernel;
+use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::gp::model::{build_model, BuildOptions};
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -37,7 +37,7 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10).measurement_time(Duration::from_secs(100)).warm_up_time(Duration::from_secs(1));
     g.bench_function("symmetric_full_rank200_nystrom2000", |b| b.iter(|| build_model(&template, &opts, |_, _, _| {})));
     g.finish();
-    if let Some(peak) = gpmm_host::cli::peak_memory_bytes() {
+    if let Some(peak) = gpmm_host::process::peak_memory_bytes() {
         eprintln!("peak resident memory: {:.1} MiB", peak as f64 / 1048576.0);
     }
 }

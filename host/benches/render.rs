@@ -5,8 +5,8 @@
 //! `cargo bench -p gpmm-host --bench render` (data from `$GPMM_DATA` or `../shared/data`).
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::render::{Background, Framing, Instance, RenderSettings, Renderer, View, TILE};
-use gpmm_host::template::{load_template, TemplateOptions};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -1,31 +1,21 @@
-//! gpmm-host: everything that runs on the workstation.
+//! gpmm-host: everything that runs on the workstation, as a library (the `gpmm` program is the
+//! separate crate in `host/cli/`).
 //!
-//! Template import ([`mesh_io`], [`template`]), the paper's Gaussian-process
-//! kernels ([`kernel`]), their low-rank Nyström/Mercer approximation
-//! ([`lowrank`]), the model file ([`model_io`]), rendering through the core's tile
-//! rasterizer ([`render`], [`figure`]) and the `gpmm` program ([`cli`]).
+//! Modules by concern: meshes, templates and their geometry ([`mesh`]); the paper's
+//! Gaussian-process kernels, their low-rank Nyström/Mercer approximation and the model file
+//! ([`gp`]); rendering through the core's tile rasterizer and figures ([`render`]); photos and
+//! landmark files ([`photo`]); fitting a model to a photo or a mesh ([`fit`]); the device side:
+//! quantization, the model blob and the firmware run ([`device`]); the paper's evaluation and the
+//! synthetic faces it runs on ([`eval`]); where the data lives ([`data`]); this process's memory
+//! use ([`process`]).
 #![deny(missing_docs)]
 
-pub mod cli;
 pub mod data;
-pub mod demo;
-pub mod device_fit;
-pub mod device_mesh;
+pub mod device;
 pub mod eval;
-pub mod figure;
 pub mod fit;
-pub mod fit_bench;
-pub mod geom;
-pub mod kernel;
-pub mod lowrank;
-pub mod mesh_io;
-pub mod model;
-pub mod model_io;
-pub mod npy;
+pub mod gp;
+pub mod mesh;
 pub mod photo;
-pub mod pts;
-pub mod quantize;
-pub mod register;
+pub mod process;
 pub mod render;
-pub mod synth;
-pub mod template;

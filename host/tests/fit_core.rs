@@ -9,10 +9,10 @@ use gpmm_core::fit::{
 };
 use gpmm_core::{Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer, NO_TRIANGLE};
 use gpmm_host::data::{data_dir_for_tests, template_dir};
-use gpmm_host::kernel::ModelKernel;
-use gpmm_host::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::model::{build_model, BuildOptions};
-use gpmm_host::template::{load_template, TemplateOptions};
+use gpmm_host::gp::kernel::ModelKernel;
+use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::gp::model::{build_model, BuildOptions};
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::time::Instant;

@@ -3,8 +3,8 @@
 #![allow(clippy::needless_range_loop)] // index loops mirror the matrix formulas
 
 use faer::{Mat, Side};
-use gpmm_host::kernel::*;
-use gpmm_host::lowrank::{low_rank, NystromOptions, RankSpec};
+use gpmm_host::gp::kernel::*;
+use gpmm_host::gp::lowrank::{low_rank, NystromOptions, RankSpec};
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 

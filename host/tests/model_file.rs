@@ -1,10 +1,10 @@
 //! Model file: save/load round trip, Python-readable layout, corrupted and foreign files.
 
-use gpmm_host::kernel::ModelKernel;
-use gpmm_host::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::model::{build_model, BuildOptions, GpModel, MODEL_VERSION};
-use gpmm_host::model_io::{from_bytes, to_bytes, ModelIoError};
-use gpmm_host::template::{Mesh, Provenance, Template};
+use gpmm_host::gp::kernel::ModelKernel;
+use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::gp::model::{build_model, BuildOptions, GpModel, MODEL_VERSION};
+use gpmm_host::gp::model_io::{from_bytes, to_bytes, ModelIoError};
+use gpmm_host::mesh::template::{Mesh, Provenance, Template};
 
 /// A small closed mesh (octahedron subdivided) with colours: no data files needed.
 fn small_template() -> Template {
@@ -53,8 +53,8 @@ fn save_load_round_trip_is_exact() {
     let model = small_model();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("m.gpmm");
-    gpmm_host::model_io::save(&model, &path).unwrap();
-    let back = gpmm_host::model_io::load(&path).unwrap();
+    gpmm_host::gp::model_io::save(&model, &path).unwrap();
+    let back = gpmm_host::gp::model_io::load(&path).unwrap();
     assert_eq!(back, model);
     assert_eq!(back.shape.rank(), 10);
     assert_eq!(back.color.rank(), 6);
@@ -91,7 +91,7 @@ fn instance_is_mean_plus_scaled_components() {
     coeffs[3] = 1.5;
     let inst = model.shape.instance(&coeffs).unwrap();
     let n = model.vertices();
-    if let gpmm_host::model::PartBasis::Factored { directions, fields } = &model.shape.basis {
+    if let gpmm_host::gp::model::PartBasis::Factored { directions, fields } = &model.shape.basis {
         for i in [0, n / 2, n - 1] {
             for a in 0..3 {
                 let want = model.shape.mean[i][a] + 1.5 * fields[3 * n + i] * directions[3][a];

@@ -1,7 +1,7 @@
 //! Nyström accuracy against the exact eigendecomposition on a small mesh.
 
-use gpmm_host::kernel::{DiagonalKernel, Hyperparameters, KernelPoint, ModelKernel};
-use gpmm_host::lowrank::{exact_scalar_eigenvalues, low_rank, NystromOptions, RankSpec};
+use gpmm_host::gp::kernel::{DiagonalKernel, Hyperparameters, KernelPoint, ModelKernel};
+use gpmm_host::gp::lowrank::{exact_scalar_eigenvalues, low_rank, NystromOptions, RankSpec};
 
 /// A face-sized half ellipsoid (150 x 200 x 100 mm) with a smooth colour pattern, `n` vertices.
 fn half_ellipsoid(n: usize) -> Vec<KernelPoint> {

@@ -4,8 +4,8 @@
 //! at several poses and two image sizes must agree on >= 99% of covered pixels, colours within 2/255.
 
 use gpmm_core::{Cull, ShLight};
+use gpmm_host::mesh::template::{load_template, Template, TemplateOptions};
 use gpmm_host::render::{to_u8, Background, Framing, Instance, RenderSettings, Renderer, View};
-use gpmm_host::template::{load_template, Template, TemplateOptions};
 use std::path::PathBuf;
 
 fn data_dir() -> Option<PathBuf> {

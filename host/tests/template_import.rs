@@ -8,8 +8,8 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use gpmm_host::mesh_io::{read_landmarks_json, read_mesh, write_ply, write_ply_with, MeshIoError, PlyEncoding};
-use gpmm_host::template::{load_template, Mesh, Template, TemplateError, TemplateOptions, IBUG68_MIRROR_PAIRS};
+use gpmm_host::mesh::io::{read_landmarks_json, read_mesh, write_ply, write_ply_with, MeshIoError, PlyEncoding};
+use gpmm_host::mesh::template::{load_template, Mesh, Template, TemplateError, TemplateOptions, IBUG68_MIRROR_PAIRS};
 
 fn data_dir() -> Option<PathBuf> {
     gpmm_host::data::data_dir_for_tests()

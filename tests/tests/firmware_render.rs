@@ -1,7 +1,7 @@
 //! The firmware smoke test: the cropped template (simplified to 3,000 vertices) rendered at 128×128 by the core on the host and by
 //! the Cortex-M4F firmware under QEMU must give the same frame checksum.
 //!
-//! The host writes the template as a device mesh (`gpmm_host::device_mesh`: mesh + pose, camera
+//! The host writes the template as a device mesh (`gpmm_host::device::mesh`: mesh + pose, camera
 //! and light), renders it with gpmm-core into a `FrameChecksum`, and runs `firmware-sim/run.sh
 //! --data FILE`, which flashes the file into the firmware's data partition. The firmware is
 //! built once per test run (the first run builds it; the others run the built ELF).
@@ -15,8 +15,8 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use gpmm_core::FrameChecksum;
-use gpmm_host::device_mesh::{DeviceMesh, DeviceScene};
-use gpmm_host::template::{load_template, TemplateOptions};
+use gpmm_host::device::mesh::{DeviceMesh, DeviceScene};
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use serde_json::Value;
 
 fn data_dir() -> Option<PathBuf> {

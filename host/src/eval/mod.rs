@@ -9,10 +9,12 @@
 
 pub mod kde;
 pub mod models;
+pub mod npy;
 pub mod pca;
 pub mod plot;
 pub mod recognition;
 pub mod specgen;
+pub mod synth;
 pub mod world;
 
 use std::path::{Path, PathBuf};
@@ -32,19 +34,19 @@ pub enum EvalError {
     },
     /// A model file could not be read or written.
     #[error(transparent)]
-    ModelFile(#[from] crate::model_io::ModelIoError),
+    ModelFile(#[from] crate::gp::model_io::ModelIoError),
     /// The synthetic world or a `gpmm synth` directory could not be read.
     #[error(transparent)]
-    Synth(#[from] crate::synth::SynthError),
+    Synth(#[from] crate::eval::synth::SynthError),
     /// A template or scan could not be imported.
     #[error(transparent)]
-    Template(#[from] crate::template::TemplateError),
+    Template(#[from] crate::mesh::template::TemplateError),
     /// A mesh could not be written.
     #[error(transparent)]
-    Mesh(#[from] crate::mesh_io::MeshIoError),
+    Mesh(#[from] crate::mesh::io::MeshIoError),
     /// A registration failed.
     #[error(transparent)]
-    Register(#[from] crate::register::RegisterError),
+    Register(#[from] crate::fit::register::RegisterError),
     /// The input does not allow the evaluation (e.g. no gallery images, a model without landmarks).
     #[error("{0}")]
     Invalid(String),
@@ -67,7 +69,7 @@ pub(crate) fn create_dir(path: &Path) -> Result<(), EvalError> {
 
 /// Writes a PNG figure, naming the file on failure.
 pub(crate) fn save_png(image: &image::RgbaImage, path: &Path) -> Result<(), EvalError> {
-    crate::figure::save_png(image, path).map_err(|e| EvalError::Invalid(format!("{}: cannot write: {e}", path.display())))
+    crate::render::figure::save_png(image, path).map_err(|e| EvalError::Invalid(format!("{}: cannot write: {e}", path.display())))
 }
 
 /// The Wilson score interval of `successes` out of `trials` at the normal quantile `z` (1.96 for 95 %).

@@ -10,11 +10,11 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::kernel::{Hyperparameters, ModelKernel};
-use crate::lowrank::{NystromOptions, RankSpec};
-use crate::model::{build_model, BuildOptions, GpModel};
-use crate::synth::SynthOptions;
-use crate::template::{load_template, TemplateOptions};
+use crate::eval::synth::SynthOptions;
+use crate::gp::kernel::{Hyperparameters, ModelKernel};
+use crate::gp::lowrank::{NystromOptions, RankSpec};
+use crate::gp::model::{build_model, BuildOptions, GpModel};
+use crate::mesh::template::{load_template, TemplateOptions};
 
 use super::world::{EvalWorld, TRAIN_ID_BASE};
 use super::{create_dir, io_err, write_text, EvalError};
@@ -183,7 +183,7 @@ impl ModelFactory {
             return Ok((path, false));
         }
         let model = self.build(recipe)?;
-        crate::model_io::save(&model, &path)?;
+        crate::gp::model_io::save(&model, &path)?;
         write_text(&key_path, &key)?;
         Ok((path, true))
     }
@@ -201,7 +201,8 @@ impl ModelFactory {
     fn build(&mut self, recipe: &ModelRecipe) -> Result<GpModel, EvalError> {
         match recipe {
             ModelRecipe::Template { kernel, .. } => {
-                let kernel: ModelKernel = kernel.parse().map_err(|e: crate::kernel::UnknownKernel| EvalError::Invalid(e.to_string()))?;
+                let kernel: ModelKernel =
+                    kernel.parse().map_err(|e: crate::gp::kernel::UnknownKernel| EvalError::Invalid(e.to_string()))?;
                 let (ply, lm) = self.template_paths();
                 let topts = TemplateOptions { vertices: self.build.vertices, ..Default::default() };
                 let template = load_template(&ply, &lm, &topts)?;
@@ -228,10 +229,10 @@ impl ModelFactory {
         let seed = self.world_options.seed;
         let ply = scans.join(format!("seed{seed}-scan{index:02}.ply"));
         let lm = scans.join(format!("seed{seed}-scan{index:02}.landmarks.json"));
-        crate::mesh_io::write_ply_with(
+        crate::mesh::io::write_ply_with(
             &ply,
             &scan.mesh,
-            crate::mesh_io::PlyEncoding::BinaryLittleEndian,
+            crate::mesh::io::PlyEncoding::BinaryLittleEndian,
             &[super::world::ICT_ATTRIBUTION],
         )?;
         let json = serde_json::json!({ "scheme": "ibug68", "vertex_ids": scan.landmarks });
@@ -276,7 +277,7 @@ impl ModelFactory {
             if !f.is_file() {
                 return Err(EvalError::Invalid(format!("model file {} not found", f.display())));
             }
-            crate::model_io::load(f)?;
+            crate::gp::model_io::load(f)?;
             let stem = f.file_stem().and_then(|s| s.to_str()).unwrap_or("model").to_string();
             let mut label = stem.clone();
             let mut k = 2;

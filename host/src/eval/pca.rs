@@ -6,9 +6,9 @@
 //! `G = f DᵀD = V Λ Vᵀ`: `C (D v_k) = λ_k (D v_k)` and `|D v_k|² = λ_k / f`, so the basis scaled by
 //! `sqrt(λ_k)` (what a model file stores) is `sqrt(f) D v_k`.
 
-use crate::kernel::Hyperparameters;
-use crate::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
-use crate::template::{Mesh, Provenance};
+use crate::gp::kernel::Hyperparameters;
+use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
+use crate::mesh::template::{Mesh, Provenance};
 
 use super::EvalError;
 

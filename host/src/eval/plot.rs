@@ -1,8 +1,8 @@
-//! Line charts as PNG (no font files: labels use the 8×8 bitmap font of [`crate::figure`]).
+//! Line charts as PNG (no font files: labels use the 8×8 bitmap font of [`crate::render::figure`]).
 
 use image::{Rgba, RgbaImage};
 
-use crate::figure::{draw_text, text_width, GLYPH};
+use crate::render::figure::{draw_text, text_width, GLYPH};
 
 /// One line of a chart.
 #[derive(Debug, Clone, PartialEq)]

@@ -19,8 +19,8 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::eval::synth::{read_truth, ImageTruth};
 use crate::fit::{fit_prepared, load_photo, FitSettings};
-use crate::synth::{read_truth, ImageTruth};
 
 use super::plot::{line_chart, Chart, Series};
 use super::{create_dir, wilson_interval, write_text, EvalError};
@@ -183,7 +183,7 @@ pub struct SynthSet {
     /// Selected identities.
     pub identities: Vec<usize>,
     /// The world options used to render them.
-    pub options: crate::synth::SynthOptions,
+    pub options: crate::eval::synth::SynthOptions,
 }
 
 impl SynthSet {
@@ -223,7 +223,7 @@ impl SynthSet {
     }
 }
 
-fn fit_one(model: &crate::model::GpModel, dir: &Path, t: &ImageTruth, settings: &FitSettings) -> Result<ImageFit, String> {
+fn fit_one(model: &crate::gp::model::GpModel, dir: &Path, t: &ImageTruth, settings: &FitSettings) -> Result<ImageFit, String> {
     let t0 = Instant::now();
     let prepared = load_photo(model, &dir.join(&t.image), &dir.join(&t.landmarks_file), false, settings.size)
         .map_err(|e| format!("{}: {e}", t.image))?;
@@ -263,7 +263,7 @@ pub fn fit_set(
             }
         }
     }
-    let model = crate::model_io::load(model_path)?;
+    let model = crate::gp::model_io::load(model_path)?;
     if model.landmarks.len() != 68 {
         return Err(EvalError::Invalid(format!(
             "{}: the model has {} landmarks; recognition needs the 68 iBUG landmarks",
@@ -399,7 +399,7 @@ pub fn evaluate(
         let mut per_fit: Vec<f64> = sets.iter().flat_map(|s| s.fits.iter().map(|f| f.seconds)).collect();
         per_fit.sort_by(f64::total_cmp);
         let vertices = match row.components.first() {
-            Some((_, p)) => crate::model_io::load(p)?.vertices(),
+            Some((_, p)) => crate::gp::model_io::load(p)?.vertices(),
             None => 0,
         };
         let r = RowResult {

@@ -3,7 +3,7 @@
 //!
 //! The test set is `count` identities of the synthetic world (`gpmm synth`'s ICT identities with
 //! their albedo, whole meshes) drawn with their own seed; none of the models is built from them.
-//! Correspondence is established by [`crate::register`]: a rigid alignment on the non-jaw iBUG
+//! Correspondence is established by [`crate::fit::register`]: a rigid alignment on the non-jaw iBUG
 //! landmarks, then iterated closest points with the model's prior as regularizer.
 //!
 //! - **Generalization G(k)**: each test identity is registered with the first k shape and k colour
@@ -27,7 +27,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::register::{basis_instance, basis_matrix, register, PreparedTarget, RegisterOptions, Registration};
+use crate::fit::register::{basis_instance, basis_matrix, register, PreparedTarget, RegisterOptions, Registration};
 
 use super::plot::{line_chart, side_by_side, Chart, Series};
 use super::world::Scan;
@@ -102,7 +102,7 @@ fn mean_distance(a: &[[f64; 3]], b: &[[f64; 3]], mask: &[bool]) -> f64 {
     let (mut s, mut n) = (0.0, 0usize);
     for ((p, q), &m) in a.iter().zip(b).zip(mask) {
         if m {
-            s += crate::geom::dist2(*p, *q).sqrt();
+            s += crate::mesh::geometry::dist2(*p, *q).sqrt();
             n += 1;
         }
     }
@@ -130,7 +130,7 @@ pub fn evaluate_model(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<ModelCurves, EvalError> {
     let t0 = std::time::Instant::now();
-    let model = crate::model_io::load(model_path)?;
+    let model = crate::gp::model_io::load(model_path)?;
     if targets.is_empty() {
         return Err(EvalError::Invalid("specgen needs at least one test identity".into()));
     }

@@ -4,7 +4,7 @@
 //!   transferred and varied albedo) as a coloured mesh with its 68 landmark vertex ids, either
 //!   whole ([`EvalWorld::full_scan`], what the images show) or cut to the face region
 //!   ([`EvalWorld::cropped_scan`]) with the template's face crop
-//!   ([`crate::template::face_crop_indices`], computed once on the ICT neutral), so that models
+//!   ([`crate::mesh::template::face_crop_indices`], computed once on the ICT neutral), so that models
 //!   learned from scans cover the same part of the face as the models built from the template.
 //! - **Training identities** are the world's identities [`TRAIN_ID_BASE`]`+j` of the same seed:
 //!   they never coincide with the test identities `0..count` of a `gpmm synth` directory.
@@ -15,10 +15,10 @@
 //!   linear (brightness × tint × exp(bumps)), so its model is the PCA of many sampled albedos.
 //! - **PCA baseline** ([`EvalWorld::pca_model`]): PCA of a few cropped training scans.
 
-use crate::geom::{centroid, dot, sub};
-use crate::model::GpModel;
-use crate::synth::{SynthOptions, SynthWorld};
-use crate::template::{face_crop_indices, ibug_frame, Mesh};
+use crate::eval::synth::{SynthOptions, SynthWorld};
+use crate::gp::model::GpModel;
+use crate::mesh::geometry::{centroid, dot, sub};
+use crate::mesh::template::{face_crop_indices, ibug_frame, Mesh};
 
 use super::pca::{covariance_basis, dense_part, learned_metadata, pca_model};
 use super::EvalError;
@@ -65,7 +65,7 @@ impl EvalWorld {
         let world = SynthWorld::load(options)?;
         let n_ict = world.summary().vertices;
         let path = options.ict_dir.join("neutral.npy");
-        let (_, raw) = crate::npy::read_f32(&path).map_err(crate::synth::SynthError::from)?;
+        let (_, raw) = crate::eval::npy::read_f32(&path).map_err(crate::eval::synth::SynthError::from)?;
         let raw: Vec<[f64; 3]> = raw.chunks_exact(3).map(|c| [0, 1, 2].map(|k| 10.0 * f64::from(c[k]))).collect();
         if raw.len() != n_ict {
             return Err(EvalError::Invalid(format!("{}: {} vertices, the world has {n_ict}", path.display(), raw.len())));
@@ -157,7 +157,7 @@ impl EvalWorld {
     /// The generating world as a model: exact ICT shape covariance, albedo PCA of `color_samples` identities (rank ≤ `color_rank`).
     pub fn upper_bound_model(&self, color_samples: usize, color_rank: usize) -> Result<GpModel, EvalError> {
         let path = self.options.ict_dir.join("identity_modes.npy");
-        let (shape, modes) = crate::npy::read_f32(&path).map_err(crate::synth::SynthError::from)?;
+        let (shape, modes) = crate::eval::npy::read_f32(&path).map_err(crate::eval::synth::SynthError::from)?;
         let n_ict = self.neutral.len() - self.fans.len();
         let used = self.world.summary().modes;
         if shape.len() != 3 || shape[1] != n_ict || shape[2] != 3 || shape[0] < used {

@@ -25,10 +25,10 @@
 //! over the vertices whose closest target vertex is not on the border (no distance cut); the colour
 //! residual is the Euclidean RGB distance between the fitted albedo and the target's colour there.
 
-use crate::geom::{add, centroid, dist2, mul, sub};
-use crate::model::{GpModel, ModelPart, PartBasis};
-use crate::synth::{closest_on_triangle, Grid};
-use crate::template::Mesh;
+use crate::eval::synth::{closest_on_triangle, Grid};
+use crate::gp::model::{GpModel, ModelPart, PartBasis};
+use crate::mesh::geometry::{add, centroid, dist2, mul, sub};
+use crate::mesh::template::Mesh;
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use serde::{Deserialize, Serialize};

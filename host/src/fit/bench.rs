@@ -13,9 +13,9 @@
 //!   least-squares light) and of the image chain's result;
 //! - wall-clock seconds of the fit (crop and both chains).
 
+use crate::eval::synth::{read_truth, ImageTruth};
 use crate::fit::{fit_prepared, load_photo, FitSettings};
-use crate::model::GpModel;
-use crate::synth::{read_truth, ImageTruth};
+use crate::gp::model::GpModel;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -91,7 +91,7 @@ pub struct BenchSummary {
 pub enum BenchError {
     /// `truth.json` could not be read.
     #[error(transparent)]
-    Truth(#[from] crate::synth::SynthError),
+    Truth(#[from] crate::eval::synth::SynthError),
     /// The directory holds no images.
     #[error("{0}: truth.json lists no images")]
     Empty(String),

@@ -155,7 +155,7 @@ fn specgen_quick_writes_curves_that_behave() {
 #[test]
 fn register_recovers_a_moved_instance_of_the_model() {
     let Some(f) = fixture() else { return };
-    let model = gpmm_host::model_io::load(&f.model).unwrap();
+    let model = gpmm_host::gp::model_io::load(&f.model).unwrap();
     // An instance with known coefficients, turned by 10 degrees and shifted: the target.
     let mut mesh = model.instance(&[1.2, -0.8, 0.5, 0.3, -1.0], &[0.7, -0.5]).unwrap();
     let (c, sn) = (10f64.to_radians().cos(), 10f64.to_radians().sin());
@@ -164,7 +164,7 @@ fn register_recovers_a_moved_instance_of_the_model() {
     }
     let dir = tempfile::tempdir().unwrap();
     let target = dir.path().join("target.ply");
-    gpmm_host::mesh_io::write_ply(&target, &mesh).unwrap();
+    gpmm_host::mesh::io::write_ply(&target, &mesh).unwrap();
     let lm = dir.path().join("target.json");
     std::fs::write(&lm, serde_json::json!({ "scheme": "ibug68", "vertex_ids": model.landmarks }).to_string()).unwrap();
 
@@ -182,7 +182,7 @@ fn register_recovers_a_moved_instance_of_the_model() {
     // Vertex by vertex (the same topology), the registered instance, written in the target's frame, lies on the target:
     // the correspondence is recovered, not just the surface (the coefficients themselves are only defined up to the
     // near-rigid components the pose can absorb).
-    let reg = gpmm_host::mesh_io::read_mesh(&dir.path().join("full/registered.ply"), None, None).unwrap();
+    let reg = gpmm_host::mesh::io::read_mesh(&dir.path().join("full/registered.ply"), None, None).unwrap();
     assert_eq!(reg.positions.len(), mesh.positions.len());
     let d: f64 =
         reg.positions.iter().zip(&mesh.positions).map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()).sum::<f64>()
@@ -246,9 +246,9 @@ fn bad_input_gives_clear_errors() {
     // register: a missing mesh, landmarks that do not fit.
     let e = fails(&gpmm(&["register", s(&f.model), s(&dir.path().join("missing.ply")), "-o", o]));
     assert!(e.contains("missing.ply"), "{e}");
-    let mesh = gpmm_host::model_io::load(&f.model).unwrap().instance(&[], &[]).unwrap();
+    let mesh = gpmm_host::gp::model_io::load(&f.model).unwrap().instance(&[], &[]).unwrap();
     let target = dir.path().join("t.ply");
-    gpmm_host::mesh_io::write_ply(&target, &mesh).unwrap();
+    gpmm_host::mesh::io::write_ply(&target, &mesh).unwrap();
     let lm = dir.path().join("few.json");
     std::fs::write(&lm, r#"{"scheme": "ibug68", "vertex_ids": [1, 2, 3]}"#).unwrap();
     let e = fails(&gpmm(&["register", s(&f.model), s(&target), "--landmarks", s(&lm), "-o", o]));
@@ -267,8 +267,8 @@ fn eval_and_register_have_help() {
 /// identity's shape lies (up to its own rigid frame) in the span of the upper bound's shape basis.
 #[test]
 fn world_models_match_the_world() {
+    use gpmm_host::eval::synth::{SynthOptions, SynthWorld};
     use gpmm_host::eval::world::EvalWorld;
-    use gpmm_host::synth::{SynthOptions, SynthWorld};
     let Some(f) = fixture() else { return };
     let opts = SynthOptions { seed: 5, ..SynthOptions::with_data_dir(&f.data) };
     let world = EvalWorld::load(&opts).unwrap();
@@ -292,7 +292,7 @@ fn world_models_match_the_world() {
     let ub = world.upper_bound_model(5, 4).unwrap();
     assert_eq!(ub.vertices(), world.cropped_vertices());
     assert_eq!((ub.shape.rank(), ub.color.rank()), (100, 4));
-    let basis = gpmm_host::register::basis_matrix(&ub.shape, 100);
+    let basis = gpmm_host::fit::register::basis_matrix(&ub.shape, 100);
     let d: Vec<f64> =
         cropped.mesh.positions.iter().zip(&ub.shape.mean).flat_map(|(p, m)| (0..3).map(move |k| p[k] - f64::from(m[k]))).collect();
     let norm2: f64 = d.iter().map(|v| v * v).sum();

@@ -1,11 +1,11 @@
 //! Figures: labelled image grids (8×8 bitmap font), the sample grid of `gpmm sample -o`, the
 //! paper's kernel figure of `gpmm figure kernels`, and compact PNG output.
 
-use crate::kernel::ModelKernel;
-use crate::lowrank::{NystromOptions, RankSpec};
-use crate::model::{build_model, BuildOptions, GpModel};
+use crate::gp::kernel::ModelKernel;
+use crate::gp::lowrank::{NystromOptions, RankSpec};
+use crate::gp::model::{build_model, BuildOptions, GpModel};
+use crate::mesh::template::{Mesh, Template};
 use crate::render::{Background, Framing, Instance, RenderError, RenderSettings, Renderer, View};
-use crate::template::{Mesh, Template};
 use gpmm_core::ShLight;
 use image::{ImageEncoder, Rgba, RgbaImage};
 use rand::{RngExt, SeedableRng};

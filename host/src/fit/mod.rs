@@ -16,9 +16,12 @@
 //! result is a deterministic function of the inputs, the settings and the seed: `fit.json` is
 //! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
 
-use crate::model::GpModel;
+pub mod bench;
+pub mod register;
+
+use crate::gp::model::GpModel;
+use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
-use crate::pts::PtsError;
 use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
     standard_fit, Acceptance, FitError, FitParams, Instance, InstanceBuffers, Mixture, MorphableModel, Stage, TargetImage, MAX_LANDMARKS,
@@ -599,7 +602,7 @@ pub fn overlay(crop: &RgbImage, render: &RgbaImage, target: &[[f32; 2]], fitted:
     let ink = Rgba([230, 230, 230, 255]);
     for (i, label) in ["input", "fit", "blend"].iter().enumerate() {
         let (ox, _) = panel(i as u32);
-        crate::figure::draw_text(&mut out, ox, 3, label, 1, ink);
+        crate::render::figure::draw_text(&mut out, ox, 3, label, 1, ink);
     }
     for i in [0u32, 2] {
         let (ox, oy) = panel(i);
@@ -659,7 +662,7 @@ pub struct FitJob {
 pub enum FitFilesError {
     /// The model file.
     #[error(transparent)]
-    ModelFile(#[from] crate::model_io::ModelIoError),
+    ModelFile(#[from] crate::gp::model_io::ModelIoError),
     /// The fit.
     #[error(transparent)]
     Fit(#[from] FitRunError),
@@ -681,7 +684,7 @@ pub fn load_photo(
     one_based: bool,
     size: u32,
 ) -> Result<Prepared, FitRunError> {
-    let pts = crate::pts::read_pts(landmarks, one_based)?;
+    let pts = crate::photo::pts::read_pts(landmarks, one_based)?;
     let photo = crate::photo::load_rgb(image)?;
     pts.check(landmarks, model.landmarks.len(), &model.metadata.landmark_scheme, photo.width(), photo.height(), one_based)?;
     prepare(&photo, &pts.points, size)
@@ -690,7 +693,7 @@ pub fn load_photo(
 /// `gpmm fit`: loads everything, fits and writes `fit.json`, `overlay.png` and `fit.ply` into the output directory.
 pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Result<FitReport, FitFilesError> {
     job.settings.validate()?;
-    let model = crate::model_io::load(&job.model)?;
+    let model = crate::gp::model_io::load(&job.model)?;
     let t0 = Instant::now();
     let prepared = load_photo(&model, &job.image, &job.landmarks, job.pts_one_based, job.settings.size)?;
     let outcome = fit_prepared(&model, &prepared, &job.settings, progress)?;
@@ -711,14 +714,14 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     std::fs::write(&json_path, text + "\n").map_err(|e| werr(&json_path, &e))?;
     let ov_path = dir.join("overlay.png");
     let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
-    crate::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
+    crate::render::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
     let ply_path = dir.join("fit.ply");
     let mesh = model
         .instance(outcome.params.shape_coeffs(), outcome.params.color_coeffs())
         .map_err(|e| FitRunError::Model(format!("instance: {e:?}")))?;
     let attribution = model.metadata.template.attribution.clone().unwrap_or_default();
     let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
-    crate::mesh_io::write_ply_with(&ply_path, &mesh, crate::mesh_io::PlyEncoding::BinaryLittleEndian, &comments)
+    crate::mesh::io::write_ply_with(&ply_path, &mesh, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)
         .map_err(|e| werr(&ply_path, &e))?;
     Ok(rep)
 }

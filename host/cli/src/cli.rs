@@ -1,15 +1,16 @@
 //! The `gpmm` command line.
 
-use crate::figure::{self, KernelFigureOptions};
-use crate::kernel::{Hyperparameters, ModelKernel};
-use crate::lowrank::{NystromOptions, RankSpec};
-use crate::model::{build_model, BuildOptions, BuildStage, GpModel};
-use crate::render::{check_size, render_model, Background, RenderSettings, View};
-use crate::template::{load_template, TemplateOptions};
-use crate::{mesh_io, model_io};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use gpmm_core::ShLight;
+use gpmm_host::gp::kernel::{Hyperparameters, ModelKernel};
+use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::gp::model::{build_model, BuildOptions, BuildStage, GpModel};
+use gpmm_host::gp::model_io;
+use gpmm_host::mesh::io as mesh_io;
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::render::figure::{self, KernelFigureOptions};
+use gpmm_host::render::{check_size, render_model, Background, RenderSettings, View};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -99,7 +100,7 @@ pub enum Command {
     /// profile's budget, instructions per stage and per image step, the fitted pose,
     /// log-likelihood and 68 landmarks. --compare-host runs the same fit on the host core too.
     /// Needs a gpmm source checkout (firmware-sim/) and installs QEMU and the toolchain if missing.
-    DeviceFit(crate::device_fit::DeviceFitArgs),
+    DeviceFit(gpmm_host::device::fit::DeviceFitArgs),
 }
 
 /// Arguments of `gpmm quantize`.
@@ -109,7 +110,7 @@ pub struct QuantizeArgs {
     pub model: PathBuf,
     /// Device profile: m4f (1000 vertices, ranks 50/50, 16 bits, blob <= 400 KiB) or m7 (2000 vertices, ranks 80/80, 16 bits, blob <= 800 KiB).
     #[arg(long, value_name = "m4f|m7")]
-    pub profile: crate::quantize::Profile,
+    pub profile: gpmm_host::device::quantize::Profile,
     /// Vertex budget instead of the profile's (at most 65535).
     #[arg(long, value_name = "N")]
     pub vertices: Option<usize>,
@@ -120,8 +121,8 @@ pub struct QuantizeArgs {
     #[arg(long, value_name = "K")]
     pub rank_color: Option<usize>,
     /// Bits per basis value: 8 or 16 (default: the profile's, 16).
-    #[arg(long, value_name = "8|16", value_parser = crate::quantize::parse_bits)]
-    pub bits: Option<crate::quantize::Bits>,
+    #[arg(long, value_name = "8|16", value_parser = gpmm_host::device::quantize::parse_bits)]
+    pub bits: Option<gpmm_host::device::quantize::Bits>,
     /// Random coefficient draws for the quantization error.
     #[arg(long, default_value_t = 100, value_name = "N")]
     pub draws: usize,
@@ -168,37 +169,37 @@ pub struct FitArgs {
 #[derive(Debug, Args)]
 pub struct FitSettingsArgs {
     /// Working image side (pixels): the crop is resampled to SIZE x SIZE.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
     pub size: u32,
     /// Landmark-chain steps: 40 % on the pose, then the shape (no rendering; about 20 us each).
-    #[arg(long, default_value_t = crate::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
     pub landmark_steps: u32,
     /// Image-chain steps (one render each).
-    #[arg(long, default_value_t = crate::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
     pub image_steps: u32,
     /// Seed of the chains.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SEED)]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
     pub seed: u64,
     /// Shape components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SHAPE_RANK, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SHAPE_RANK, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = crate::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_COLOR_RANK, value_name = "K")]
     pub color_rank: usize,
     /// Landmark standard deviation as a fraction of the working image side.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_LANDMARK_SIGMA, value_name = "FRACTION")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_SIGMA, value_name = "FRACTION")]
     pub landmark_sigma: f32,
     /// Factor on the landmark σ of the 17 jaw-contour points (iBUG-68) while the landmark chain
     /// fits the pose: where a detector puts them depends on the view, so they say less about the
     /// pose than the inner points (1 treats them like the others).
-    #[arg(long, default_value_t = crate::fit::DEFAULT_CONTOUR_SIGMA, value_name = "FACTOR")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_CONTOUR_SIGMA, value_name = "FACTOR")]
     pub contour_sigma: f32,
 }
 
 impl FitSettingsArgs {
     /// The settings.
-    pub fn settings(&self) -> crate::fit::FitSettings {
-        crate::fit::FitSettings {
+    pub fn settings(&self) -> gpmm_host::fit::FitSettings {
+        gpmm_host::fit::FitSettings {
             size: self.size,
             landmark_steps: self.landmark_steps,
             image_steps: self.image_steps,
@@ -547,7 +548,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Register(a) => register_mesh(a),
         Command::Quantize(a) => quantize(a),
         Command::Inspect(a) => inspect(a),
-        Command::DeviceFit(a) => crate::device_fit::device_fit(a),
+        Command::DeviceFit(a) => gpmm_host::device::fit::device_fit(a),
         Command::Render(a) => render(a),
         Command::Figure(a) => match a.figure {
             FigureCommand::Kernels(k) => figure_kernels(k),
@@ -570,14 +571,6 @@ fn rank_spec(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<
         (None, Some(f)) => bail!("--captured-{what} {f} must be in (0, 1]"),
         (None, None) => Ok(RankSpec::Count(200)),
     }
-}
-
-/// Peak resident memory of this process in bytes (Linux), if known.
-pub fn peak_memory_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
 }
 
 fn build(a: BuildArgs) -> Result<()> {
@@ -642,7 +635,8 @@ fn build(a: BuildArgs) -> Result<()> {
         eprintln!("attribution (must accompany anything built from this model): {attr}");
     }
     if a.timings {
-        let peak = peak_memory_bytes().map(|b| format!("{:.1} MiB", b as f64 / 1048576.0)).unwrap_or_else(|| "unknown".into());
+        let peak =
+            gpmm_host::process::peak_memory_bytes().map(|b| format!("{:.1} MiB", b as f64 / 1048576.0)).unwrap_or_else(|| "unknown".into());
         eprintln!(
             "timings: template {:.2} s, kernels + low rank {:.2} s, total {:.2} s; peak memory {peak}",
             t_template.as_secs_f64(),
@@ -665,9 +659,9 @@ pub fn info_json(path: &Path) -> Result<serde_json::Value> {
 
 fn model_summary(model: &GpModel, bytes: u64) -> serde_json::Value {
     let head = |v: &[f64]| v.iter().take(10).copied().collect::<Vec<_>>();
-    let layout = |b: &crate::model::PartBasis| match b {
-        crate::model::PartBasis::Factored { .. } => "factored",
-        crate::model::PartBasis::Dense { .. } => "dense",
+    let layout = |b: &gpmm_host::gp::model::PartBasis| match b {
+        gpmm_host::gp::model::PartBasis::Factored { .. } => "factored",
+        gpmm_host::gp::model::PartBasis::Dense { .. } => "dense",
     };
     serde_json::json!({
         "vertices": model.vertices(),
@@ -827,7 +821,7 @@ fn figure_kernels(a: KernelFigureArgs) -> Result<()> {
 }
 
 fn fit(a: FitArgs) -> Result<()> {
-    let job = crate::fit::FitJob {
+    let job = gpmm_host::fit::FitJob {
         model: a.model,
         image: a.image,
         landmarks: a.landmarks,
@@ -842,7 +836,7 @@ fn fit(a: FitArgs) -> Result<()> {
     );
     let lm_total = u64::from(job.settings.landmark_steps);
     let t0 = Instant::now();
-    let rep = crate::fit::fit_files(&job, &mut |phase, done, _| {
+    let rep = gpmm_host::fit::fit_files(&job, &mut |phase, done, _| {
         bar.set_message(phase.to_string());
         bar.set_position(if phase == "image chain" { lm_total + done } else { done });
     });
@@ -875,7 +869,7 @@ fn bench_fit(a: BenchFitArgs) -> Result<()> {
         bar.set_length(t as u64);
         bar.set_position(d as u64);
     };
-    let (summary, images, errors) = crate::fit_bench::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
+    let (summary, images, errors) = gpmm_host::fit::bench::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
     bar.finish_and_clear();
     for e in &errors {
         eprintln!("fit failed: {e}");
@@ -891,7 +885,7 @@ fn bench_fit(a: BenchFitArgs) -> Result<()> {
 }
 
 fn quantize(a: QuantizeArgs) -> Result<()> {
-    use crate::quantize::{self as q, QuantizeOptions};
+    use gpmm_host::device::quantize::{self as q, QuantizeOptions};
     let model = model_io::load(&a.model)?;
     let mut opts = QuantizeOptions::for_profile(a.profile);
     opts.vertices = a.vertices.unwrap_or(opts.vertices);
@@ -948,8 +942,8 @@ fn quantize(a: QuantizeArgs) -> Result<()> {
 }
 
 fn inspect(a: InspectArgs) -> Result<()> {
-    let blob = crate::quantize::BlobBuf::read(&a.blob)?;
-    let (json, result) = crate::quantize::inspect(&blob);
+    let blob = gpmm_host::device::quantize::BlobBuf::read(&a.blob)?;
+    let (json, result) = gpmm_host::device::quantize::inspect(&blob);
     println!("{}", serde_json::to_string_pretty(&json)?);
     result.with_context(|| format!("{} is not a valid model blob", a.blob.display()))
 }
@@ -1048,7 +1042,7 @@ pub struct RecognitionArgs {
     #[arg(long, value_name = "N")]
     pub identities: Option<usize>,
     /// Working image side of the fits (pixels).
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
     pub size: u32,
     /// Landmark-chain steps per fit (default 5000; 1500 with --quick).
     #[arg(long, value_name = "N")]
@@ -1065,10 +1059,10 @@ pub struct RecognitionArgs {
     #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_COLOR_RANK, value_name = "K")]
     pub color_rank: usize,
     /// Seed of the fitting chains.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SEED)]
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
     pub fit_seed: u64,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
@@ -1122,7 +1116,7 @@ pub struct RegisterArgs {
     #[arg(long, value_name = "K")]
     pub color_rank: Option<usize>,
     /// Closest-point iterations.
-    #[arg(long, default_value_t = crate::register::RegisterOptions::default().iterations, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::register::RegisterOptions::default().iterations, value_name = "N")]
     pub iterations: usize,
     /// Output directory: registered.ply (model topology, in the target's frame) and register.json.
     #[arg(short, long, value_name = "OUTDIR")]
@@ -1133,8 +1127,8 @@ fn command_line() -> String {
     std::env::args().map(|a| if a.contains(' ') { format!("'{a}'") } else { a }).collect::<Vec<_>>().join(" ")
 }
 
-fn eval_factory(m: &EvalModelArgs, out: &Path, world: crate::synth::SynthOptions) -> crate::eval::models::ModelFactory {
-    use crate::eval::models::{GpBuild, ModelFactory};
+fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::eval::synth::SynthOptions) -> gpmm_host::eval::models::ModelFactory {
+    use gpmm_host::eval::models::{GpBuild, ModelFactory};
     let q = m.quick;
     let build = GpBuild {
         vertices: m.vertices.or(q.then_some(600)),
@@ -1142,7 +1136,7 @@ fn eval_factory(m: &EvalModelArgs, out: &Path, world: crate::synth::SynthOptions
         nystrom_points: m.nystrom_points.unwrap_or(if q { 300 } else { 2000 }).max(1),
         ..GpBuild::default()
     };
-    let data = m.data.clone().unwrap_or_else(crate::data::default_data_dir);
+    let data = m.data.clone().unwrap_or_else(gpmm_host::data::default_data_dir);
     let dir = m.model_dir.clone().unwrap_or_else(|| out.join("models"));
     let mut f = ModelFactory::new(&dir, &data, build, world);
     if q {
@@ -1151,13 +1145,13 @@ fn eval_factory(m: &EvalModelArgs, out: &Path, world: crate::synth::SynthOptions
     f
 }
 
-fn eval_selection(m: &EvalModelArgs) -> Result<crate::eval::models::ModelSelection> {
+fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSelection> {
     let kernels = match m.kernels.as_deref().map(str::trim) {
         None => Vec::new(),
         Some(s) if s.eq_ignore_ascii_case("all") => ModelKernel::ALL.to_vec(),
         Some(s) => s.split(',').map(|k| k.trim().parse::<ModelKernel>()).collect::<Result<Vec<_>, _>>()?,
     };
-    Ok(crate::eval::models::ModelSelection {
+    Ok(gpmm_host::eval::models::ModelSelection {
         files: m.models.clone(),
         kernels,
         upper_bound: m.upper_bound,
@@ -1166,9 +1160,14 @@ fn eval_selection(m: &EvalModelArgs) -> Result<crate::eval::models::ModelSelecti
     })
 }
 
-fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> crate::synth::SynthOptions {
-    let data = data.map(Path::to_path_buf).unwrap_or_else(crate::data::default_data_dir);
-    crate::synth::SynthOptions { seed, identity_scale: scale, modes, ..crate::synth::SynthOptions::with_data_dir(&data) }
+fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> gpmm_host::eval::synth::SynthOptions {
+    let data = data.map(Path::to_path_buf).unwrap_or_else(gpmm_host::data::default_data_dir);
+    gpmm_host::eval::synth::SynthOptions {
+        seed,
+        identity_scale: scale,
+        modes,
+        ..gpmm_host::eval::synth::SynthOptions::with_data_dir(&data)
+    }
 }
 
 /// Prints a line above a progress bar, or plainly when the bar is hidden (output not a terminal).
@@ -1185,7 +1184,7 @@ fn bar_style(template: &str) -> ProgressStyle {
 }
 
 fn eval_recognition(a: RecognitionArgs) -> Result<()> {
-    use crate::eval::recognition::{evaluate, write_report, Progress, RecognitionReport, SynthSet};
+    use gpmm_host::eval::recognition::{evaluate, write_report, Progress, RecognitionReport, SynthSet};
     let t0 = Instant::now();
     let q = a.models.quick;
     if !a.synth.is_dir() {
@@ -1208,18 +1207,18 @@ fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         note(&pb, format!("model {label}: {}", if built { "built" } else { "reused" }));
     })?;
     pb.finish_and_clear();
-    let settings = crate::fit::FitSettings {
+    let settings = gpmm_host::fit::FitSettings {
         size: a.size,
-        landmark_steps: a.landmark_steps.unwrap_or(if q { 1500 } else { crate::fit::DEFAULT_LANDMARK_STEPS }),
-        image_steps: a.image_steps.unwrap_or(if q { 40 } else { crate::fit::DEFAULT_IMAGE_STEPS }),
+        landmark_steps: a.landmark_steps.unwrap_or(if q { 1500 } else { gpmm_host::fit::DEFAULT_LANDMARK_STEPS }),
+        image_steps: a.image_steps.unwrap_or(if q { 40 } else { gpmm_host::fit::DEFAULT_IMAGE_STEPS }),
         seed: a.fit_seed,
         shape_rank: a.shape_rank,
         color_rank: a.color_rank,
-        landmark_sigma: crate::fit::DEFAULT_LANDMARK_SIGMA,
-        contour_sigma: crate::fit::DEFAULT_CONTOUR_SIGMA,
+        landmark_sigma: gpmm_host::fit::DEFAULT_LANDMARK_SIGMA,
+        contour_sigma: gpmm_host::fit::DEFAULT_CONTOUR_SIGMA,
     };
     settings.validate()?;
-    let kde_settings = crate::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.image_steps), ..settings };
+    let kde_settings = gpmm_host::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.image_steps), ..settings };
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let bar = ProgressBar::new(0);
     bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
@@ -1250,13 +1249,13 @@ fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         total_seconds: t0.elapsed().as_secs_f64(),
     };
     write_report(&report, &a.output)?;
-    println!("{}", crate::eval::recognition::markdown(&report));
+    println!("{}", gpmm_host::eval::recognition::markdown(&report));
     eprintln!("wrote recognition.md, .csv, .json and .png to {}", a.output.display());
     Ok(())
 }
 
 fn eval_specgen(a: SpecgenArgs) -> Result<()> {
-    use crate::eval::specgen::{evaluate_model, prepare_targets, write_report, SpecGenReport, SpecGenSettings};
+    use gpmm_host::eval::specgen::{evaluate_model, prepare_targets, write_report, SpecGenReport, SpecGenSettings};
     let t0 = Instant::now();
     let q = a.models.quick;
     let mut components = Vec::new();
@@ -1290,7 +1289,10 @@ fn eval_specgen(a: SpecgenArgs) -> Result<()> {
     let settings = SpecGenSettings {
         components,
         samples: a.samples.unwrap_or(if q { 5 } else { 100 }).max(1),
-        register: crate::register::RegisterOptions { iterations: a.iterations.unwrap_or(if q { 6 } else { 20 }), ..Default::default() },
+        register: gpmm_host::fit::register::RegisterOptions {
+            iterations: a.iterations.unwrap_or(if q { 6 } else { 20 }),
+            ..Default::default()
+        },
         seed: 0,
     };
     settings.register.validate()?;
@@ -1327,13 +1329,13 @@ fn eval_specgen(a: SpecgenArgs) -> Result<()> {
         total_seconds: t0.elapsed().as_secs_f64(),
     };
     write_report(&report, &a.output)?;
-    println!("{}", crate::eval::specgen::markdown(&report));
+    println!("{}", gpmm_host::eval::specgen::markdown(&report));
     eprintln!("wrote specgen.md, .csv, .json, specgen-shape.png and specgen-color.png to {}", a.output.display());
     Ok(())
 }
 
 fn register_mesh(a: RegisterArgs) -> Result<()> {
-    use crate::register::{register, PreparedTarget, RegisterOptions, RegisterReport};
+    use gpmm_host::fit::register::{register, PreparedTarget, RegisterOptions, RegisterReport};
     let t0 = Instant::now();
     let model = model_io::load(&a.model)?;
     let mesh = mesh_io::read_mesh(&a.mesh, None, Some([0.5; 3]))?;
@@ -1365,7 +1367,7 @@ fn register_mesh(a: RegisterArgs) -> Result<()> {
     let reg = register(&model, &target, &opts)?;
     pb.finish_and_clear();
     std::fs::create_dir_all(&a.output).with_context(|| format!("cannot create {}", a.output.display()))?;
-    let out_mesh = crate::template::Mesh {
+    let out_mesh = gpmm_host::mesh::template::Mesh {
         positions: reg.positions.iter().map(|p| reg.pose.apply_inverse(*p)).collect(),
         colors: reg.colors.clone(),
         triangles: model.triangles.clone(),

@@ -15,7 +15,7 @@
 //! over random coefficient draws); [`simplification_error`] what step 1 costs (distance of the
 //! original mean surface's vertices to the simplified mean surface).
 
-use crate::model::{GpModel, ModelPart, PartBasis};
+use crate::gp::model::{GpModel, ModelPart, PartBasis};
 use gpmm_core::blob::{
     blob_crc, parse_header, BlobDims, Layout, Section, CRC_OFFSET, HEADER_BYTES, MAGIC, MAX_METADATA_BYTES, MAX_VERTICES, VERSION,
 };

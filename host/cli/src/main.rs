@@ -1,4 +1,8 @@
 //! The `gpmm` command-line program.
+
+mod cli;
+mod demo;
+
 fn main() -> std::process::ExitCode {
-    gpmm_host::cli::main()
+    cli::main()
 }

@@ -38,8 +38,8 @@ use gpmm_core::checksum::{crc32, FrameChecksum};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::{vertex_stage, Camera, Cull, FrameStats, Pose, ProjectedVertex, ShLight, TileRasterizer, Vec3};
 
-use crate::model::GpModel;
-use crate::template::Mesh;
+use crate::gp::model::GpModel;
+use crate::mesh::template::Mesh;
 
 /// File magic: the first 4 bytes.
 pub const MAGIC: [u8; 4] = *b"GPDM";

@@ -7,8 +7,10 @@
 //! written as-is (no gamma, DESIGN.md), rounded to 8 bits. Back faces are culled: the model's
 //! triangles are counter-clockwise seen from outside, so [`Cull::Clockwise`] keeps the front faces.
 
-use crate::model::GpModel;
-use crate::template::Mesh;
+pub mod figure;
+
+use crate::gp::model::GpModel;
+use crate::mesh::template::Mesh;
 use gpmm_core::{
     vertex_stage, Camera, Cull, FrameStats, ModelError, Pose, ProjectedVertex, RasterError, ShLight, Tile, TileRasterizer, TileSink, Vec3,
     VertexError,

@@ -7,7 +7,7 @@
 //! `[T,3]`; `landmarks` U32 `[L]`. The `__metadata__` entry `gpmm` holds [`ModelMetadata`]
 //! as JSON. Readable from Python with `safetensors.numpy.load_file`.
 
-use crate::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
+use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
 use safetensors::tensor::{Dtype, SafeTensors, TensorView};
 use std::collections::HashMap;
 use std::path::Path;

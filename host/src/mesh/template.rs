@@ -4,10 +4,10 @@
 //!
 //! Steps:
 //!
-//! 1. **Read** the mesh ([`crate::mesh_io::read_mesh`]: PLY, or glTF +
+//! 1. **Read** the mesh ([`crate::mesh::io::read_mesh`]: PLY, or glTF +
 //!    texture with seams welded; landmark ids of a glTF refer to the welded
 //!    mesh ordered by position) and the landmarks
-//!    ([`crate::mesh_io::read_landmarks_json`]); every landmark id must be a
+//!    ([`crate::mesh::io::read_landmarks_json`]); every landmark id must be a
 //!    vertex of the mesh; the `ibug68` scheme needs exactly 68 ids.
 //! 2. **Normalize**. For `ibug68`: the scale makes the outer eye corners
 //!    (36, 45) [`OUTER_CANTHAL_MM`] = 90 mm apart, unless `scale` is given
@@ -53,12 +53,12 @@
 //!    attribution (from a `LICENSE.txt` next to the mesh, see
 //!    [`attribution_from_license`]), scale, whether cropped, source vertex count.
 
-use crate::geom::{add, centroid, cross, dot, mul, norm, sub};
+use crate::mesh::geometry::{add, centroid, cross, dot, mul, norm, sub};
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use crate::mesh_io::{read_landmarks_json, read_mesh_with_info, ColorSource, MeshIoError};
+use crate::mesh::io::{read_landmarks_json, read_mesh_with_info, ColorSource, MeshIoError};
 
 /// A coloured triangle mesh in f64 (positions in the mesh's units, colours linear RGB in [0,1]).
 #[derive(Debug, Clone, Default, PartialEq)]

@@ -4,7 +4,7 @@
 mod common;
 use common::{fails, gpmm, ok};
 
-use gpmm_host::quantize::{quantization_error, quantize, Bits, BlobBuf, Profile, QuantizeError, QuantizeOptions};
+use gpmm_host::device::quantize::{quantization_error, quantize, Bits, BlobBuf, Profile, QuantizeError, QuantizeOptions};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -102,7 +102,7 @@ fn quantize_then_inspect() {
     assert!(i["metadata"]["attribution"].as_str().unwrap().contains("Lee Perry-Smith"));
 
     // The landmarks are the model's landmark vertices, in the same order, not moved.
-    let model = gpmm_host::model_io::load(model_path).unwrap();
+    let model = gpmm_host::gp::model_io::load(model_path).unwrap();
     let buf = BlobBuf::read(&blob_path).unwrap();
     let blob = buf.view().unwrap();
     for (k, (&b, &m)) in blob.landmarks().iter().zip(&model.landmarks).enumerate() {
@@ -268,7 +268,7 @@ fn profile_budget_and_bad_arguments() {
 #[test]
 fn library_quantize_matches_profile_defaults() {
     let Some((_dir, model_path)) = model() else { return };
-    let model = gpmm_host::model_io::load(model_path).unwrap();
+    let model = gpmm_host::gp::model_io::load(model_path).unwrap();
     let mut opts = QuantizeOptions::for_profile(Profile::M4f);
     opts.vertices = 400;
     opts.rank_shape = 12;

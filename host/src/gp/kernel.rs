@@ -12,7 +12,7 @@
 //! Nothing here is face-specific: the kernels see only vertex positions (mm)
 //! and template colours (linear RGB in [0,1]).
 
-use crate::geom::dist2;
+use crate::mesh::geometry::dist2;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;

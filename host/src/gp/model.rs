@@ -1,9 +1,9 @@
 //! A Gaussian-process morphable model: mean shape and albedo, low-rank bases,
 //! topology, landmarks and metadata; and how to build one from a template.
 
-use crate::kernel::{Hyperparameters, KernelPoint, ModelKernel};
-use crate::lowrank::{low_rank, LowRank, NystromOptions, RankSpec};
-use crate::template::{Mesh, Provenance, Template};
+use crate::gp::kernel::{Hyperparameters, KernelPoint, ModelKernel};
+use crate::gp::lowrank::{low_rank, LowRank, NystromOptions, RankSpec};
+use crate::mesh::template::{Mesh, Provenance, Template};
 use gpmm_core::{Basis, DenseBasis, FactoredBasis, ModelError};
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;

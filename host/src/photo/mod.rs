@@ -10,6 +10,8 @@
 //! when shrinking, so it does not alias). Coordinates map exactly: working = (original − corner) ·
 //! size / S in continuous pixel coordinates (centres at +0.5 in both images).
 
+pub mod pts;
+
 use image::{imageops::FilterType, RgbImage};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};

@@ -64,7 +64,7 @@ fn build_info_for_all_nine_kernels() {
             let f = info[key].as_f64().unwrap();
             assert!(f > 0.0 && f <= 1.0, "{key} = {f}");
         }
-        let model = gpmm_host::model_io::load(&out).unwrap();
+        let model = gpmm_host::gp::model_io::load(&out).unwrap();
         for ev in [&model.shape.eigenvalues, &model.color.eigenvalues] {
             assert!(ev.iter().all(|v| *v > 0.0), "{name}: eigenvalues positive");
             assert!(ev.windows(2).all(|w| w[0] >= w[1]), "{name}: eigenvalues sorted");
@@ -104,8 +104,8 @@ fn captured_fraction_selects_rank_and_sample_writes_meshes() {
 
     let out = dir.path().join("samples");
     ok(&gpmm(&["sample", m, "-n", "3", "--seed", "7", "--out-dir", out.to_str().unwrap()]));
-    let mean = gpmm_host::mesh_io::read_mesh(&out.join("mean.ply"), None, None).unwrap();
-    let s0 = gpmm_host::mesh_io::read_mesh(&out.join("sample_000.ply"), None, None).unwrap();
+    let mean = gpmm_host::mesh::io::read_mesh(&out.join("mean.ply"), None, None).unwrap();
+    let s0 = gpmm_host::mesh::io::read_mesh(&out.join("sample_000.ply"), None, None).unwrap();
     assert!(out.join("sample_002.ply").is_file());
     assert_eq!(mean.positions.len(), info["vertices"].as_u64().unwrap() as usize);
     assert_eq!(s0.triangles, mean.triangles);

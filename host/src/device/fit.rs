@@ -8,8 +8,8 @@
 //!
 //! The fit-input layout is documented in `firmware-sim/src/fit_input.rs` and its README.
 
+use crate::device::quantize::BlobBuf;
 use crate::fit::{FitSettings, Prepared};
-use crate::quantize::BlobBuf;
 use gpmm_core::checksum::crc32;
 use gpmm_core::fit::{project_landmarks, standard_fit, FitError, Instance, InstanceBuffers, StandardFit, TargetImage};
 use gpmm_core::ProjectedVertex;
@@ -411,7 +411,7 @@ pub fn device_fit(a: DeviceFitArgs) -> anyhow::Result<()> {
     let blob = BlobBuf::read(&a.blob).with_context(|| format!("reading the model blob {}", a.blob.display()))?;
     let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", a.blob.display()))?;
     let size = profile_image_size(&a.profile);
-    let pts = crate::pts::read_pts(&a.landmarks, a.pts_one_based)?;
+    let pts = crate::photo::pts::read_pts(&a.landmarks, a.pts_one_based)?;
     let photo = crate::photo::load_rgb(&a.image)?;
     pts.check(&a.landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
     let prepared = crate::fit::prepare(&photo, &pts.points, size)?;

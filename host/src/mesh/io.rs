@@ -41,7 +41,7 @@ use std::path::{Path, PathBuf};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType};
 
-use crate::template::Mesh;
+use crate::mesh::template::Mesh;
 
 /// Errors from reading or writing mesh, texture and landmark files; each names the file.
 #[derive(Debug, thiserror::Error)]

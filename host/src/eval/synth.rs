@@ -10,7 +10,7 @@
 //! `neutral.npy` (N×3, cm) + Σ_k w_k · `identity_modes.npy`\[k\] (K×N×3), w_k = s · z_k with
 //! z_k ~ N(0, 1) and s = [`SynthOptions::identity_scale`] (the modes carry their own scale),
 //! converted to millimetres (×10). Each identity is then put into the same frame as the template
-//! (see [`crate::template`]): x is the sum of the (image-right − image-left) vectors of the
+//! (see [`crate::mesh::template`]): x is the sum of the (image-right − image-left) vectors of the
 //! iBUG mirror pairs, y the chin (8) → nose bridge (27) direction orthogonalized against x,
 //! z = x × y toward the camera, origin the landmark centroid projected onto the mirror plane;
 //! no rescaling (identities keep their real size). A pose of yaw = pitch = roll = 0 is frontal.
@@ -26,7 +26,7 @@
 //! # Albedo
 //! 1. **Transfer** (once, on the ICT neutral in the face frame): the template
 //!    (`lee-perry-smith.ply` + `landmarks_ibug68.json`, imported by
-//!    [`crate::template::load_template`] without cropping, in mm) is aligned to the ICT neutral
+//!    [`crate::mesh::template::load_template`] without cropping, in mm) is aligned to the ICT neutral
 //!    by the least-squares similarity transform (Horn's quaternion method, with scale) from the
 //!    51 non-jaw landmark pairs (iBUG 17-67; the jaw points are silhouette-dependent). Each ICT
 //!    vertex takes the colour of its closest point on the aligned template surface: the closest
@@ -77,10 +77,10 @@ use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
-use crate::geom::{add, centroid, cross, dot, mul, norm, sub};
-use crate::mesh_io::read_landmarks_json;
-use crate::npy::{self, NpyError};
-use crate::template::{load_template, TemplateError, TemplateOptions, IBUG68_COUNT};
+use crate::eval::npy::{self, NpyError};
+use crate::mesh::geometry::{add, centroid, cross, dot, mul, norm, sub};
+use crate::mesh::io::read_landmarks_json;
+use crate::mesh::template::{load_template, TemplateError, TemplateOptions, IBUG68_COUNT};
 
 /// Number of random Gaussian bumps of the per-identity albedo variation.
 pub const ALBEDO_BUMPS: usize = 5;
@@ -982,7 +982,7 @@ fn face_frame(lm: &[[f64; 3]]) -> Result<([[f64; 3]; 3], [f64; 3]), String> {
     if lm.len() != IBUG68_COUNT {
         return Err(format!("need {IBUG68_COUNT} landmarks, got {}", lm.len()));
     }
-    let frame = crate::template::ibug_frame(lm)?;
+    let frame = crate::mesh::template::ibug_frame(lm)?;
     Ok((frame.axes, frame.center))
 }
 

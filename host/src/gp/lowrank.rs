@@ -1,6 +1,6 @@
 //! Low-rank (Mercer) approximation of a factored kernel by the Nyström method.
 //!
-//! For each [`DirectionClass`](crate::kernel::DirectionClass) of a [`DiagonalKernel`], the
+//! For each [`DirectionClass`](crate::gp::kernel::DirectionClass) of a [`DiagonalKernel`], the
 //! scalar kernel matrix `K` over the `N` mesh vertices is approximated from `m` sampled
 //! vertices `Z` (farthest-point sampling): `K_ZZ = U Λ Uᵀ` and the Nyström extensions
 //! `K_NZ u_i` of its leading eigenvectors span a subspace that holds `K`'s leading
@@ -15,8 +15,8 @@
 //! merged and sorted by eigenvalue. The captured fraction is `Σ kept eigenvalues / trace(K)`
 //! with the exact trace of the full `3N x 3N` kernel matrix.
 
-use crate::geom::dist2;
-use crate::kernel::{DiagonalKernel, KernelBank, KernelPoint, ScalarKernel};
+use crate::gp::kernel::{DiagonalKernel, KernelBank, KernelPoint, ScalarKernel};
+use crate::mesh::geometry::dist2;
 use faer::{Mat, MatRef, Side};
 use rand::seq::index::sample;
 use rand::SeedableRng;
@@ -391,7 +391,7 @@ pub fn exact_scalar_eigenvalues(kernel: &ScalarKernel, points: &[KernelPoint]) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kernel::{Hyperparameters, ModelKernel};
+    use crate::gp::kernel::{Hyperparameters, ModelKernel};
 
     fn grid(n: usize) -> Vec<KernelPoint> {
         (0..n)

@@ -1,9 +1,9 @@
 //! `gpmm demo` (the main job end to end) and `gpmm synth` (synthetic faces with known truth).
 
 use crate::cli::{run, Cli};
-use crate::synth::{contact_sheet, synthesize, write_synth_dir, SynthOptions};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser};
+use gpmm_host::eval::synth::{contact_sheet, synthesize, write_synth_dir, SynthOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -104,8 +104,8 @@ fn p(path: &Path) -> String {
 /// kernel figure and synthetic test faces, and fits a photo.
 pub fn demo(a: DemoArgs) -> Result<()> {
     let t0 = Instant::now();
-    let data = a.data.unwrap_or_else(crate::data::default_data_dir);
-    let tdir = crate::data::template_dir(&data);
+    let data = a.data.unwrap_or_else(gpmm_host::data::default_data_dir);
+    let tdir = gpmm_host::data::template_dir(&data);
     let (ply, lm) = (tdir.join("lee-perry-smith.ply"), tdir.join("landmarks_ibug68.json"));
     if !ply.is_file() {
         bail!("template {} not found: pass --data DIR or set GPMM_DATA to the shared data directory", ply.display());

@@ -1,0 +1,6 @@
+//! The device side: quantizing a model into its flash image ([`quantize`]), the interim device
+//! mesh ([`mesh`]) and the fit on the simulated device ([`fit`]).
+
+pub mod fit;
+pub mod mesh;
+pub mod quantize;
