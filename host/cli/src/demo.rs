@@ -1,11 +1,16 @@
-//! `gpmm demo` (the main job end to end) and `gpmm synth` (synthetic faces with known truth).
+//! `gpmm demo`: the main job end to end, through the same functions as the single commands.
 
-use crate::cli::{run, Cli};
+use crate::build::{build, info_json, BuildArgs};
+use crate::fit::run_fit;
+use crate::render::{figure_kernels, render, sample, KernelFigureArgs, RenderArgs, SampleArgs};
+use crate::synth::{synth, SynthArgs};
 use anyhow::{bail, Context, Result};
-use clap::{Args, Parser};
-use gpmm_host::eval::synth::{contact_sheet, synthesize, write_synth_dir, SynthOptions};
-use indicatif::{ProgressBar, ProgressStyle};
-use std::path::{Path, PathBuf};
+use clap::Args;
+use gpmm_host::fit::{FitJob, FitSettings};
+use gpmm_host::gp::kernel::ModelKernel;
+use gpmm_host::gp::lowrank::NystromOptions;
+use gpmm_host::render::Background;
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `gpmm demo`.
@@ -22,84 +27,6 @@ pub struct DemoArgs {
     pub quick: bool,
 }
 
-/// Arguments of `gpmm synth`.
-#[derive(Debug, Args)]
-pub struct SynthArgs {
-    /// ICT-FaceKit directory (neutral.npy, identity_modes.npy, triangles.npy, landmarks_ibug68.json).
-    #[arg(long, value_name = "DIR")]
-    pub ict: Option<PathBuf>,
-    /// Template directory whose albedo is transferred to the ICT faces.
-    #[arg(long, value_name = "DIR")]
-    pub template_dir: Option<PathBuf>,
-    /// Number of identities (each is rendered at every yaw).
-    #[arg(long, default_value_t = 10)]
-    pub count: usize,
-    /// Seed of everything random.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Yaw angles in degrees (positive turns the face toward the image right).
-    #[arg(long, value_delimiter = ',', default_value = "0,15,30,45", allow_hyphen_values = true)]
-    pub yaws: Vec<f32>,
-    /// Image width and height in pixels.
-    #[arg(long, default_value_t = 128)]
-    pub size: u32,
-    /// Also write a contact sheet of the images to this PNG.
-    #[arg(long, value_name = "PNG")]
-    pub sheet: Option<PathBuf>,
-    /// Output directory: NNNN_yawYY.png, NNNN_yawYY.pts, truth.json.
-    #[arg(short, long, value_name = "DIR")]
-    pub output: PathBuf,
-}
-
-fn bar(len: usize, what: &str) -> ProgressBar {
-    let pb = ProgressBar::new(len as u64);
-    let template = format!("{{bar:30}} {{pos}}/{{len}} {what} [{{elapsed}}]");
-    pb.set_style(ProgressStyle::with_template(&template).unwrap_or_else(|_| ProgressStyle::default_bar()));
-    pb
-}
-
-/// Runs `gpmm synth`.
-pub fn synth(a: SynthArgs) -> Result<()> {
-    let mut opts = SynthOptions::default();
-    if let Some(d) = a.ict {
-        opts.ict_dir = d;
-    }
-    if let Some(d) = a.template_dir {
-        opts.template_dir = d;
-    }
-    opts.count = a.count;
-    opts.seed = a.seed;
-    opts.yaws_deg = a.yaws;
-    opts.size = a.size;
-    opts.validate()?;
-    let t0 = Instant::now();
-    let pb = bar(opts.count * opts.yaws_deg.len(), "images");
-    let summary = write_synth_dir(&opts, &a.output, |done, _| pb.set_position(done as u64))?;
-    pb.finish_and_clear();
-    eprintln!(
-        "wrote {} images of {} identities and {} in {:.1} s",
-        summary.images,
-        summary.identities,
-        summary.truth.display(),
-        t0.elapsed().as_secs_f64()
-    );
-    if let Some(sheet) = a.sheet {
-        let faces = synthesize(&SynthOptions { count: opts.count.min(8), ..opts.clone() }, |_, _| {})?;
-        contact_sheet(&faces, opts.yaws_deg.len().max(1) * 2).save(&sheet).with_context(|| format!("cannot write {}", sheet.display()))?;
-        eprintln!("wrote {}", sheet.display());
-    }
-    Ok(())
-}
-
-fn step(args: &[&str]) -> Result<()> {
-    let cli = Cli::try_parse_from(std::iter::once("gpmm").chain(args.iter().copied())).map_err(|e| anyhow::anyhow!("{e}"))?;
-    run(cli)
-}
-
-fn p(path: &Path) -> String {
-    path.display().to_string()
-}
-
 /// Runs `gpmm demo`: builds a model from the template, renders it, samples it, draws the
 /// kernel figure and synthetic test faces, and fits a photo.
 pub fn demo(a: DemoArgs) -> Result<()> {
@@ -113,73 +40,100 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let out = a.out_dir;
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let model = out.join("model.gpmm");
-    let (rank, vertices, nystrom, count) = if a.quick { ("40", Some("1500"), "600", 2) } else { ("200", None, "2000", 6) };
+    let (rank, vertices, nystrom_points, count) = if a.quick { (40, Some(1500), 600, 2) } else { (200, None, 2000, 6) };
 
     eprintln!("[1/6] building the symmetric-full model from the template");
-    let mut build = vec!["build", "--template", ply.to_str().unwrap_or_default(), "--landmarks", lm.to_str().unwrap_or_default()];
-    build.extend(["--kernel", "symmetric-full", "--rank-shape", rank, "--rank-color", rank, "--nystrom-points", nystrom, "--timings"]);
-    if let Some(v) = vertices {
-        build.extend(["--vertices", v]);
-    }
-    let model_s = p(&model);
-    build.extend(["-o", &model_s]);
-    step(&build)?;
-    let info = crate::cli::info_json(&model)?;
+    build(BuildArgs {
+        template: ply.clone(),
+        texture: None,
+        landmarks: lm.clone(),
+        kernel: ModelKernel::SymmetricFull,
+        rank_shape: Some(rank),
+        rank_color: Some(rank),
+        captured_shape: None,
+        captured_color: None,
+        config: None,
+        vertices,
+        scale: None,
+        no_crop: false,
+        default_color: None,
+        nystrom_points,
+        seed: NystromOptions::default().seed,
+        timings: true,
+        output: model.clone(),
+    })?;
+    let info = info_json(&model)?;
     std::fs::write(out.join("info.json"), serde_json::to_string_pretty(&info)?)?;
 
     eprintln!("[2/6] rendering the mean face");
-    for (name, yaw) in [("mean.png", "0"), ("mean_yaw30.png", "30")] {
-        step(&["render", &model_s, "--yaw", yaw, "--light", "frontal", "--size", "256", "-o", &p(&out.join(name))])?;
+    for (name, yaw) in [("mean.png", 0.0), ("mean_yaw30.png", 30.0)] {
+        render(RenderArgs {
+            model: model.clone(),
+            yaw,
+            pitch: 0.0,
+            roll: 0.0,
+            light: "frontal".into(),
+            size: (256, 256),
+            shape: None,
+            color: None,
+            background: Background::Color([0.0; 3]),
+            fov: 20.0,
+            output: out.join(name),
+        })?;
     }
     eprintln!("[3/6] random samples (PLY meshes and a picture)");
-    step(&["sample", &model_s, "-n", "5", "--seed", "1", "--out-dir", &p(&out.join("samples")), "-o", &p(&out.join("samples.png"))])?;
+    sample(SampleArgs {
+        model: model.clone(),
+        count: 5,
+        seed: 1,
+        out_dir: Some(out.join("samples")),
+        output: Some(out.join("samples.png")),
+        size: (192, 192),
+        light: "frontal".into(),
+        side_yaw: 45.0,
+    })?;
 
     eprintln!("[4/6] the kernel figure: samples of all nine kernels");
-    let mut fig = vec!["figure", "kernels", "--template", ply.to_str().unwrap_or_default(), "--landmarks", lm.to_str().unwrap_or_default()];
-    if a.quick {
-        fig.extend(["--vertices", "800", "--ranks", "20,20", "--nystrom-points", "300"]);
-    }
-    let fig_out = p(&out.join("kernels.png"));
-    fig.extend(["-o", &fig_out]);
-    step(&fig)?;
+    let (fig_vertices, fig_ranks, fig_nystrom) = if a.quick { (800, (20, 20), 300) } else { (2000, (50, 50), 500) };
+    figure_kernels(KernelFigureArgs {
+        template: ply,
+        texture: None,
+        landmarks: lm,
+        vertices: fig_vertices,
+        nystrom_points: fig_nystrom,
+        ranks: fig_ranks,
+        seed: 0,
+        shape_scale: 2.0,
+        shape_yaw: 0.0,
+        cell: 96,
+        output: out.join("kernels.png"),
+    })?;
 
     eprintln!("[5/6] synthetic faces with known truth (ICT identities)");
-    let count_s = count.to_string();
-    let ict = p(&data.join("ict"));
-    let tdir_s = p(&tdir);
-    step(&[
-        "synth",
-        "--ict",
-        &ict,
-        "--template-dir",
-        &tdir_s,
-        "--count",
-        &count_s,
-        "--seed",
-        "1",
-        "--sheet",
-        &p(&out.join("synth.png")),
-        "-o",
-        &p(&out.join("synth")),
-    ])?;
+    synth(SynthArgs {
+        ict: Some(data.join("ict")),
+        template_dir: Some(tdir),
+        count,
+        seed: 1,
+        yaws: vec![0.0, 15.0, 30.0, 45.0],
+        size: 128,
+        sheet: Some(out.join("synth.png")),
+        output: out.join("synth"),
+    })?;
 
     eprintln!("[6/6] fitting a photo (astronaut.png, public domain, with its 68 landmarks) by MCMC");
     let (photo, pts) = (data.join("images/astronaut.png"), data.join("images/astronaut.pts"));
     if photo.is_file() && pts.is_file() {
-        let (lm_steps, img_steps) = if a.quick { ("2000", "150") } else { ("5000", "600") };
-        step(&[
-            "fit",
-            &model_s,
-            &p(&photo),
-            "--landmarks",
-            &p(&pts),
-            "--landmark-steps",
-            lm_steps,
-            "--image-steps",
-            img_steps,
-            "-o",
-            &p(&out.join("fit")),
-        ])?;
+        let (landmark_steps, image_steps) = if a.quick { (2000, 150) } else { (5000, 600) };
+        run_fit(&FitJob {
+            model,
+            image: photo,
+            landmarks: pts,
+            pts_one_based: false,
+            settings: FitSettings { landmark_steps, image_steps, ..FitSettings::default() },
+            out_dir: out.join("fit"),
+            timing: true,
+        })?;
     } else {
         eprintln!("  skipped: {} or {} is absent", photo.display(), pts.display());
     }

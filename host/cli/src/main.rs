@@ -1,8 +1,134 @@
-//! The `gpmm` command-line program.
+//! The `gpmm` program: command-line arguments, progress display and the demo, over the
+//! gpmm-host library.
 
-mod cli;
+mod build;
 mod demo;
+mod device;
+mod eval;
+mod fit;
+mod progress;
+mod register;
+mod render;
+mod synth;
 
-fn main() -> std::process::ExitCode {
-    cli::main()
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// gpmm: Gaussian-process morphable models from one scan, fitted on microcontrollers.
+#[derive(Debug, Parser)]
+#[command(name = "gpmm", version, about, long_about = None, propagate_version = true)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Build a Gaussian-process morphable model (shape + albedo) from one coloured scan.
+    ///
+    /// The scan is normalized to millimetres (outer eye corners 90 mm apart unless --scale
+    /// is given), centred on the landmarks' mirror plane, oriented (x right, y up, z toward
+    /// the camera), cropped to the face and optionally simplified. The kernel is approximated
+    /// by the Nyström method and kept as a low-rank model.
+    Build(Box<build::BuildArgs>),
+    /// Print a model file's key figures as JSON.
+    Info(build::InfoArgs),
+    /// Draw random instances (all coefficients ~ N(0,1)): coloured PLY meshes and/or a rendered grid.
+    Sample(render::SampleArgs),
+    /// Render the mean (or given coefficients) through the core's tile rasterizer into a PNG.
+    ///
+    /// Colours are linear RGB written as-is (no gamma). The camera's field of view spans the
+    /// shorter image side; the model is placed so that its mean shape fits with a margin.
+    Render(render::RenderArgs),
+    /// Render a figure (see `gpmm figure --help`).
+    Figure(render::FigureArgs),
+    /// Render synthetic faces with known truth: ICT identities, transferred albedo, random light and pose.
+    Synth(synth::SynthArgs),
+    /// The main job end to end: build a model from the template scan, render, sample, draw figures, fit a photo.
+    Demo(demo::DemoArgs),
+    /// Fit a model to a photo with 68 landmarks: pose, shape, colour and light by MCMC.
+    ///
+    /// The photo is cropped to a square around the landmarks (side 1.8x the landmarks' larger
+    /// extent, lifted by 0.1x so the forehead fits; border pixels repeated past the image edge) and
+    /// resampled to --size. Then a landmark-only chain (default 5000 steps, about 0.1 s: the first
+    /// 40 % fit the pose with the jaw contour down-weighted, the rest the shape with yaw held), a
+    /// closed-form SH light, and an image chain (default 600 steps, each renders the model: about
+    /// 0.55 s at 128x128). Writes OUTDIR/fit.json, overlay.png (input | fit | blend; green dots: target
+    /// landmarks, red crosses: fitted) and fit.ply (the fitted shape and albedo, model space, mm).
+    /// The same inputs and seed give the same fit.json except `seconds` and `timing`.
+    Fit(fit::FitArgs),
+    /// Fit every image of a `gpmm synth` directory (in parallel) and print error statistics as JSON.
+    BenchFit(fit::BenchFitArgs),
+    /// Evaluate models like the paper: recognition across yaw, specificity / generalization / compactness.
+    Eval(eval::EvalArgs),
+    /// Register a model to a mesh (3D-to-3D fit): landmark alignment, then closest points with the model's prior.
+    ///
+    /// Writes OUTDIR/registered.ply (the fitted instance on the model's topology, in the mesh's frame) and
+    /// OUTDIR/register.json (coefficients, rigid transform, residual: mean / median / p90 distance from the
+    /// model's vertices to the mesh surface, vertices reaching past the mesh's border excluded; colour residual).
+    Register(register::RegisterArgs),
+    /// Quantize a model for a device profile and write its flash image (a model blob).
+    ///
+    /// Simplifies the model to the vertex budget (meshoptimizer; the landmark vertices are kept,
+    /// in the same order), keeps the leading shape and colour components, and stores each
+    /// component as 8- or 16-bit integers with its own scale (symmetric: scale = max|value| /
+    /// 127 or / 32767). Means stay f32, triangle indices become u16. Refuses a blob over the
+    /// profile's budget (m4f: 400 KiB of its 512 KiB data partition; m7: 800 KiB of 1 MiB),
+    /// which leaves room for the test image and landmarks. Prints a summary on stderr and, on
+    /// stdout, JSON with the blob size and the quantization error (float model of the kept
+    /// vertices and ranks against the blob, over --draws random N(0,1) coefficient vectors)
+    /// and the simplification error (source mean surface against the simplified one).
+    /// Format: docs/blob-format.md.
+    Quantize(device::QuantizeArgs),
+    /// Validate a model blob with the device's parser and print its header and metadata as JSON.
+    ///
+    /// Exits with status 1 and the parser's message if the blob is invalid; the JSON is still
+    /// printed when the header is readable (with "crc_ok": false for a corrupted blob).
+    Inspect(device::InspectArgs),
+    /// Fit a model blob to a photo on the simulated device: Cortex-M firmware under QEMU.
+    ///
+    /// Crops the photo around its landmarks to the profile's image size (m4f: 128x128, m7:
+    /// 256x256), writes the data partition (the blob, then the image, landmarks, seed and step
+    /// counts), builds the firmware for the profile, runs the core's standard fit under QEMU
+    /// (instructions counted with -icount) and prints JSON: flash and RAM use against the
+    /// profile's budget, instructions per stage and per image step, the fitted pose,
+    /// log-likelihood and 68 landmarks. --compare-host runs the same fit on the host core too.
+    /// Needs a gpmm source checkout (firmware-sim/) and installs QEMU and the toolchain if missing.
+    DeviceFit(device::DeviceFitArgs),
+}
+
+/// Runs the program and maps errors to a message and exit code 1.
+fn main() -> ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Runs one parsed command.
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Build(a) => build::build(*a),
+        Command::Info(a) => build::info(a),
+        Command::Sample(a) => render::sample(a),
+        Command::Synth(a) => synth::synth(a),
+        Command::Demo(a) => demo::demo(a),
+        Command::Fit(a) => fit::fit(a),
+        Command::BenchFit(a) => fit::bench_fit(a),
+        Command::Eval(a) => eval::eval(a),
+        Command::Register(a) => register::register_mesh(a),
+        Command::Quantize(a) => device::quantize(a),
+        Command::Inspect(a) => device::inspect(a),
+        Command::DeviceFit(a) => device::device_fit(a),
+        Command::Render(a) => render::render(a),
+        Command::Figure(a) => render::figure(a),
+    }
 }

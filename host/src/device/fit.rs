@@ -340,6 +340,15 @@ fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError> {
     v.get(key).and_then(|x| x.as_u64().or_else(|| x.as_str().and_then(|s| s.parse().ok()))).ok_or(DeviceFitError::Missing(key))
 }
 
+/// The profile's working image side.
+pub fn profile_image_size(profile: &str) -> u32 {
+    if profile == "m7" {
+        256
+    } else {
+        128
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -355,121 +364,4 @@ mod tests {
         // A key that is the suffix of another is not confused with it.
         assert!(number::<f32>("INFO  xyaw_deg=3", "yaw_deg").is_err());
     }
-}
-
-/// Arguments of `gpmm device-fit`.
-#[derive(Debug, clap::Args)]
-pub struct DeviceFitArgs {
-    /// Device profile: m4f (Cortex-M4F, 1 MiB flash, 192 KiB RAM, 128x128 image) or m7 (Cortex-M7, 2 MiB, 512 KiB, 256x256).
-    #[arg(long, default_value = "m4f", value_parser = ["m4f", "m7"])]
-    pub profile: String,
-    /// The model blob (`gpmm quantize`).
-    pub blob: PathBuf,
-    /// Photo: PNG, JPEG or PPM (cropped around the landmarks and resampled to the profile's image size).
-    pub image: PathBuf,
-    /// Landmarks: iBUG .pts (68 points), 0-based continuous pixel coordinates.
-    #[arg(long, value_name = "PTS")]
-    pub landmarks: PathBuf,
-    /// The .pts file is 1-based (300-W / menpo convention).
-    #[arg(long)]
-    pub pts_one_based: bool,
-    /// Seed of the chains.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_SEED)]
-    pub seed: u64,
-    /// Landmark-chain steps.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
-    pub landmark_steps: u32,
-    /// Image-chain steps.
-    #[arg(long, default_value_t = crate::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
-    pub image_steps: u32,
-    /// Also run the same fit on the host (the core on the same blob) and report the differences.
-    #[arg(long)]
-    pub compare_host: bool,
-    /// Only run the fit on the host (the core on the same blob, as the firmware would): no QEMU.
-    #[arg(long, conflicts_with = "compare_host")]
-    pub host_only: bool,
-    /// Keep the data partition image (blob + fit input) at this path.
-    #[arg(long, value_name = "FILE")]
-    pub keep_partition: Option<PathBuf>,
-    /// QEMU time limit in seconds.
-    #[arg(long, default_value_t = 1800)]
-    pub timeout: u32,
-}
-
-/// The profile's working image side.
-pub fn profile_image_size(profile: &str) -> u32 {
-    if profile == "m7" {
-        256
-    } else {
-        128
-    }
-}
-
-/// Runs `gpmm device-fit`: prepares the partition, runs the firmware, prints the JSON report.
-pub fn device_fit(a: DeviceFitArgs) -> anyhow::Result<()> {
-    use anyhow::Context;
-    let blob = BlobBuf::read(&a.blob).with_context(|| format!("reading the model blob {}", a.blob.display()))?;
-    let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", a.blob.display()))?;
-    let size = profile_image_size(&a.profile);
-    let pts = crate::photo::pts::read_pts(&a.landmarks, a.pts_one_based)?;
-    let photo = crate::photo::load_rgb(&a.image)?;
-    pts.check(&a.landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
-    let prepared = crate::fit::prepare(&photo, &pts.points, size)?;
-    let settings = FitSettings {
-        size,
-        landmark_steps: a.landmark_steps,
-        image_steps: a.image_steps,
-        seed: a.seed,
-        shape_rank: view.rank_shape(),
-        color_rank: view.rank_color(),
-        ..FitSettings::default()
-    };
-    settings.validate()?;
-    if a.host_only {
-        let (fit, lm) = host_fit(&blob, &prepared, &settings)?;
-        let p = fit.params();
-        let json = serde_json::json!({
-            "profile": a.profile,
-            "yaw_deg": p.pose.yaw.to_degrees(),
-            "pitch_deg": p.pose.pitch.to_degrees(),
-            "roll_deg": p.pose.roll.to_degrees(),
-            "log_posterior": fit.image.best_log_posterior,
-            "log_likelihood": fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood),
-            "landmarks_px": lm,
-            "landmarks_original_px": lm.iter().map(|q| prepared.crop.to_original(*q, size)).collect::<Vec<_>>(),
-        });
-        println!("{}", serde_json::to_string_pretty(&json)?);
-        return Ok(());
-    }
-    let partition = partition_bytes(blob.bytes(), &fit_input_bytes(&prepared, &settings));
-    let dir = tempfile::tempdir().context("creating a temporary directory")?;
-    let path = a.keep_partition.clone().unwrap_or_else(|| dir.path().join("partition.bin"));
-    std::fs::write(&path, &partition).with_context(|| format!("writing {}", path.display()))?;
-    let pb = indicatif::ProgressBar::new_spinner();
-    pb.set_message(format!("building the {} firmware and fitting under QEMU (a few minutes)", a.profile));
-    pb.enable_steady_tick(std::time::Duration::from_millis(200));
-    let log = run_firmware(&a.profile, &path, a.timeout);
-    pb.finish_and_clear();
-    let log = log?;
-    let mut report = parse_report(&a.profile, &log)?;
-    report.landmarks_original_px = Some(report.landmarks_px.iter().map(|p| prepared.crop.to_original(*p, size)).collect());
-    let mut json = serde_json::to_value(&report)?;
-    if a.compare_host {
-        let (fit, lm) = host_fit(&blob, &prepared, &settings)?;
-        let max_diff = lm.iter().zip(&report.landmarks_px).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0f32, f32::max);
-        let host_ll = fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood);
-        json["host"] = serde_json::json!({
-            "yaw_deg": fit.params().pose.yaw.to_degrees(),
-            "pitch_deg": fit.params().pose.pitch.to_degrees(),
-            "roll_deg": fit.params().pose.roll.to_degrees(),
-            "log_likelihood": host_ll,
-            "landmarks_px": lm,
-        });
-        json["parity"] = serde_json::json!({
-            "max_landmark_difference_px": max_diff,
-            "log_likelihood_relative_difference": ((host_ll - report.log_likelihood) / host_ll.abs().max(1e-9)).abs(),
-        });
-    }
-    println!("{}", serde_json::to_string_pretty(&json)?);
-    Ok(())
 }

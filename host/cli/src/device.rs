@@ -1,0 +1,221 @@
+//! The device commands: `gpmm quantize`, `gpmm inspect` and `gpmm device-fit`.
+
+use crate::progress::spinner;
+use anyhow::{Context, Result};
+use clap::Args;
+use gpmm_host::device::fit::{fit_input_bytes, host_fit, parse_report, partition_bytes, profile_image_size, run_firmware};
+use gpmm_host::device::quantize::BlobBuf;
+use gpmm_host::fit::FitSettings;
+use gpmm_host::gp::model_io;
+use std::path::PathBuf;
+
+/// Arguments of `gpmm device-fit`.
+#[derive(Debug, Args)]
+pub struct DeviceFitArgs {
+    /// Device profile: m4f (Cortex-M4F, 1 MiB flash, 192 KiB RAM, 128x128 image) or m7 (Cortex-M7, 2 MiB, 512 KiB, 256x256).
+    #[arg(long, default_value = "m4f", value_parser = ["m4f", "m7"])]
+    pub profile: String,
+    /// The model blob (`gpmm quantize`).
+    pub blob: PathBuf,
+    /// Photo: PNG, JPEG or PPM (cropped around the landmarks and resampled to the profile's image size).
+    pub image: PathBuf,
+    /// Landmarks: iBUG .pts (68 points), 0-based continuous pixel coordinates.
+    #[arg(long, value_name = "PTS")]
+    pub landmarks: PathBuf,
+    /// The .pts file is 1-based (300-W / menpo convention).
+    #[arg(long)]
+    pub pts_one_based: bool,
+    /// Seed of the chains.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Landmark-chain steps.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
+    pub landmark_steps: u32,
+    /// Image-chain steps.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
+    pub image_steps: u32,
+    /// Also run the same fit on the host (the core on the same blob) and report the differences.
+    #[arg(long)]
+    pub compare_host: bool,
+    /// Only run the fit on the host (the core on the same blob, as the firmware would): no QEMU.
+    #[arg(long, conflicts_with = "compare_host")]
+    pub host_only: bool,
+    /// Keep the data partition image (blob + fit input) at this path.
+    #[arg(long, value_name = "FILE")]
+    pub keep_partition: Option<PathBuf>,
+    /// QEMU time limit in seconds.
+    #[arg(long, default_value_t = 1800)]
+    pub timeout: u32,
+}
+
+/// Arguments of `gpmm quantize`.
+#[derive(Debug, Args)]
+pub struct QuantizeArgs {
+    /// Model file (from `gpmm build`).
+    pub model: PathBuf,
+    /// Device profile: m4f (1000 vertices, ranks 50/50, 16 bits, blob <= 400 KiB) or m7 (2000 vertices, ranks 80/80, 16 bits, blob <= 800 KiB).
+    #[arg(long, value_name = "m4f|m7")]
+    pub profile: gpmm_host::device::quantize::Profile,
+    /// Vertex budget instead of the profile's (at most 65535).
+    #[arg(long, value_name = "N")]
+    pub vertices: Option<usize>,
+    /// Shape components instead of the profile's (default: the profile's, or the model's rank if lower).
+    #[arg(long, value_name = "K")]
+    pub rank_shape: Option<usize>,
+    /// Colour components instead of the profile's (default: the profile's, or the model's rank if lower).
+    #[arg(long, value_name = "K")]
+    pub rank_color: Option<usize>,
+    /// Bits per basis value: 8 or 16 (default: the profile's, 16).
+    #[arg(long, value_name = "8|16", value_parser = gpmm_host::device::quantize::parse_bits)]
+    pub bits: Option<gpmm_host::device::quantize::Bits>,
+    /// Random coefficient draws for the quantization error.
+    #[arg(long, default_value_t = 100, value_name = "N")]
+    pub draws: usize,
+    /// Seed of the draws.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output blob file.
+    #[arg(short, long, value_name = "BLOB")]
+    pub output: PathBuf,
+}
+
+/// Arguments of `gpmm inspect`.
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// Model blob file (from `gpmm quantize`).
+    pub blob: PathBuf,
+}
+
+/// Runs `gpmm quantize`.
+pub fn quantize(a: QuantizeArgs) -> Result<()> {
+    use gpmm_host::device::quantize::{self as q, QuantizeOptions};
+    let model = model_io::load(&a.model)?;
+    let mut opts = QuantizeOptions::for_profile(a.profile);
+    opts.vertices = a.vertices.unwrap_or(opts.vertices);
+    opts.rank_shape = a.rank_shape.unwrap_or(opts.rank_shape.min(model.shape.rank()));
+    opts.rank_color = a.rank_color.unwrap_or(opts.rank_color.min(model.color.rank()));
+    opts.bits = a.bits.unwrap_or(opts.bits);
+    opts.source = a.model.file_name().map(|f| f.to_string_lossy().into_owned());
+    let pb = spinner("simplifying and quantizing");
+    let quantized = q::quantize(&model, &opts);
+    pb.finish_and_clear();
+    let quantized = quantized?;
+    let blob = quantized.to_blob()?;
+    let view = blob.view().context("the written blob does not validate (a bug)")?;
+    let pb = spinner("measuring the quantization and simplification error");
+    let stats = q::quantization_error(&quantized.reduced, &view, a.draws, a.seed)?;
+    let simp = q::simplification_error(&model, &quantized);
+    pb.finish_and_clear();
+    blob.write(&a.output)?;
+    eprintln!(
+        "{}: {} bytes ({:.1} KiB of the {} budget {:.0} KiB); {} of {} vertices, {} triangles, ranks {}/{}, {} bits",
+        a.output.display(),
+        blob.len(),
+        blob.len() as f64 / 1024.0,
+        a.profile,
+        a.profile.blob_budget() as f64 / 1024.0,
+        view.vertices(),
+        model.vertices(),
+        view.triangles().len(),
+        view.rank_shape(),
+        view.rank_color(),
+        view.bits()
+    );
+    eprintln!(
+        "quantization error over {} draws: shape RMS {:.5} mm (max {:.5}), colour RMS {:.6} (max {:.6}); simplification: mean-shape surface RMS {:.3} mm (max {:.3})",
+        stats.draws, stats.shape_rms_mm, stats.shape_max_mm, stats.color_rms, stats.color_max, simp.mean_shape_rms_mm, simp.mean_shape_max_mm
+    );
+    let json = serde_json::json!({
+        "output": a.output.display().to_string(),
+        "bytes": blob.len(),
+        "profile": a.profile.name(),
+        "budget_bytes": a.profile.blob_budget(),
+        "partition_bytes": a.profile.partition_bytes(),
+        "vertices": view.vertices(),
+        "triangles": view.triangles().len(),
+        "landmarks": view.landmarks().len(),
+        "rank_shape": view.rank_shape(),
+        "rank_color": view.rank_color(),
+        "bits": view.bits(),
+        "quantization": stats,
+        "simplification": simp,
+    });
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    Ok(())
+}
+
+/// Runs `gpmm inspect`.
+pub fn inspect(a: InspectArgs) -> Result<()> {
+    let blob = BlobBuf::read(&a.blob)?;
+    let (json, result) = gpmm_host::device::quantize::inspect(&blob);
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    result.with_context(|| format!("{} is not a valid model blob", a.blob.display()))
+}
+
+/// Runs `gpmm device-fit`: prepares the partition, runs the firmware, prints the JSON report.
+pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
+    let blob = BlobBuf::read(&a.blob).with_context(|| format!("reading the model blob {}", a.blob.display()))?;
+    let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", a.blob.display()))?;
+    let size = profile_image_size(&a.profile);
+    let pts = gpmm_host::photo::pts::read_pts(&a.landmarks, a.pts_one_based)?;
+    let photo = gpmm_host::photo::load_rgb(&a.image)?;
+    pts.check(&a.landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
+    let prepared = gpmm_host::fit::prepare(&photo, &pts.points, size)?;
+    let settings = FitSettings {
+        size,
+        landmark_steps: a.landmark_steps,
+        image_steps: a.image_steps,
+        seed: a.seed,
+        shape_rank: view.rank_shape(),
+        color_rank: view.rank_color(),
+        ..FitSettings::default()
+    };
+    settings.validate()?;
+    if a.host_only {
+        let (fit, lm) = host_fit(&blob, &prepared, &settings)?;
+        let p = fit.params();
+        let json = serde_json::json!({
+            "profile": a.profile,
+            "yaw_deg": p.pose.yaw.to_degrees(),
+            "pitch_deg": p.pose.pitch.to_degrees(),
+            "roll_deg": p.pose.roll.to_degrees(),
+            "log_posterior": fit.image.best_log_posterior,
+            "log_likelihood": fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood),
+            "landmarks_px": lm,
+            "landmarks_original_px": lm.iter().map(|q| prepared.crop.to_original(*q, size)).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&json)?);
+        return Ok(());
+    }
+    let partition = partition_bytes(blob.bytes(), &fit_input_bytes(&prepared, &settings));
+    let dir = tempfile::tempdir().context("creating a temporary directory")?;
+    let path = a.keep_partition.clone().unwrap_or_else(|| dir.path().join("partition.bin"));
+    std::fs::write(&path, &partition).with_context(|| format!("writing {}", path.display()))?;
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.set_message(format!("building the {} firmware and fitting under QEMU (a few minutes)", a.profile));
+    pb.enable_steady_tick(std::time::Duration::from_millis(200));
+    let log = run_firmware(&a.profile, &path, a.timeout);
+    pb.finish_and_clear();
+    let log = log?;
+    let mut report = parse_report(&a.profile, &log)?;
+    report.landmarks_original_px = Some(report.landmarks_px.iter().map(|p| prepared.crop.to_original(*p, size)).collect());
+    let mut json = serde_json::to_value(&report)?;
+    if a.compare_host {
+        let (fit, lm) = host_fit(&blob, &prepared, &settings)?;
+        let max_diff = lm.iter().zip(&report.landmarks_px).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0f32, f32::max);
+        let host_ll = fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood);
+        json["host"] = serde_json::json!({
+            "yaw_deg": fit.params().pose.yaw.to_degrees(),
+            "pitch_deg": fit.params().pose.pitch.to_degrees(),
+            "roll_deg": fit.params().pose.roll.to_degrees(),
+            "log_likelihood": host_ll,
+            "landmarks_px": lm,
+        });
+        json["parity"] = serde_json::json!({
+            "max_landmark_difference_px": max_diff,
+            "log_likelihood_relative_difference": ((host_ll - report.log_likelihood) / host_ll.abs().max(1e-9)).abs(),
+        });
+    }
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    Ok(())
+}

