@@ -9,20 +9,22 @@
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
-pub mod blob;
 pub mod camera;
 pub mod checksum;
 pub mod fit;
+pub mod format;
 pub mod light;
 pub mod model;
 pub mod pose;
+pub mod profile;
 pub mod raster;
 pub mod shading;
 pub mod tile;
 
-pub use blob::{BlobError, ModelBlob};
 pub use camera::{Camera, ScreenPoint};
 pub use checksum::{crc32, FrameChecksum};
+pub use format::blob;
+pub use format::blob::{BlobError, ModelBlob};
 pub use light::ShLight;
 pub use model::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
 pub use pose::{Mat3, Pose};

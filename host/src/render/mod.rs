@@ -4,7 +4,7 @@
 //! the tile rasterizer are the same code the device runs; the host only adds an [`ImageSink`] that
 //! copies each finished tile into an [`RgbaImage`], and a default [`Framing`] (camera focal length
 //! from a field of view, model distance from its bounding box). Colours are linear RGB in [0, 1]
-//! written as-is (no gamma, DESIGN.md), rounded to 8 bits. Back faces are culled: the model's
+//! written as-is (no gamma, docs/design.md), rounded to 8 bits. Back faces are culled: the model's
 //! triangles are counter-clockwise seen from outside, so [`Cull::Clockwise`] keeps the front faces.
 
 pub mod figure;
