@@ -17,8 +17,9 @@ use gpmm_core::{
 };
 use image::{Rgba, RgbaImage};
 
-/// Tile width and height of the host rasterizer (pixels).
-pub const TILE: usize = 32;
+/// Tile width and height of the host rasterizer (pixels): the devices' (`gpmm_core::profile`), so
+/// host and device sum the image likelihood tile by tile in the same order.
+pub const TILE: usize = gpmm_core::profile::M4F.tile;
 /// Triangle capacity of the host rasterizer's per-tile-row bin.
 pub const BIN: usize = 8192;
 /// The rasterizer configuration the host uses.
