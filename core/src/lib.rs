@@ -10,15 +10,13 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 pub mod blob;
-pub mod camera;
 pub mod checksum;
 pub mod fit;
-pub mod light;
 pub mod model;
-pub mod pose;
-pub mod raster;
-pub mod shading;
-pub mod tile;
+pub mod render;
+
+// The render modules under their old crate-root paths (`gpmm_core::camera::Camera`, ...).
+pub use render::{camera, light, pose, raster, shading, tile};
 
 pub use blob::{BlobError, ModelBlob};
 pub use camera::{Camera, ScreenPoint};

@@ -19,13 +19,13 @@ use super::image::{BackgroundModel, ImageEval, ImageLikelihood, TargetImage};
 use super::init::landmark_pivot;
 use super::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
 use super::light_fit::{solve_light, LightSolveConfig};
-use super::morph::{Instance, MorphableModel};
 use super::normal::{uniform, uniform_open0};
 use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::{propose, Mixture, ProposalContext, ProposalKind, MAX_PROPOSALS};
 use super::FitError;
-use crate::shading::TriIndex;
+use crate::model::morphable::{Instance, MorphableModel};
+use crate::render::shading::TriIndex;
 use crate::{Cull, TileRasterizer, Vec3};
 use rand_core::Rng;
 

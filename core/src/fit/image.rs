@@ -7,7 +7,7 @@
 //! background terms of uncovered pixels cancel in every Metropolis-Hastings ratio.
 
 use super::FitError;
-use crate::tile::{Tile, TileSink, NO_TRIANGLE};
+use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 use crate::Vec3;
 
 /// The foreground σ of Schönborn et al. on colours in [0, 1].
@@ -35,7 +35,7 @@ impl<'a> TargetImage<'a> {
         if (width as usize).checked_mul(height as usize) != Some(pixels.len()) {
             return Err(FitError::LengthMismatch);
         }
-        if width > crate::raster::MAX_IMAGE_SIZE || height > crate::raster::MAX_IMAGE_SIZE {
+        if width > crate::render::raster::MAX_IMAGE_SIZE || height > crate::render::raster::MAX_IMAGE_SIZE {
             return Err(FitError::BadConfig);
         }
         Ok(Self { pixels, width, height })

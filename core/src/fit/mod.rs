@@ -2,7 +2,7 @@
 //!
 //! The pieces, one module each:
 //! - [`params`]: the parameter vector ([`FitParams`]: pose, focal length, SH light, coefficients).
-//! - [`morph`]: the borrowed [`MorphableModel`] view and the cached per-vertex [`Instance`].
+//! - [`crate::model::morphable`] (re-exported as `morph`): the borrowed [`MorphableModel`] view and the cached per-vertex [`Instance`].
 //! - [`prior`], [`landmarks`], [`image`]: log prior, landmark and image log likelihoods.
 //! - [`proposal`]: the coarse-to-fine mixture of Gaussian drift proposals.
 //! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
@@ -18,13 +18,15 @@ pub mod image;
 pub mod init;
 pub mod landmarks;
 pub mod light_fit;
-pub mod morph;
 pub mod normal;
 pub mod params;
 pub mod prior;
 pub mod proposal;
 pub mod recipe;
 
+/// The morphable-model view under its old path (`gpmm_core::fit::morph`); it lives in [`crate::model`].
+pub use crate::model::morphable as morph;
+pub use crate::model::morphable::{Instance, InstanceBuffers, MorphableModel};
 pub use chain::{
     image_chain, image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, Acceptance, FitResult, ImageProblem,
     Problem,
@@ -33,7 +35,6 @@ pub use image::{BackgroundModel, ImageEval, ImageLikelihood, TargetImage, DEFAUL
 pub use init::{initial_guess, landmark_pivot};
 pub use landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
 pub use light_fit::{solve_light, LightSolveConfig};
-pub use morph::{Instance, InstanceBuffers, MorphableModel};
 pub use params::FitParams;
 pub use prior::Prior;
 pub use proposal::{propose, Mixture, Proposal, ProposalContext, ProposalKind, Scale, MAX_PROPOSALS};

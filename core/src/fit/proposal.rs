@@ -24,7 +24,7 @@
 use super::normal::{add_normals, standard_normal};
 use super::params::FitParams;
 use super::FitError;
-use crate::pose::mat_vec;
+use crate::render::pose::mat_vec;
 use crate::{ShLight, Vec3};
 use rand_core::Rng;
 

@@ -25,12 +25,12 @@ use super::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA}
 use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
 use super::light_fit::{solve_light, LightSolveConfig};
-use super::morph::{Instance, MorphableModel};
 use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::Mixture;
 use super::FitError;
-use crate::shading::TriIndex;
+use crate::model::morphable::{Instance, MorphableModel};
+use crate::render::shading::TriIndex;
 use crate::{ShLight, TileRasterizer};
 use rand_core::Rng;
 
