@@ -9,17 +9,15 @@
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
-pub mod camera;
 pub mod checksum;
 pub mod fit;
 pub mod format;
-pub mod light;
 pub mod model;
-pub mod pose;
 pub mod profile;
-pub mod raster;
-pub mod shading;
-pub mod tile;
+pub mod render;
+
+// The render modules under their old crate-root paths (`gpmm_core::camera::Camera`, ...).
+pub use render::{camera, light, pose, raster, shading, tile};
 
 pub use camera::{Camera, ScreenPoint};
 pub use checksum::{crc32, FrameChecksum};

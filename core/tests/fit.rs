@@ -7,8 +7,8 @@ mod fit_support;
 
 use fit_support::*;
 use gpmm_core::fit::{
-    image_chain, image_log_likelihood, initial_guess, landmark_chain, solve_light, BackgroundModel, FitError, FitParams, ImageProblem,
-    LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
+    image_chain, image_log_likelihood, initial_guess, landmark_chain, solve_light, BackgroundModel, FitError, FitParams, GaussianPixel,
+    ImageProblem, LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
 use gpmm_core::{Basis, FactoredBasis, ShLight};
 use rand_core::SeedableRng;
@@ -97,7 +97,12 @@ fn image_likelihood_is_highest_at_the_truth() {
     let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H };
     let image = TargetImage::new(&scene.pixels, W, H).unwrap();
     let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
-    let ip = ImageProblem { image, background: &bg, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap(),
+        background: &bg,
+        light_solve: LightSolveConfig::default(),
+    };
     let mut bufs = Buffers::new(scene.synth.vertices());
     let mut inst = bufs.instance();
     let mut raster = Raster::new();
@@ -195,7 +200,12 @@ fn run_both(
     let problem = Problem { mixture: &img_mix, ..problem };
     let image = TargetImage::new(&scene.pixels, W, H).unwrap();
     let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
-    let ip = ImageProblem { image, background: &bg, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap(),
+        background: &bg,
+        light_solve: LightSolveConfig::default(),
+    };
     let mut bufs = Buffers::new(scene.synth.vertices());
     let mut inst = bufs.instance();
     let mut raster = Raster::new();
@@ -236,9 +246,9 @@ fn image_chain_improves_the_landmark_fit_and_reports_timing() {
     for (i, e) in mix.entries().iter().enumerate() {
         eprintln!(
             "  {:>15} {:>12} σ {:<7} proposed {:>4} passed {:>4} accepted {:>4}",
-            e.kind.name(),
-            e.scale.name(),
-            e.sigma,
+            e.proposal.kind.name(),
+            e.proposal.scale.name(),
+            e.proposal.sigma,
             img_fit.acceptance.proposed[i],
             img_fit.acceptance.passed_filter[i],
             img_fit.acceptance.accepted[i]
@@ -247,7 +257,7 @@ fn image_chain_improves_the_landmark_fit_and_reports_timing() {
     assert!(after.rmse() < 0.8 * before.rmse(), "{} vs {}", after.rmse(), before.rmse());
     assert!(img_fit.best_log_posterior >= lm_fit.best_log_posterior - 1e3 || after.log_likelihood > before.log_likelihood);
     assert!((img_fit.best.pose.yaw.to_degrees() - 25.0).abs() < 3.0);
-    let ls = mix.entries().iter().position(|e| e.kind == gpmm_core::fit::ProposalKind::LightSolve).unwrap();
+    let ls = mix.entries().iter().position(|e| e.proposal.kind == gpmm_core::fit::ProposalKind::LightSolve).unwrap();
     assert!(img_fit.acceptance.proposed[ls] > 0);
 }
 
@@ -310,12 +320,16 @@ fn bad_input_is_an_error_not_a_panic() {
     assert_eq!(TargetImage::new(&scene.pixels, W, H + 1).err(), Some(FitError::LengthMismatch));
     let small = TargetImage::new(&scene.pixels[..64 * 128], 128, 64).unwrap();
     let bg = BackgroundModel::uniform();
-    let ip = ImageProblem { image: small, background: &bg, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let pixel = GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap();
+    let ip = ImageProblem { image: small, pixel, background: &bg, light_solve: LightSolveConfig::default() };
     let mut bufs = Buffers::new(synth.vertices());
     let mut inst = bufs.instance();
     let mut raster = Raster::new();
     assert_eq!(image_chain(&problem, &ip, &init, 5, &mut inst, &mut raster, &mut rng).err(), Some(FitError::LengthMismatch));
-    let ip = ImageProblem { sigma: -1.0, image: TargetImage::new(&scene.pixels, W, H).unwrap(), ..ip };
+    // A bad pixel σ is refused when the term is made; a light solve on every 0th vertex by the chain.
+    assert_eq!(GaussianPixel::new(-1.0).err(), Some(FitError::BadConfig));
+    let no_stride = LightSolveConfig { stride: 0, ..LightSolveConfig::default() };
+    let ip = ImageProblem { light_solve: no_stride, image: TargetImage::new(&scene.pixels, W, H).unwrap(), ..ip };
     assert_eq!(image_chain(&problem, &ip, &init, 5, &mut inst, &mut raster, &mut rng).err(), Some(FitError::BadConfig));
     // Per-vertex buffers of the wrong length.
     let mut small_bufs = Buffers::new(synth.vertices() - 1);
@@ -371,7 +385,12 @@ fn timing_breakdown_of_an_image_evaluation() {
     let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H };
     let image = TargetImage::new(&scene.pixels, W, H).unwrap();
     let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
-    let ip = ImageProblem { image, background: &bg, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap(),
+        background: &bg,
+        light_solve: LightSolveConfig::default(),
+    };
     let mut bufs = Buffers::new(scene.synth.vertices());
     let mut inst = bufs.instance();
     let mut raster = Raster::new();

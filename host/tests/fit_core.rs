@@ -4,8 +4,8 @@
 //! `--release -- --nocapture` for the figures).
 
 use gpmm_core::fit::{
-    image_chain, initial_guess, landmark_chain, BackgroundModel, FitParams, ImageProblem, Instance, InstanceBuffers, LandmarkTarget,
-    LightSolveConfig, Mixture, MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
+    image_chain, initial_guess, landmark_chain, BackgroundModel, FitParams, GaussianPixel, ImageProblem, Instance, InstanceBuffers,
+    LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
 use gpmm_core::{Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer, NO_TRIANGLE};
 use gpmm_host::data::{data_dir_for_tests, template_dir};
@@ -105,7 +105,8 @@ fn fits_a_rendered_face_with_known_pose() {
 
     let image = TargetImage::new(&pixels, W, H).unwrap();
     let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
-    let ip = ImageProblem { image, background: &bg, sigma: DEFAULT_PIXEL_SIGMA, light_solve: LightSolveConfig::default() };
+    let pixel = GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap();
+    let ip = ImageProblem { image, pixel, background: &bg, light_solve: LightSolveConfig::default() };
     let img_mix = Mixture::image_default(W as f32);
     let problem = Problem { mixture: &img_mix, ..problem };
     let start = image_chain(&problem, &ip, &lm_fit.best, 0, &mut inst, &mut raster, &mut rng).unwrap();

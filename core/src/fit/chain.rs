@@ -11,27 +11,31 @@
 //! `min(1, π₀(x')/π₀(x))` the second becomes `min(1, [L_img(x') q(x | x')] / [L_img(x) q(x' | x)])`
 //! (the first stage's own ratio cancels). The image chain puts it in the second stage, because
 //! the least-squares light proposal's Hastings term is large and only the image term can pay
-//! for it; the landmark chain has a single stage. Acceptance is counted per mixture component. The best sample
+//! for it; the landmark chain has a single stage. Both chains are one loop ([`run_chain`] over a
+//! [`SecondStage`]: none, or the rendered image). Every proposal's outcome goes to a
+//! [`ChainObserver`]; [`Acceptance`] counts per mixture component. The best sample
 //! (highest log posterior seen) and the last sample are returned. Everything is a deterministic
 //! function of the inputs and the generator's state.
 
-use super::image::{BackgroundModel, ImageEval, ImageLikelihood, TargetImage};
+use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::landmark_pivot;
 use super::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
 use super::light_fit::{solve_light, LightSolveConfig};
-use super::morph::{Instance, MorphableModel};
+use super::likelihood::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
 use super::normal::{uniform, uniform_open0};
+use super::observer::{Acceptance, ChainObserver, NoObserver, Progress, ProposalStep, StepOutcome};
 use super::params::FitParams;
 use super::prior::Prior;
-use super::proposal::{propose, Mixture, ProposalContext, ProposalKind, MAX_PROPOSALS};
+use super::proposal::{Mixture, Proposal, ProposalContext, StandardProposal};
 use super::FitError;
-use crate::shading::TriIndex;
-use crate::{Cull, TileRasterizer, Vec3};
+use crate::model::morphable::{Instance, MorphableModel};
+use crate::render::shading::TriIndex;
+use crate::{Cull, ShLight, TileRasterizer, Vec3};
 use rand_core::Rng;
 
 /// What both chains need: the model, target landmarks, prior, proposal mixture and image size.
 #[derive(Debug, Clone, Copy)]
-pub struct Problem<'a, I: TriIndex = u32> {
+pub struct Problem<'a, I: TriIndex = u32, P = StandardProposal> {
     /// The model.
     pub model: MorphableModel<'a, I>,
     /// Target landmarks (one per model landmark).
@@ -39,75 +43,24 @@ pub struct Problem<'a, I: TriIndex = u32> {
     /// The prior.
     pub prior: &'a Prior,
     /// The proposal mixture.
-    pub mixture: &'a Mixture,
+    pub mixture: &'a Mixture<P>,
     /// Working image width (the principal point is the image centre).
     pub width: u32,
     /// Working image height.
     pub height: u32,
 }
 
-/// What the image chain needs on top of a [`Problem`].
+/// What the image chain needs on top of a [`Problem`]: the target and the likelihood's terms.
 #[derive(Debug, Clone, Copy)]
-pub struct ImageProblem<'a> {
+pub struct ImageProblem<'a, L = GaussianPixel, B = BackgroundModel> {
     /// The target image (its size must be the problem's).
     pub image: TargetImage<'a>,
-    /// Background model of the target.
-    pub background: &'a BackgroundModel,
-    /// Foreground σ on [0, 1] colours (see [`super::DEFAULT_PIXEL_SIGMA`]).
-    pub sigma: f32,
+    /// The foreground (pixel) term, e.g. [`GaussianPixel`] with σ [`super::DEFAULT_PIXEL_SIGMA`].
+    pub pixel: L,
+    /// The background term.
+    pub background: &'a B,
     /// Sampling and ridge of the least-squares light proposal (its `offset` is drawn per use).
     pub light_solve: LightSolveConfig,
-}
-
-/// Per-component proposal counts (index = position in the [`Mixture`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Acceptance {
-    /// Times the component was drawn.
-    pub proposed: [u32; MAX_PROPOSALS],
-    /// Times it passed the prior-and-landmark stage.
-    pub passed_filter: [u32; MAX_PROPOSALS],
-    /// Times it was accepted.
-    pub accepted: [u32; MAX_PROPOSALS],
-}
-
-impl Acceptance {
-    const fn new() -> Self {
-        Self { proposed: [0; MAX_PROPOSALS], passed_filter: [0; MAX_PROPOSALS], accepted: [0; MAX_PROPOSALS] }
-    }
-
-    /// Acceptance rate of component `id` (0 if never drawn).
-    pub fn rate(&self, id: usize) -> f32 {
-        let p = self.proposed.get(id).copied().unwrap_or(0);
-        let a = self.accepted.get(id).copied().unwrap_or(0);
-        if p == 0 {
-            0.0
-        } else {
-            a as f32 / p as f32
-        }
-    }
-
-    /// Accepted over proposed, all components.
-    pub fn overall(&self) -> f32 {
-        let p: u32 = self.proposed.iter().sum();
-        let a: u32 = self.accepted.iter().sum();
-        if p == 0 {
-            0.0
-        } else {
-            a as f32 / p as f32
-        }
-    }
-
-    fn count(&mut self, id: usize, passed: bool, accepted: bool) {
-        if let Some(v) = self.proposed.get_mut(id) {
-            *v = v.saturating_add(1);
-        }
-        if let (true, Some(v)) = (passed, self.passed_filter.get_mut(id)) {
-            *v = v.saturating_add(1);
-        }
-        if let (true, Some(v)) = (accepted, self.accepted.get_mut(id)) {
-            *v = v.saturating_add(1);
-        }
-    }
 }
 
 /// Outcome of a chain.
@@ -131,26 +84,48 @@ pub struct FitResult<const KS: usize, const KC: usize> {
     pub steps: u32,
 }
 
-#[derive(Clone, Copy)]
-struct State<const KS: usize, const KC: usize> {
-    params: FitParams<KS, KC>,
+/// A chain's state: the parameters with their evaluated terms (and the landmark vertices, kept
+/// so that a move that leaves the shape alone does not recompute them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChainState<const KS: usize, const KC: usize> {
+    /// The parameters.
+    pub params: FitParams<KS, KC>,
     lm: [Vec3; MAX_LANDMARKS],
-    prior: f32,
-    landmarks: LandmarkEval,
-    image: Option<ImageEval>,
+    /// Log prior.
+    pub prior: f32,
+    /// The landmark term.
+    pub landmarks: LandmarkEval,
+    /// The image term (image chain only).
+    pub image: Option<ImageEval>,
 }
 
-impl<const KS: usize, const KC: usize> State<KS, KC> {
-    fn filter_term(&self) -> f32 {
+impl<const KS: usize, const KC: usize> ChainState<KS, KC> {
+    /// Evaluates the prior and the landmark term of `params` (no image term).
+    pub fn new<I: TriIndex, P>(problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<Self, FitError> {
+        let mut lm = [[0.0f32; 3]; MAX_LANDMARKS];
+        let n = problem.model.landmark_positions(params.shape_coeffs(), &mut lm)?;
+        let cam = params.camera(problem.width, problem.height);
+        let landmarks = evaluate_landmarks(lm.get(..n).unwrap_or(&[]), &params.pose, &cam, &problem.landmarks)?;
+        Ok(Self { params: *params, lm, prior: problem.prior.log_density(params), landmarks, image: None })
+    }
+
+    /// The first stage's log density: prior plus landmarks.
+    pub fn filter_term(&self) -> f32 {
         self.prior + self.landmarks.log_likelihood
     }
 
-    fn posterior(&self) -> f32 {
+    /// The log posterior (up to a constant): the first stage's plus the image term if any.
+    pub fn log_posterior(&self) -> f32 {
         self.filter_term() + self.image.map_or(0.0, |e| e.log_likelihood)
+    }
+
+    /// The model's landmark vertices (model space) of this state's shape.
+    pub fn landmark_vertices(&self) -> &[Vec3] {
+        &self.lm
     }
 }
 
-fn check<I: TriIndex, const KS: usize, const KC: usize>(problem: &Problem<'_, I>, init: &FitParams<KS, KC>) -> Result<(), FitError> {
+fn check<I: TriIndex, P, const KS: usize, const KC: usize>(problem: &Problem<'_, I, P>, init: &FitParams<KS, KC>) -> Result<(), FitError> {
     if problem.width == 0 || problem.height == 0 {
         return Err(FitError::EmptyImage);
     }
@@ -166,27 +141,18 @@ fn check<I: TriIndex, const KS: usize, const KC: usize>(problem: &Problem<'_, I>
     Ok(())
 }
 
-fn landmark_state<I: TriIndex, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I>,
-    params: &FitParams<KS, KC>,
-) -> Result<State<KS, KC>, FitError> {
-    let mut lm = [[0.0f32; 3]; MAX_LANDMARKS];
-    let n = problem.model.landmark_positions(params.shape_coeffs(), &mut lm)?;
-    let cam = params.camera(problem.width, problem.height);
-    let landmarks = evaluate_landmarks(lm.get(..n).unwrap_or(&[]), &params.pose, &cam, &problem.landmarks)?;
-    Ok(State { params: *params, lm, prior: problem.prior.log_density(params), landmarks, image: None })
-}
-
-/// Stage 1 for `prop` drawn from `cur`: prior and landmarks (recomputing landmark positions only
-/// after a shape change). `Ok(None)`: rejected.
-fn filter_stage<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I>,
-    cur: &State<KS, KC>,
+/// The first stage for `prop`, drawn by `proposal` from `cur`: prior and landmarks (recomputing
+/// landmark vertices only after a shape change), accepted with
+/// `min(1, exp(filter_term(x') − filter_term(x) + hastings))`. Draws one uniform from `rng`
+/// first, whatever the outcome. `Ok(None)`: rejected.
+pub fn filter_stage<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    cur: &ChainState<KS, KC>,
     prop: &FitParams<KS, KC>,
-    kind: ProposalKind,
+    proposal: &Q,
     hastings: f32,
     rng: &mut R,
-) -> Result<Option<State<KS, KC>>, FitError> {
+) -> Result<Option<ChainState<KS, KC>>, FitError> {
     let u = libm::logf(uniform_open0(rng));
     if hastings == f32::NEG_INFINITY {
         return Ok(None);
@@ -195,11 +161,11 @@ fn filter_stage<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
     if prior == f32::NEG_INFINITY {
         return Ok(None);
     }
-    let mut next = State { params: *prop, lm: cur.lm, prior, landmarks: cur.landmarks, image: cur.image };
-    if kind.changes_shape() {
+    let mut next = ChainState { params: *prop, lm: cur.lm, prior, landmarks: cur.landmarks, image: cur.image };
+    if proposal.changes_shape() {
         problem.model.landmark_positions(prop.shape_coeffs(), &mut next.lm)?;
     }
-    if kind.changes_geometry() {
+    if proposal.changes_geometry() {
         let n = problem.model.landmarks().len();
         let cam = prop.camera(problem.width, problem.height);
         next.landmarks = evaluate_landmarks(next.lm.get(..n).unwrap_or(&[]), &prop.pose, &cam, &problem.landmarks)?;
@@ -208,96 +174,256 @@ fn filter_stage<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
     Ok(if u < log_a { Some(next) } else { None })
 }
 
-fn pick<R: Rng + ?Sized>(mixture: &Mixture, rng: &mut R) -> Result<usize, FitError> {
-    mixture.choose(uniform(rng)).ok_or(FitError::BadConfig)
+/// The stage after the prior-and-landmark filter: nothing (the landmark chain) or the rendered
+/// image term (the image chain, [`RenderedImage`]).
+pub trait SecondStage<I: TriIndex, P, const KS: usize, const KC: usize> {
+    /// Whether there is a second stage: the Hastings term then goes to it (see the module docs).
+    fn active(&self) -> bool;
+
+    /// The second stage's term of the chain's start (`None` without a second stage).
+    fn start(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<Option<ImageEval>, FitError>;
+
+    /// The least-squares light of `cur` for a proposal that needs one (`None` if unavailable).
+    fn light_solution<R: Rng + ?Sized>(&mut self, problem: &Problem<'_, I, P>, cur: &ChainState<KS, KC>, rng: &mut R) -> Option<ShLight>;
+
+    /// The second stage's term of a proposal that passed the filter (an error rejects it).
+    fn evaluate(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<ImageEval, FitError>;
 }
 
-fn result<const KS: usize, const KC: usize>(
-    best: &State<KS, KC>,
-    last: &State<KS, KC>,
-    acceptance: Acceptance,
-    steps: u32,
-) -> FitResult<KS, KC> {
-    FitResult {
-        best: best.params,
-        best_log_posterior: best.posterior(),
-        best_landmarks: best.landmarks,
-        best_image: best.image,
-        last: last.params,
-        last_log_posterior: last.posterior(),
-        acceptance,
-        steps,
+/// No second stage: the landmark chain.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LandmarksOnly;
+
+impl<I: TriIndex, P, const KS: usize, const KC: usize> SecondStage<I, P, KS, KC> for LandmarksOnly {
+    fn active(&self) -> bool {
+        false
+    }
+
+    fn start(&mut self, _: &Problem<'_, I, P>, _: &FitParams<KS, KC>) -> Result<Option<ImageEval>, FitError> {
+        Ok(None)
+    }
+
+    fn light_solution<R: Rng + ?Sized>(&mut self, _: &Problem<'_, I, P>, _: &ChainState<KS, KC>, _: &mut R) -> Option<ShLight> {
+        None
+    }
+
+    fn evaluate(&mut self, _: &Problem<'_, I, P>, _: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
+        Err(FitError::BadConfig)
     }
 }
 
-/// Runs `steps` Metropolis-Hastings steps on `prior × landmarks` from `init`: no rendering, no
-/// per-vertex buffers (the landmark vertices are computed alone).
-pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I>,
-    init: &FitParams<KS, KC>,
-    steps: u32,
-    rng: &mut R,
-) -> Result<FitResult<KS, KC>, FitError> {
-    landmark_chain_observed(problem, init, steps, rng, |_| {})
+/// The image term as the second stage: renders through `raster` into the likelihood sink, the
+/// per-vertex work cached in `instance`.
+pub struct RenderedImage<'p, 'd, 'i, 'm, 'r, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize> {
+    /// The target and the likelihood's terms.
+    pub image: &'p ImageProblem<'d, L, B>,
+    /// The per-vertex buffers.
+    pub instance: &'i mut Instance<'m, KS, KC>,
+    /// The rasterizer.
+    pub raster: &'r mut TileRasterizer<TW, TH, BIN>,
 }
 
-/// [`landmark_chain`], calling `on_step(done)` with the number of finished steps before each
-/// step and once at the end (for progress reports).
-pub fn landmark_chain_observed<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I>,
+impl<I: TriIndex, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize> SecondStage<I, P, KS, KC>
+    for RenderedImage<'_, '_, '_, '_, '_, L, B, KS, KC, TW, TH, BIN>
+where
+    L: PixelLikelihood + Copy,
+    B: BackgroundLikelihood,
+{
+    fn active(&self) -> bool {
+        true
+    }
+
+    fn start(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<Option<ImageEval>, FitError> {
+        render_eval(problem, self.image, params, self.instance, self.raster).map(Some)
+    }
+
+    fn light_solution<R: Rng + ?Sized>(&mut self, problem: &Problem<'_, I, P>, cur: &ChainState<KS, KC>, rng: &mut R) -> Option<ShLight> {
+        let offset = (rng.next_u32() as usize) % self.image.light_solve.stride;
+        let cfg = LightSolveConfig { offset, ..self.image.light_solve };
+        let cam = cur.params.camera(problem.width, problem.height);
+        // The instance may hold a rejected proposal: bring it back to the current state.
+        self.instance.update(&problem.model, &cur.params, problem.width, problem.height).ok()?;
+        let inst = &*self.instance;
+        solve_light(inst.positions(), inst.normals(), inst.albedos(), &cur.params.pose, &cam, &self.image.image, &cfg).ok()
+    }
+
+    fn evaluate(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
+        render_eval(problem, self.image, params, self.instance, self.raster)
+    }
+}
+
+fn pick<R: Rng + ?Sized, P>(mixture: &Mixture<P>, rng: &mut R) -> Result<usize, FitError> {
+    mixture.choose(uniform(rng)).ok_or(FitError::BadConfig)
+}
+
+/// One step's decision after the proposal drew `prop` with Hastings term `h`.
+#[allow(clippy::too_many_arguments)]
+fn decide<R: Rng + ?Sized, I: TriIndex, P: Proposal, S: SecondStage<I, P, KS, KC>, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    stage: &mut S,
+    cur: &mut ChainState<KS, KC>,
+    prop: &FitParams<KS, KC>,
+    proposal: &P,
+    h: f32,
+    rng: &mut R,
+) -> Result<StepOutcome, FitError> {
+    if !stage.active() {
+        return Ok(match filter_stage(problem, cur, prop, proposal, h, rng)? {
+            Some(next) => {
+                *cur = next;
+                StepOutcome::Accepted
+            }
+            None if h == f32::NEG_INFINITY => StepOutcome::Impossible,
+            None => StepOutcome::RejectedByFilter,
+        });
+    }
+    if h == f32::NEG_INFINITY {
+        return Ok(StepOutcome::Impossible);
+    }
+    // The Hastings term goes to the second stage (see the module docs).
+    let Some(mut next) = filter_stage(problem, cur, prop, proposal, 0.0, rng)? else {
+        return Ok(StepOutcome::RejectedByFilter);
+    };
+    let u = libm::logf(uniform_open0(rng));
+    // A proposal the renderer refuses (e.g. non-finite positions) is rejected, not an error:
+    // the start was rendered, so the inputs themselves are sound.
+    let accepted = match stage.evaluate(problem, &next.params) {
+        Ok(e) => {
+            let old = cur.image.map_or(0.0, |c| c.log_likelihood);
+            next.image = Some(e);
+            u < e.log_likelihood - old + h
+        }
+        Err(_) => false,
+    };
+    Ok(if accepted {
+        *cur = next;
+        StepOutcome::Accepted
+    } else {
+        StepOutcome::RejectedByImage
+    })
+}
+
+/// The Metropolis-Hastings / delayed-acceptance loop: `steps` steps from `init`, the first stage
+/// prior and landmarks, then `stage`. `observer` sees progress and every proposal's outcome.
+pub fn run_chain<R, I, P, S, O, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    stage: &mut S,
     init: &FitParams<KS, KC>,
     steps: u32,
     rng: &mut R,
-    mut on_step: impl FnMut(u32),
-) -> Result<FitResult<KS, KC>, FitError> {
+    mut observer: O,
+) -> Result<FitResult<KS, KC>, FitError>
+where
+    R: Rng + ?Sized,
+    I: TriIndex,
+    P: Proposal,
+    S: SecondStage<I, P, KS, KC>,
+    O: ChainObserver,
+{
     check(problem, init)?;
-    let ctx = ProposalContext { pivot: landmark_pivot(&problem.model, Some(&problem.landmarks))?, light_solution: None };
-    let mut cur = landmark_state(problem, init)?;
-    if !cur.posterior().is_finite() {
+    let mut ctx = ProposalContext { pivot: landmark_pivot(&problem.model, Some(&problem.landmarks))?, light_solution: None };
+    let mut cur = ChainState::new(problem, init)?;
+    cur.image = stage.start(problem, init)?;
+    if !cur.log_posterior().is_finite() {
         return Err(FitError::ImpossibleStart);
+    }
+    for (id, e) in problem.mixture.entries().iter().enumerate() {
+        observer.component(id, e.proposal.name());
     }
     let mut best = cur;
     let mut acc = Acceptance::new();
     let mut prop = *init;
     for step in 0..steps {
-        on_step(step);
+        observer.progress(step);
         let id = pick(problem.mixture, rng)?;
         let Some(entry) = problem.mixture.entries().get(id) else { return Err(FitError::BadConfig) };
-        let h = propose(entry, &cur.params, &ctx, rng, &mut prop);
-        let next = filter_stage(problem, &cur, &prop, entry.kind, h, rng)?;
-        acc.count(id, next.is_some(), next.is_some());
-        if let Some(n) = next {
-            cur = n;
-            if cur.posterior() > best.posterior() {
-                best = cur;
-            }
+        let proposal = &entry.proposal;
+        ctx.light_solution = if proposal.needs_light_solution() { stage.light_solution(problem, &cur, rng) } else { None };
+        let h = proposal.propose(&cur.params, &ctx, rng, &mut prop);
+        let outcome = decide(problem, stage, &mut cur, &prop, proposal, h, rng)?;
+        if outcome.accepted() && cur.log_posterior() > best.log_posterior() {
+            best = cur;
         }
+        let report = ProposalStep { step, id, name: proposal.name(), outcome, log_posterior: cur.log_posterior() };
+        acc.proposal(&report);
+        observer.proposal(&report);
     }
-    on_step(steps);
-    Ok(result(&best, &cur, acc, steps))
+    observer.progress(steps);
+    Ok(FitResult {
+        best: best.params,
+        best_log_posterior: best.log_posterior(),
+        best_landmarks: best.landmarks,
+        best_image: best.image,
+        last: cur.params,
+        last_log_posterior: cur.log_posterior(),
+        acceptance: acc,
+        steps,
+    })
 }
 
-fn render_eval<I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
-    problem: &Problem<'_, I>,
-    image: &ImageProblem<'_>,
+/// Runs `steps` Metropolis-Hastings steps on `prior × landmarks` from `init`: no rendering, no
+/// per-vertex buffers (the landmark vertices are computed alone).
+pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, P: Proposal, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    init: &FitParams<KS, KC>,
+    steps: u32,
+    rng: &mut R,
+) -> Result<FitResult<KS, KC>, FitError> {
+    run_chain(problem, &mut LandmarksOnly, init, steps, rng, NoObserver)
+}
+
+/// [`landmark_chain`], calling `on_step(done)` with the number of finished steps before each
+/// step and once at the end (for progress reports).
+pub fn landmark_chain_observed<R: Rng + ?Sized, I: TriIndex, P: Proposal, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    init: &FitParams<KS, KC>,
+    steps: u32,
+    rng: &mut R,
+    on_step: impl FnMut(u32),
+) -> Result<FitResult<KS, KC>, FitError> {
+    run_chain(problem, &mut LandmarksOnly, init, steps, rng, Progress(on_step))
+}
+
+/// [`landmark_chain`] with an observer that sees progress and every proposal's outcome.
+pub fn landmark_chain_with<R: Rng + ?Sized, I: TriIndex, P: Proposal, O: ChainObserver, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    init: &FitParams<KS, KC>,
+    steps: u32,
+    rng: &mut R,
+    observer: O,
+) -> Result<FitResult<KS, KC>, FitError> {
+    run_chain(problem, &mut LandmarksOnly, init, steps, rng, observer)
+}
+
+fn render_eval<I: TriIndex, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    problem: &Problem<'_, I, P>,
+    image: &ImageProblem<'_, L, B>,
     params: &FitParams<KS, KC>,
     instance: &mut Instance<'_, KS, KC>,
     raster: &mut TileRasterizer<TW, TH, BIN>,
-) -> Result<ImageEval, FitError> {
+) -> Result<ImageEval, FitError>
+where
+    L: PixelLikelihood + Copy,
+    B: BackgroundLikelihood,
+{
     instance.update(&problem.model, params, problem.width, problem.height)?;
-    let mut sink = ImageLikelihood::new(image.image, image.background, image.sigma)?;
+    let mut sink = ImageLikelihood::with_terms(image.image, image.pixel, image.background);
     raster.render(instance.projected(), problem.model.triangles(), problem.width, problem.height, Cull::Clockwise, &mut sink)?;
     Ok(sink.eval())
 }
 
 /// Evaluates the image term of `params` alone (renders once).
-pub fn image_log_likelihood<I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
-    problem: &Problem<'_, I>,
-    image: &ImageProblem<'_>,
+pub fn image_log_likelihood<I: TriIndex, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    problem: &Problem<'_, I, P>,
+    image: &ImageProblem<'_, L, B>,
     params: &FitParams<KS, KC>,
     instance: &mut Instance<'_, KS, KC>,
     raster: &mut TileRasterizer<TW, TH, BIN>,
-) -> Result<ImageEval, FitError> {
+) -> Result<ImageEval, FitError>
+where
+    L: PixelLikelihood + Copy,
+    B: BackgroundLikelihood,
+{
     if image.image.width() != problem.width || image.image.height() != problem.height {
         return Err(FitError::LengthMismatch);
     }
@@ -307,40 +433,70 @@ pub fn image_log_likelihood<I: TriIndex, const KS: usize, const KC: usize, const
 /// Runs `steps` delayed-acceptance steps on `prior × landmarks × image` from `init`, rendering
 /// each proposal that passes the prior-and-landmark stage through `raster` into the likelihood
 /// sink, with the per-vertex work cached in `instance`.
-pub fn image_chain<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
-    problem: &Problem<'_, I>,
-    image: &ImageProblem<'_>,
+#[allow(clippy::too_many_arguments)]
+pub fn image_chain<R, I, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    problem: &Problem<'_, I, P>,
+    image: &ImageProblem<'_, L, B>,
     init: &FitParams<KS, KC>,
     steps: u32,
     instance: &mut Instance<'_, KS, KC>,
     raster: &mut TileRasterizer<TW, TH, BIN>,
     rng: &mut R,
-) -> Result<FitResult<KS, KC>, FitError> {
-    image_chain_observed(problem, image, init, steps, instance, raster, rng, |_| {})
+) -> Result<FitResult<KS, KC>, FitError>
+where
+    R: Rng + ?Sized,
+    I: TriIndex,
+    P: Proposal,
+    L: PixelLikelihood + Copy,
+    B: BackgroundLikelihood,
+{
+    image_chain_with(problem, image, init, steps, instance, raster, rng, NoObserver)
 }
 
 /// [`image_chain`], calling `on_step(done)` with the number of finished steps before each step
 /// and once at the end: progress reports without restarting the chain (a restart re-renders
 /// its start).
 #[allow(clippy::too_many_arguments)]
-pub fn image_chain_observed<
-    R: Rng + ?Sized,
-    I: TriIndex,
-    const KS: usize,
-    const KC: usize,
-    const TW: usize,
-    const TH: usize,
-    const BIN: usize,
->(
-    problem: &Problem<'_, I>,
-    image: &ImageProblem<'_>,
+pub fn image_chain_observed<R, I, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    problem: &Problem<'_, I, P>,
+    image: &ImageProblem<'_, L, B>,
     init: &FitParams<KS, KC>,
     steps: u32,
     instance: &mut Instance<'_, KS, KC>,
     raster: &mut TileRasterizer<TW, TH, BIN>,
     rng: &mut R,
-    mut on_step: impl FnMut(u32),
-) -> Result<FitResult<KS, KC>, FitError> {
+    on_step: impl FnMut(u32),
+) -> Result<FitResult<KS, KC>, FitError>
+where
+    R: Rng + ?Sized,
+    I: TriIndex,
+    P: Proposal,
+    L: PixelLikelihood + Copy,
+    B: BackgroundLikelihood,
+{
+    image_chain_with(problem, image, init, steps, instance, raster, rng, Progress(on_step))
+}
+
+/// [`image_chain`] with an observer that sees progress and every proposal's outcome.
+#[allow(clippy::too_many_arguments)]
+pub fn image_chain_with<R, I, P, L, B, O, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    problem: &Problem<'_, I, P>,
+    image: &ImageProblem<'_, L, B>,
+    init: &FitParams<KS, KC>,
+    steps: u32,
+    instance: &mut Instance<'_, KS, KC>,
+    raster: &mut TileRasterizer<TW, TH, BIN>,
+    rng: &mut R,
+    observer: O,
+) -> Result<FitResult<KS, KC>, FitError>
+where
+    R: Rng + ?Sized,
+    I: TriIndex,
+    P: Proposal,
+    L: PixelLikelihood + Copy,
+    B: BackgroundLikelihood,
+    O: ChainObserver,
+{
     check(problem, init)?;
     if image.image.width() != problem.width || image.image.height() != problem.height {
         return Err(FitError::LengthMismatch);
@@ -348,60 +504,5 @@ pub fn image_chain_observed<
     if image.light_solve.stride == 0 {
         return Err(FitError::BadConfig);
     }
-    let mut ctx = ProposalContext { pivot: landmark_pivot(&problem.model, Some(&problem.landmarks))?, light_solution: None };
-    let mut cur = landmark_state(problem, init)?;
-    cur.image = Some(render_eval(problem, image, init, instance, raster)?);
-    if !cur.posterior().is_finite() {
-        return Err(FitError::ImpossibleStart);
-    }
-    let mut best = cur;
-    let mut acc = Acceptance::new();
-    let mut prop = *init;
-    for step in 0..steps {
-        on_step(step);
-        let id = pick(problem.mixture, rng)?;
-        let Some(entry) = problem.mixture.entries().get(id) else { return Err(FitError::BadConfig) };
-        ctx.light_solution = None;
-        if entry.kind == ProposalKind::LightSolve {
-            let offset = (rng.next_u32() as usize) % image.light_solve.stride;
-            let cfg = LightSolveConfig { offset, ..image.light_solve };
-            let cam = cur.params.camera(problem.width, problem.height);
-            // The instance may hold a rejected proposal: bring it back to the current state.
-            if instance.update(&problem.model, &cur.params, problem.width, problem.height).is_ok() {
-                let solved =
-                    solve_light(instance.positions(), instance.normals(), instance.albedos(), &cur.params.pose, &cam, &image.image, &cfg);
-                ctx.light_solution = solved.ok();
-            }
-        }
-        let h = propose(entry, &cur.params, &ctx, rng, &mut prop);
-        if h == f32::NEG_INFINITY {
-            acc.count(id, false, false);
-            continue;
-        }
-        // The Hastings term goes to the second stage (see the module docs).
-        let Some(mut next) = filter_stage(problem, &cur, &prop, entry.kind, 0.0, rng)? else {
-            acc.count(id, false, false);
-            continue;
-        };
-        let u = libm::logf(uniform_open0(rng));
-        // A proposal the renderer refuses (e.g. non-finite positions) is rejected, not an error:
-        // the start was rendered, so the inputs themselves are sound.
-        let accepted = match render_eval(problem, image, &next.params, instance, raster) {
-            Ok(e) => {
-                let old = cur.image.map_or(0.0, |c| c.log_likelihood);
-                next.image = Some(e);
-                u < e.log_likelihood - old + h
-            }
-            Err(_) => false,
-        };
-        acc.count(id, true, accepted);
-        if accepted {
-            cur = next;
-            if cur.posterior() > best.posterior() {
-                best = cur;
-            }
-        }
-    }
-    on_step(steps);
-    Ok(result(&best, &cur, acc, steps))
+    run_chain(problem, &mut RenderedImage { image, instance, raster }, init, steps, rng, observer)
 }

@@ -1,13 +1,8 @@
-//! Image likelihood: Gaussian foreground against a colour-histogram background, as a [`TileSink`].
-//!
-//! For every pixel the model covers, `log N(I | R, σ² I₃) − log b(I)` is added (I: target colour,
-//! R: rendered colour, b: the background density of the target's colour); uncovered pixels add 0.
-//! This is the foreground/background likelihood ratio of Schönborn et al. (2017): the whole image
-//! is explained, by the face where it is drawn and by the background model elsewhere, and the
-//! background terms of uncovered pixels cancel in every Metropolis-Hastings ratio.
+//! The target image, its colour-histogram background model and the result of one image
+//! evaluation. The likelihood itself (pixel and background terms composed into a [`crate::tile::TileSink`])
+//! is in [`super::likelihood`].
 
 use super::FitError;
-use crate::tile::{Tile, TileSink, NO_TRIANGLE};
 use crate::Vec3;
 
 /// The foreground σ of Schönborn et al. on colours in [0, 1].
@@ -35,7 +30,7 @@ impl<'a> TargetImage<'a> {
         if (width as usize).checked_mul(height as usize) != Some(pixels.len()) {
             return Err(FitError::LengthMismatch);
         }
-        if width > crate::raster::MAX_IMAGE_SIZE || height > crate::raster::MAX_IMAGE_SIZE {
+        if width > crate::render::raster::MAX_IMAGE_SIZE || height > crate::render::raster::MAX_IMAGE_SIZE {
             return Err(FitError::BadConfig);
         }
         Ok(Self { pixels, width, height })
@@ -76,7 +71,7 @@ impl<'a> TargetImage<'a> {
     }
 }
 
-fn to_linear(p: [u8; 3]) -> Vec3 {
+pub(crate) fn to_linear(p: [u8; 3]) -> Vec3 {
     p.map(|c| f32::from(c) * (1.0 / 255.0))
 }
 
@@ -145,68 +140,6 @@ impl ImageEval {
     }
 }
 
-/// A [`TileSink`] accumulating the image likelihood while the model is rendered.
-#[derive(Debug)]
-pub struct ImageLikelihood<'a, 'b> {
-    image: TargetImage<'a>,
-    background: &'b BackgroundModel,
-    inv_two_var: f32,
-    log_norm: f32,
-    sum: f64,
-    sq: f64,
-    covered: u32,
-}
-
-impl<'a, 'b> ImageLikelihood<'a, 'b> {
-    /// A sink comparing renders with `image`, foreground σ `sigma` (> 0).
-    pub fn new(image: TargetImage<'a>, background: &'b BackgroundModel, sigma: f32) -> Result<Self, FitError> {
-        if !(sigma > 0.0 && sigma.is_finite()) {
-            return Err(FitError::BadConfig);
-        }
-        let log_norm = -3.0 * libm::logf(sigma * libm::sqrtf(core::f32::consts::TAU));
-        Ok(Self { image, background, inv_two_var: 0.5 / (sigma * sigma), log_norm, sum: 0.0, sq: 0.0, covered: 0 })
-    }
-
-    /// Clears the sums before the next frame.
-    pub fn reset(&mut self) {
-        self.sum = 0.0;
-        self.sq = 0.0;
-        self.covered = 0;
-    }
-
-    /// The sums of the frame(s) consumed since the last reset.
-    pub fn eval(&self) -> ImageEval {
-        let ll = self.sum as f32;
-        ImageEval { log_likelihood: if ll.is_nan() { f32::NEG_INFINITY } else { ll }, covered: self.covered, sq_err: self.sq as f32 }
-    }
-}
-
-impl<const TW: usize, const TH: usize> TileSink<TW, TH> for ImageLikelihood<'_, '_> {
-    fn consume(&mut self, tile: &Tile<TW, TH>) {
-        let (x0, y0) = tile.origin();
-        let (w, h) = tile.size();
-        let (mut sum, mut sq, mut covered) = (0.0f32, 0.0f32, 0u32);
-        for ((tri_row, col_row), y) in tile.triangles().iter().zip(tile.colors()).zip(y0..y0 + h) {
-            let Some(target_row) = self.image.row(y) else { continue };
-            let Some(target_row) = target_row.get(x0 as usize..) else { continue };
-            for ((t, c), p) in tri_row.iter().zip(col_row).zip(target_row).take(w as usize) {
-                if *t == NO_TRIANGLE {
-                    continue;
-                }
-                let i = to_linear(*p);
-                let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
-                let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
-                sq += d2sum;
-                sum += self.log_norm - d2sum * self.inv_two_var - self.background.log_density(*p);
-                covered += 1;
-            }
-        }
-        self.sum += f64::from(sum);
-        self.sq += f64::from(sq);
-        self.covered = self.covered.saturating_add(covered);
-    }
-}
-
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
@@ -220,7 +153,7 @@ mod tests {
         let img = TargetImage::new(&px, 3, 2).unwrap();
         assert_eq!(BackgroundModel::from_image(&img, 0.0).err(), Some(FitError::BadConfig));
         let bg = BackgroundModel::uniform();
-        assert_eq!(ImageLikelihood::new(img, &bg, f32::NAN).err(), Some(FitError::BadConfig));
+        assert_eq!(super::super::ImageLikelihood::new(img, &bg, f32::NAN).err(), Some(FitError::BadConfig));
         assert_eq!(img.pixel(3, 0), None);
         assert_eq!(img.sample(-0.5, 0.0), None);
     }

@@ -1,11 +1,11 @@
 //! A starting point for the chains from the target landmarks alone.
 
 use super::landmarks::{LandmarkTarget, MAX_LANDMARKS};
-use super::morph::MorphableModel;
 use super::params::FitParams;
 use super::FitError;
-use crate::pose::mat_vec;
-use crate::shading::TriIndex;
+use crate::model::morphable::MorphableModel;
+use crate::render::pose::mat_vec;
+use crate::render::shading::TriIndex;
 use crate::{Pose, ShLight, Vec3};
 
 /// Centroid of the mean shape's landmarks selected by the target's validity mask (all if none match).

@@ -133,7 +133,7 @@ pub fn evaluate_landmarks(positions: &[Vec3], pose: &Pose, camera: &Camera, targ
     let mut weighted = 0.0f32;
     let mut count = 0u32;
     for (i, ((p, tp), _)) in positions.iter().zip(target.points).zip(target.valid).enumerate().filter(|(_, (_, &v))| v) {
-        let q = crate::pose::mat_vec(&r, *p);
+        let q = crate::render::pose::mat_vec(&r, *p);
         let Some(s) = camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) else {
             return Ok(LandmarkEval { log_likelihood: f32::NEG_INFINITY, sq_err: f32::INFINITY, count: count + 1 });
         };

@@ -8,8 +8,8 @@
 
 use super::image::TargetImage;
 use super::FitError;
-use crate::light::{lambert_basis, SH_COEFFS};
-use crate::pose::mat_vec;
+use crate::render::light::{lambert_basis, SH_COEFFS};
+use crate::render::pose::mat_vec;
 use crate::{Camera, Pose, ShLight, Vec3};
 
 /// How vertices are sampled and the system regularized.

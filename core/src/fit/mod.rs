@@ -2,9 +2,13 @@
 //!
 //! The pieces, one module each:
 //! - [`params`]: the parameter vector ([`FitParams`]: pose, focal length, SH light, coefficients).
-//! - [`morph`]: the borrowed [`MorphableModel`] view and the cached per-vertex [`Instance`].
-//! - [`prior`], [`landmarks`], [`image`]: log prior, landmark and image log likelihoods.
-//! - [`proposal`]: the coarse-to-fine mixture of Gaussian drift proposals.
+//! - [`crate::model::morphable`] (re-exported as `morph`): the borrowed [`MorphableModel`] view and the cached per-vertex [`Instance`].
+//! - [`prior`], [`landmarks`]: log prior and landmark log likelihood.
+//! - [`image`], [`likelihood`]: the target image and background model; the image likelihood
+//!   composed from a [`PixelLikelihood`] and a [`BackgroundLikelihood`].
+//! - [`proposal`]: the [`Proposal`] trait, weighted mixtures, and the built-in coarse-to-fine
+//!   Gaussian drift proposals.
+//! - [`observer`]: [`ChainObserver`]s that see every proposal's outcome ([`Acceptance`] counts).
 //! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
 //! - [`chain`]: Metropolis-Hastings with delayed acceptance (prior and landmarks, then the image).
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
@@ -18,25 +22,30 @@ pub mod image;
 pub mod init;
 pub mod landmarks;
 pub mod light_fit;
-pub mod morph;
+pub mod likelihood;
 pub mod normal;
+pub mod observer;
 pub mod params;
 pub mod prior;
 pub mod proposal;
 pub mod recipe;
 
+/// The morphable-model view under its old path (`gpmm_core::fit::morph`); it lives in [`crate::model`].
+pub use crate::model::morphable as morph;
+pub use crate::model::morphable::{Instance, InstanceBuffers, MorphableModel};
 pub use chain::{
-    image_chain, image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, Acceptance, FitResult, ImageProblem,
-    Problem,
+    filter_stage, image_chain, image_chain_observed, image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_observed,
+    landmark_chain_with, run_chain, ChainState, FitResult, ImageProblem, LandmarksOnly, Problem, RenderedImage, SecondStage,
 };
-pub use image::{BackgroundModel, ImageEval, ImageLikelihood, TargetImage, DEFAULT_PIXEL_SIGMA};
+pub use image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use init::{initial_guess, landmark_pivot};
 pub use landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
 pub use light_fit::{solve_light, LightSolveConfig};
-pub use morph::{Instance, InstanceBuffers, MorphableModel};
+pub use likelihood::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
+pub use observer::{Acceptance, ChainObserver, NoObserver, Progress, ProposalStep, StepOutcome};
 pub use params::FitParams;
 pub use prior::Prior;
-pub use proposal::{propose, Mixture, Proposal, ProposalContext, ProposalKind, Scale, MAX_PROPOSALS};
+pub use proposal::{Mixture, MixtureEntry, OneOf, Proposal, ProposalContext, ProposalKind, Scale, StandardProposal, MAX_PROPOSALS};
 pub use recipe::{project_landmarks, standard_fit, FitObserver, FitSettings, Stage, StandardFit};
 
 use crate::{ModelError, RasterError, VertexError};

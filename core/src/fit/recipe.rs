@@ -18,19 +18,19 @@
 //!
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
-use super::chain::{
-    image_chain_observed, image_log_likelihood, landmark_chain, landmark_chain_observed, Acceptance, FitResult, ImageProblem, Problem,
-};
+use super::chain::{image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, FitResult, ImageProblem, Problem};
 use super::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
 use super::light_fit::{solve_light, LightSolveConfig};
-use super::morph::{Instance, MorphableModel};
+use super::likelihood::GaussianPixel;
+use super::observer::{Acceptance, ChainObserver, ProposalStep};
 use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::Mixture;
 use super::FitError;
-use crate::shading::TriIndex;
+use crate::model::morphable::{Instance, MorphableModel};
+use crate::render::shading::TriIndex;
 use crate::{ShLight, TileRasterizer};
 use rand_core::Rng;
 
@@ -122,10 +122,45 @@ pub enum Stage {
 }
 
 /// Receives progress: `step(stage, done, total)` before each step of a chain and once with
-/// `done == total` when it ends (the firmware reads its instruction counter here).
+/// `done == total` when it ends (the firmware reads its instruction counter here), and every
+/// proposal's outcome (`proposal`, by default ignored).
 pub trait FitObserver {
-    /// One report.
+    /// One progress report.
     fn step(&mut self, stage: Stage, done: u32, total: u32);
+
+    /// One mixture component of a chain of `stage`, before its first step (see
+    /// [`ChainObserver::component`]).
+    fn component(&mut self, _stage: Stage, _id: usize, _name: &'static str) {}
+
+    /// One proposal of a chain of `stage` (both landmark phases report [`Stage::LandmarkChain`]).
+    fn proposal(&mut self, _stage: Stage, _step: &ProposalStep) {}
+}
+
+/// A [`FitObserver`] seen by one chain (or one phase of the landmark chain): progress is shifted
+/// by `offset` steps of `total`, reported only below `steps` (and at the end if `report_end`).
+struct PhaseObserver<'o> {
+    observer: &'o mut dyn FitObserver,
+    stage: Stage,
+    offset: u32,
+    total: u32,
+    steps: u32,
+    report_end: bool,
+}
+
+impl ChainObserver for PhaseObserver<'_> {
+    fn component(&mut self, id: usize, name: &'static str) {
+        self.observer.component(self.stage, id, name)
+    }
+
+    fn progress(&mut self, done: u32) {
+        if done < self.steps || self.report_end {
+            self.observer.step(self.stage, self.offset + done, self.total)
+        }
+    }
+
+    fn proposal(&mut self, step: &ProposalStep) {
+        self.observer.proposal(self.stage, step)
+    }
 }
 
 impl<F: FnMut(Stage, u32, u32)> FitObserver for F {
@@ -194,7 +229,12 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
 
     // 3. The least-squares light of its best sample (kept only if the solve succeeds).
     let background = BackgroundModel::from_image(&image, settings.background_floor)?;
-    let ip = ImageProblem { image, background: &background, sigma: settings.pixel_sigma, light_solve: LightSolveConfig::default() };
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(settings.pixel_sigma)?,
+        background: &background,
+        light_solve: LightSolveConfig::default(),
+    };
     let mut start = landmark.best;
     instance.update(model, &start, w, h)?;
     let every_vertex = LightSolveConfig { stride: 1, ..LightSolveConfig::default() };
@@ -211,9 +251,8 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
     let img_steps = settings.image_steps;
-    let image = image_chain_observed(&problem, &ip, &start, img_steps, instance, raster, rng, |done| {
-        observer.step(Stage::ImageChain, done, img_steps)
-    })?;
+    let phase = PhaseObserver { observer, stage: Stage::ImageChain, offset: 0, total: img_steps, steps: img_steps, report_end: true };
+    let image = image_chain_with(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
     Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
 }
 
@@ -246,16 +285,14 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     let total = settings.landmark_steps;
     // The pose phase's share, rounded down (f32 → u32 saturates; the share is checked to be ≤ 1).
     let pose_steps = ((total as f32 * settings.pose_share) as u32).min(total);
-    let pose = landmark_chain_observed(&pose_problem, init, pose_steps, rng, |done| {
-        if done < pose_steps {
-            observer.step(Stage::LandmarkChain, done, total)
-        }
-    })?;
+    let phase =
+        PhaseObserver { observer: &mut *observer, stage: Stage::LandmarkChain, offset: 0, total, steps: pose_steps, report_end: false };
+    let pose = landmark_chain_with(&pose_problem, init, pose_steps, rng, phase)?;
     let shape_mix = Mixture::landmark_shape(w.max(h) as f32);
     let shape_problem = Problem { landmarks: lm, mixture: &shape_mix, ..pose_problem };
-    let landmark = landmark_chain_observed(&shape_problem, &pose.best, total - pose_steps, rng, |done| {
-        observer.step(Stage::LandmarkChain, pose_steps + done, total)
-    })?;
+    let shape_steps = total - pose_steps;
+    let phase = PhaseObserver { observer, stage: Stage::LandmarkChain, offset: pose_steps, total, steps: shape_steps, report_end: true };
+    let landmark = landmark_chain_with(&shape_problem, &pose.best, shape_steps, rng, phase)?;
     Ok((pose.acceptance, landmark))
 }
 

@@ -17,15 +17,14 @@
 //! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
 
 pub mod bench;
+mod observe;
 pub mod register;
 
 use crate::gp::model::GpModel;
 use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, HostRasterizer, ImageSink};
-use gpmm_core::fit::{
-    standard_fit, Acceptance, FitError, FitParams, Instance, InstanceBuffers, Mixture, MorphableModel, Stage, TargetImage, MAX_LANDMARKS,
-};
+use gpmm_core::fit::{standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, TargetImage, MAX_LANDMARKS};
 use gpmm_core::{Cull, ProjectedVertex};
 use image::{RgbImage, Rgba, RgbaImage};
 use rand::SeedableRng;
@@ -70,10 +69,6 @@ pub const DEFAULT_CONTOUR_SIGMA: f32 = CoreSettings::DEFAULT.contour_sigma_facto
 pub const NOMINAL_DISTANCE_MM: f32 = CoreSettings::DEFAULT.nominal_distance_mm;
 /// Uniform floor mixed into the background colour histogram.
 pub const BACKGROUND_FLOOR: f32 = CoreSettings::DEFAULT.background_floor;
-/// Landmark-chain steps between progress reports.
-const LANDMARK_CHUNK: u32 = 1000;
-/// Image-chain steps between progress reports.
-const IMAGE_CHUNK: u32 = 25;
 
 /// Why a fit failed.
 #[derive(Debug, thiserror::Error)]
@@ -215,15 +210,6 @@ pub struct KindCounts {
 /// Counts per proposal kind name (`yaw`, `shape`, `light-solve`, ...).
 pub type AcceptanceReport = BTreeMap<String, KindCounts>;
 
-fn add_acceptance(report: &mut AcceptanceReport, mixture: &Mixture, acc: &Acceptance) {
-    for (i, e) in mixture.entries().iter().enumerate() {
-        let c = report.entry(e.kind.name().to_string()).or_default();
-        c.proposed += u64::from(acc.proposed.get(i).copied().unwrap_or(0));
-        c.passed += u64::from(acc.passed_filter.get(i).copied().unwrap_or(0));
-        c.accepted += u64::from(acc.accepted.get(i).copied().unwrap_or(0));
-    }
-}
-
 /// The result of [`fit_prepared`] (working-image units unless stated).
 #[derive(Debug, Clone)]
 pub struct Outcome {
@@ -294,33 +280,14 @@ pub fn fit_prepared(
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 
-    // One run of the core's standard fit; the observer reports progress and splits the time.
-    let t0 = Instant::now();
-    let mut landmark_seconds = 0.0;
-    let mut observer = |stage: Stage, done: u32, total: u32| match stage {
-        Stage::LandmarkChain => {
-            if done.is_multiple_of(LANDMARK_CHUNK) || done == total {
-                progress("landmark chain", u64::from(done), u64::from(total));
-            }
-            if done == total {
-                landmark_seconds = t0.elapsed().as_secs_f64();
-            }
-        }
-        Stage::ImageChain => {
-            if done.is_multiple_of(IMAGE_CHUNK) || done == total {
-                progress("image chain", u64::from(done), u64::from(total));
-            }
-        }
-    };
+    // One run of the core's standard fit; the observer reports progress, splits the time and
+    // counts the proposals by name.
+    let mut observer = observe::HostObserver::new(progress);
     let result = standard_fit(&mm, target, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut rng, &mut observer)
         .map_err(core("fit"))?;
-    let image_seconds = t0.elapsed().as_secs_f64() - landmark_seconds;
-    let img_mix = Mixture::image_default(w.max(h) as f32);
-    let mut landmark_acceptance = AcceptanceReport::new();
-    add_acceptance(&mut landmark_acceptance, &Mixture::landmark_pose(w.max(h) as f32), &result.pose_acceptance);
-    add_acceptance(&mut landmark_acceptance, &Mixture::landmark_shape(w.max(h) as f32), &result.landmark.acceptance);
-    let mut image_acceptance = AcceptanceReport::new();
-    add_acceptance(&mut image_acceptance, &img_mix, &result.image.acceptance);
+    let landmark_seconds = observer.landmark_seconds;
+    let image_seconds = observer.elapsed() - landmark_seconds;
+    let (landmark_acceptance, image_acceptance) = (observer.landmark, observer.image);
     let best = result.image;
     let start = result.start;
     let start_eval = result.start_image;

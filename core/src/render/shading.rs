@@ -5,9 +5,9 @@
 //! light-only change needs [`shade_vertices`] again, a pose change both [`shade_vertices`] and
 //! [`project_vertices`], and a shape change [`vertex_normals`] too ([`vertex_stage`] does all).
 
-use crate::camera::Camera;
-use crate::light::ShLight;
-use crate::pose::{mat_vec, Pose};
+use crate::render::camera::Camera;
+use crate::render::light::ShLight;
+use crate::render::pose::{mat_vec, Pose};
 use crate::Vec3;
 
 /// A vertex index type for triangle lists (`u16` on the device, `u32` on the host).

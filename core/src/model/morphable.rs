@@ -1,9 +1,9 @@
 //! The borrowed model view used by the fitter, and the cached per-vertex instance.
 
-use super::params::FitParams;
-use super::FitError;
-use crate::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, TriIndex};
-use crate::{Basis, Vec3};
+use crate::fit::params::FitParams;
+use crate::fit::FitError;
+use crate::model::basis::{Basis, Vec3};
+use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, TriIndex};
 
 /// A morphable model, borrowed: means, bases, triangles and landmark vertex ids (iBUG-68 order).
 #[derive(Debug, Clone, Copy)]
@@ -30,7 +30,7 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         if color_mean.len() != n || shape.vertices() != n || color.vertices() != n {
             return Err(FitError::LengthMismatch);
         }
-        if landmarks.len() > super::MAX_LANDMARKS {
+        if landmarks.len() > crate::fit::MAX_LANDMARKS {
             return Err(FitError::TooManyLandmarks);
         }
         if landmarks.iter().any(|&l| l as usize >= n) || triangles.iter().flatten().any(|i| i.index() >= n) {

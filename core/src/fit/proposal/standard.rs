@@ -1,4 +1,4 @@
-//! Gaussian drift proposals, coarse to fine, and their mixture (after scalismo-faces' standard fit).
+//! The built-in proposals: Gaussian drift, coarse to fine, and their mixtures (after scalismo-faces' standard fit).
 //!
 //! Every proposal changes one block of parameters and reports its log Hastings term
 //! `log q(x | x') − log q(x' | x)` (0 for the symmetric random walks):
@@ -16,16 +16,17 @@
 //! - **Light**: every SH coefficient `+= σ·ε`. **LightIntensity**: all 27 scaled by `exp(σ·ε)`,
 //!   Hastings term `27·σ·ε`.
 //! - **LightSolve**: an independence proposal around the least-squares light `L*` of the current
-//!   geometry and albedo ([`super::light_fit`]): `L' = L* + σ·ε`. `L*` depends only on parameters
+//!   geometry and albedo ([`crate::fit::light_fit`]): `L' = L* + σ·ε`. `L*` depends only on parameters
 //!   a light proposal does not change, so the reverse move draws from the same Gaussian and the
 //!   Hastings term is `log N(L; L*, σ) − log N(L'; L*, σ)`. Detailed balance holds exactly; pick σ
 //!   wider than the light posterior so a far-away current light can still be left.
 
-use super::normal::{add_normals, standard_normal};
-use super::params::FitParams;
-use super::FitError;
-use crate::pose::mat_vec;
-use crate::{ShLight, Vec3};
+use super::{Mixture, Proposal, ProposalContext};
+use crate::fit::normal::{add_normals, standard_normal};
+use crate::fit::params::FitParams;
+use crate::fit::FitError;
+use crate::render::pose::mat_vec;
+use crate::Vec3;
 use rand_core::Rng;
 
 /// Which block a proposal moves.
@@ -106,91 +107,43 @@ impl Scale {
     }
 }
 
-/// One mixture component.
+/// One built-in proposal: a kind (the block it moves), a step class and a σ (units per
+/// [`ProposalKind`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Proposal {
+pub struct StandardProposal {
     /// The block it moves.
     pub kind: ProposalKind,
     /// Its step class.
     pub scale: Scale,
-    /// Standard deviation (units per [`ProposalKind`]).
+    /// Standard deviation (units per [`ProposalKind`]; finite, > 0).
     pub sigma: f32,
-    /// Unnormalized mixture weight (≥ 0).
-    pub weight: f32,
 }
 
-/// Capacity of a [`Mixture`].
-pub const MAX_PROPOSALS: usize = 32;
-
-/// A mixture of at most [`MAX_PROPOSALS`] proposals; the index of a component is its proposal id.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Mixture {
-    entries: [Proposal; MAX_PROPOSALS],
-    len: usize,
-    total: f32,
-}
-
-const EMPTY: Proposal = Proposal { kind: ProposalKind::Shape, scale: Scale::Fine, sigma: 0.0, weight: 0.0 };
-
-impl Default for Mixture {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Mixture {
-    /// An empty mixture.
-    pub const fn new() -> Self {
-        Self { entries: [EMPTY; MAX_PROPOSALS], len: 0, total: 0.0 }
-    }
-
-    /// Adds a component (weight and σ must be finite, σ > 0, weight ≥ 0).
-    pub fn push(&mut self, p: Proposal) -> Result<(), FitError> {
-        if !(p.sigma > 0.0 && p.sigma.is_finite() && p.weight >= 0.0 && p.weight.is_finite()) {
+impl StandardProposal {
+    /// Checks σ (finite, > 0); `BadConfig` otherwise.
+    pub fn new(kind: ProposalKind, scale: Scale, sigma: f32) -> Result<Self, FitError> {
+        if !(sigma > 0.0 && sigma.is_finite()) {
             return Err(FitError::BadConfig);
         }
-        let slot = self.entries.get_mut(self.len).ok_or(FitError::BadConfig)?;
-        *slot = p;
-        self.len += 1;
-        self.total += p.weight;
-        Ok(())
+        Ok(Self { kind, scale, sigma })
+    }
+}
+
+impl Mixture<StandardProposal> {
+    /// Adds one built-in component (σ finite and > 0, weight finite and ≥ 0; `BadConfig`
+    /// otherwise or when the mixture is full).
+    pub fn push_standard(&mut self, kind: ProposalKind, scale: Scale, sigma: f32, weight: f32) -> Result<(), FitError> {
+        let p = StandardProposal::new(kind, scale, sigma)?;
+        self.push(p, weight).map_err(|_| FitError::BadConfig)
     }
 
     /// Adds coarse, intermediate and fine components of one kind with weights `share · w_i`.
     pub fn push3(&mut self, kind: ProposalKind, sigmas: [f32; 3], weights: [f32; 3], share: f32) -> Result<(), FitError> {
         let sum: f32 = weights.iter().sum();
         for ((s, w), scale) in sigmas.iter().zip(weights).zip([Scale::Coarse, Scale::Intermediate, Scale::Fine]) {
-            self.push(Proposal { kind, scale, sigma: *s, weight: share * w / sum })?;
+            self.push_standard(kind, scale, *s, share * w / sum)?;
         }
         Ok(())
-    }
-
-    /// The components.
-    pub fn entries(&self) -> &[Proposal] {
-        self.entries.get(..self.len).unwrap_or(&[])
-    }
-
-    /// Sum of the weights.
-    pub fn total_weight(&self) -> f32 {
-        self.total
-    }
-
-    /// The component for a uniform `u` in `[0, 1)` (by cumulative weight); `None` if the mixture is empty.
-    pub fn choose(&self, u: f32) -> Option<usize> {
-        let mut acc = 0.0f32;
-        let target = u * self.total;
-        let mut last = None;
-        for (i, e) in self.entries().iter().enumerate() {
-            if e.weight <= 0.0 {
-                continue;
-            }
-            acc += e.weight;
-            last = Some(i);
-            if target < acc {
-                return Some(i);
-            }
-        }
-        last
     }
 
     fn add_pose(&mut self, image_size: f32, share: f32) -> Result<(), FitError> {
@@ -254,19 +207,10 @@ impl Mixture {
         let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.25);
         let _ = m.push3(ProposalKind::Color, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.2);
         let _ = m.push3(ProposalKind::Light, [0.05, 0.01, 0.002], [0.2, 0.5, 0.3], 0.12);
-        let _ = m.push(Proposal { kind: ProposalKind::LightIntensity, scale: Scale::Intermediate, sigma: 0.05, weight: 0.08 });
-        let _ = m.push(Proposal { kind: ProposalKind::LightSolve, scale: Scale::Fine, sigma: 0.02, weight: 0.05 });
+        let _ = m.push_standard(ProposalKind::LightIntensity, Scale::Intermediate, 0.05, 0.08);
+        let _ = m.push_standard(ProposalKind::LightSolve, Scale::Fine, 0.02, 0.05);
         m
     }
-}
-
-/// What proposals need to know beyond the parameters.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ProposalContext {
-    /// Model-space pivot of rotations and distance changes (e.g. the landmark centroid of the mean).
-    pub pivot: Vec3,
-    /// The least-squares light for the current state (needed by [`ProposalKind::LightSolve`] only).
-    pub light_solution: Option<ShLight>,
 }
 
 fn camera_point<const KS: usize, const KC: usize>(p: &FitParams<KS, KC>, v: Vec3) -> Vec3 {
@@ -275,89 +219,107 @@ fn camera_point<const KS: usize, const KC: usize>(p: &FitParams<KS, KC>, v: Vec3
     [q[0] + t[0], q[1] + t[1], q[2] + t[2]]
 }
 
-/// Draws `x'` from `proposal` at `current` into `out`; returns the log Hastings term
-/// (`−∞` if the move is impossible, e.g. a distance behind the camera, or needs a light solution that is missing).
-pub fn propose<R: Rng + ?Sized, const KS: usize, const KC: usize>(
-    proposal: &Proposal,
-    current: &FitParams<KS, KC>,
-    ctx: &ProposalContext,
-    rng: &mut R,
-    out: &mut FitParams<KS, KC>,
-) -> f32 {
-    *out = *current;
-    let s = proposal.sigma;
-    match proposal.kind {
-        ProposalKind::Yaw | ProposalKind::Pitch | ProposalKind::Roll => {
-            let before = camera_point(current, ctx.pivot);
-            let d = s * standard_normal(rng);
-            match proposal.kind {
-                ProposalKind::Yaw => out.pose.yaw += d,
-                ProposalKind::Pitch => out.pose.pitch += d,
-                _ => out.pose.roll += d,
+impl Proposal for StandardProposal {
+    fn name(&self) -> &'static str {
+        self.kind.name()
+    }
+
+    fn changes_shape(&self) -> bool {
+        self.kind.changes_shape()
+    }
+
+    fn changes_geometry(&self) -> bool {
+        self.kind.changes_geometry()
+    }
+
+    fn needs_light_solution(&self) -> bool {
+        self.kind == ProposalKind::LightSolve
+    }
+
+    /// Draws `x'` into `out`; returns the log Hastings term (`−∞` if the move is impossible, e.g.
+    /// a distance behind the camera, or needs a light solution that is missing).
+    fn propose<R: Rng + ?Sized, const KS: usize, const KC: usize>(
+        &self,
+        current: &FitParams<KS, KC>,
+        ctx: &ProposalContext,
+        rng: &mut R,
+        out: &mut FitParams<KS, KC>,
+    ) -> f32 {
+        *out = *current;
+        let s = self.sigma;
+        match self.kind {
+            ProposalKind::Yaw | ProposalKind::Pitch | ProposalKind::Roll => {
+                let before = camera_point(current, ctx.pivot);
+                let d = s * standard_normal(rng);
+                match self.kind {
+                    ProposalKind::Yaw => out.pose.yaw += d,
+                    ProposalKind::Pitch => out.pose.pitch += d,
+                    _ => out.pose.roll += d,
+                }
+                let after = camera_point(out, ctx.pivot);
+                for ((t, b), a) in out.pose.translation.iter_mut().zip(before).zip(after) {
+                    *t += b - a;
+                }
+                0.0
             }
-            let after = camera_point(out, ctx.pivot);
-            for ((t, b), a) in out.pose.translation.iter_mut().zip(before).zip(after) {
-                *t += b - a;
+            ProposalKind::Distance => {
+                let w = -camera_point(current, ctx.pivot)[2];
+                let d = s * standard_normal(rng);
+                let w2 = w + d;
+                if !(w > 0.0 && w2 > 0.0) {
+                    return f32::NEG_INFINITY;
+                }
+                out.pose.translation[2] -= d;
+                out.focal = current.focal * w2 / w;
+                libm::logf(w2 / w)
             }
-            0.0
-        }
-        ProposalKind::Distance => {
-            let w = -camera_point(current, ctx.pivot)[2];
-            let d = s * standard_normal(rng);
-            let w2 = w + d;
-            if !(w > 0.0 && w2 > 0.0) {
-                return f32::NEG_INFINITY;
+            ProposalKind::Scaling => {
+                let d = s * standard_normal(rng);
+                out.focal = current.focal * libm::expf(d);
+                d
             }
-            out.pose.translation[2] -= d;
-            out.focal = current.focal * w2 / w;
-            libm::logf(w2 / w)
-        }
-        ProposalKind::Scaling => {
-            let d = s * standard_normal(rng);
-            out.focal = current.focal * libm::expf(d);
-            d
-        }
-        ProposalKind::Translation => {
-            let w = -camera_point(current, ctx.pivot)[2];
-            let mm_per_px = if current.focal > 0.0 { libm::fabsf(w) / current.focal } else { 0.0 };
-            add_normals(rng, s * mm_per_px, out.pose.translation.get_mut(..2).unwrap_or(&mut []));
-            0.0
-        }
-        ProposalKind::Shape => {
-            add_normals(rng, s, out.shape_coeffs_mut());
-            0.0
-        }
-        ProposalKind::Color => {
-            add_normals(rng, s, out.color_coeffs_mut());
-            0.0
-        }
-        ProposalKind::Light => {
-            add_normals(rng, s, out.light.coeffs.as_flattened_mut());
-            0.0
-        }
-        ProposalKind::LightIntensity => {
-            let d = s * standard_normal(rng);
-            let f = libm::expf(d);
-            for c in out.light.coeffs.iter_mut().flatten() {
-                *c *= f;
+            ProposalKind::Translation => {
+                let w = -camera_point(current, ctx.pivot)[2];
+                let mm_per_px = if current.focal > 0.0 { libm::fabsf(w) / current.focal } else { 0.0 };
+                add_normals(rng, s * mm_per_px, out.pose.translation.get_mut(..2).unwrap_or(&mut []));
+                0.0
             }
-            27.0 * d
-        }
-        ProposalKind::LightSolve => {
-            let Some(ls) = ctx.light_solution else {
-                return f32::NEG_INFINITY;
-            };
-            let (mut back, mut fwd) = (0.0f32, 0.0f32);
-            for ((o, c), m) in
-                out.light.coeffs.iter_mut().flatten().zip(current.light.coeffs.iter().flatten()).zip(ls.coeffs.iter().flatten())
-            {
-                let e = standard_normal(rng);
-                *o = m + s * e;
-                fwd += e * e;
-                back += (c - m) * (c - m);
+            ProposalKind::Shape => {
+                add_normals(rng, s, out.shape_coeffs_mut());
+                0.0
             }
-            // log N(L; L*, σ) − log N(L'; L*, σ)
-            -0.5 * back / (s * s) + 0.5 * fwd
+            ProposalKind::Color => {
+                add_normals(rng, s, out.color_coeffs_mut());
+                0.0
+            }
+            ProposalKind::Light => {
+                add_normals(rng, s, out.light.coeffs.as_flattened_mut());
+                0.0
+            }
+            ProposalKind::LightIntensity => {
+                let d = s * standard_normal(rng);
+                let f = libm::expf(d);
+                for c in out.light.coeffs.iter_mut().flatten() {
+                    *c *= f;
+                }
+                27.0 * d
+            }
+            ProposalKind::LightSolve => {
+                let Some(ls) = ctx.light_solution else {
+                    return f32::NEG_INFINITY;
+                };
+                let (mut back, mut fwd) = (0.0f32, 0.0f32);
+                for ((o, c), m) in
+                    out.light.coeffs.iter_mut().flatten().zip(current.light.coeffs.iter().flatten()).zip(ls.coeffs.iter().flatten())
+                {
+                    let e = standard_normal(rng);
+                    *o = m + s * e;
+                    fwd += e * e;
+                    back += (c - m) * (c - m);
+                }
+                // log N(L; L*, σ) − log N(L'; L*, σ)
+                -0.5 * back / (s * s) + 0.5 * fwd
+            }
         }
     }
 }
@@ -366,7 +328,8 @@ pub fn propose<R: Rng + ?Sized, const KS: usize, const KC: usize>(
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
-    use crate::Pose;
+    use crate::fit::proposal::MAX_PROPOSALS;
+    use crate::{Pose, ShLight};
     use rand_core::SeedableRng;
     use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -381,7 +344,7 @@ mod tests {
         let p = params();
         let mut out = p;
         for kind in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll] {
-            let h = propose(&Proposal { kind, scale: Scale::Coarse, sigma: 0.5, weight: 1.0 }, &p, &ctx, &mut rng, &mut out);
+            let h = StandardProposal::new(kind, Scale::Coarse, 0.5).unwrap().propose(&p, &ctx, &mut rng, &mut out);
             assert_eq!(h, 0.0);
             let (a, b) = (camera_point(&p, ctx.pivot), camera_point(&out, ctx.pivot));
             for i in 0..3 {
@@ -397,13 +360,7 @@ mod tests {
         let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
         let p = params();
         let mut out = p;
-        let h = propose(
-            &Proposal { kind: ProposalKind::Distance, scale: Scale::Coarse, sigma: 50.0, weight: 1.0 },
-            &p,
-            &ctx,
-            &mut rng,
-            &mut out,
-        );
+        let h = StandardProposal::new(ProposalKind::Distance, Scale::Coarse, 50.0).unwrap().propose(&p, &ctx, &mut rng, &mut out);
         let (w, w2) = (-p.pose.translation[2], -out.pose.translation[2]);
         assert!((out.focal / w2 - p.focal / w).abs() < 1e-4);
         assert!((h - libm::logf(w2 / w)).abs() < 1e-5);
@@ -411,7 +368,7 @@ mod tests {
 
     #[test]
     fn landmark_phases_split_pose_and_shape() {
-        let has = |m: &Mixture, k: ProposalKind| m.entries().iter().any(|e| e.kind == k && e.weight > 0.0);
+        let has = |m: &Mixture, k: ProposalKind| m.entries().iter().any(|e| e.proposal.kind == k && e.weight > 0.0);
         let pose = Mixture::landmark_pose(128.0);
         for k in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll, ProposalKind::Scaling, ProposalKind::Translation] {
             assert!(has(&pose, k), "pose phase lacks {}", k.name());
@@ -421,7 +378,7 @@ mod tests {
         assert!(has(&shape, ProposalKind::Shape) && has(&shape, ProposalKind::Pitch));
         // Yaw and distance are what the landmarks trade for shape: the shape phase holds them.
         assert!(!has(&shape, ProposalKind::Yaw) && !has(&shape, ProposalKind::Distance));
-        let share: f32 = shape.entries().iter().filter(|e| e.kind == ProposalKind::Shape).map(|e| e.weight).sum();
+        let share: f32 = shape.entries().iter().filter(|e| e.proposal.kind == ProposalKind::Shape).map(|e| e.weight).sum();
         assert!((share / shape.total_weight() - 0.6 / 0.99).abs() < 1e-4, "{share}");
     }
 
@@ -431,16 +388,24 @@ mod tests {
         let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
         let p = params();
         let mut out = p;
-        let pr = Proposal { kind: ProposalKind::LightSolve, scale: Scale::Fine, sigma: 0.1, weight: 1.0 };
-        assert_eq!(propose(&pr, &p, &ctx, &mut rng, &mut out), f32::NEG_INFINITY);
+        let pr = StandardProposal::new(ProposalKind::LightSolve, Scale::Fine, 0.1).unwrap();
+        assert!(pr.needs_light_solution());
+        assert_eq!(pr.propose(&p, &ctx, &mut rng, &mut out), f32::NEG_INFINITY);
         let mut m = Mixture::new();
-        m.push(Proposal { weight: 1.0, ..pr }).unwrap();
-        m.push(Proposal { weight: 3.0, ..pr }).unwrap();
+        m.push(pr, 1.0).unwrap();
+        m.push(pr, 3.0).unwrap();
         assert_eq!(m.choose(0.2), Some(0));
         assert_eq!(m.choose(0.3), Some(1));
         assert_eq!(m.choose(0.9999), Some(1));
-        assert!(m.push(Proposal { sigma: -1.0, ..pr }).is_err());
-        assert_eq!(Mixture::new().choose(0.5), None);
+        assert!(m.push_standard(ProposalKind::Shape, Scale::Fine, -1.0, 1.0).is_err());
+        assert_eq!(m.push(pr, f32::NAN).err().map(|e| e.proposal), Some(pr));
+        assert_eq!(Mixture::<StandardProposal>::new().choose(0.5), None);
+        let mut full = Mixture::new();
+        for _ in 0..MAX_PROPOSALS {
+            full.push(pr, 1.0).unwrap();
+        }
+        // A full mixture hands the component back.
+        assert_eq!(full.push(pr, 2.0).err().map(|e| e.weight), Some(2.0));
         assert!(Mixture::image_default(128.0).entries().len() <= MAX_PROPOSALS);
         assert!(Mixture::landmark_default(128.0).total_weight() > 0.99);
     }

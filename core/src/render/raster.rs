@@ -29,8 +29,8 @@
 //!   counted in [`FrameStats`]; for a face in front of the camera this happens only when the camera
 //!   is inside or right next to the mesh.
 
-use crate::shading::{ProjectedVertex, TriIndex};
-use crate::tile::{Tile, TileSink, NO_TRIANGLE};
+use crate::render::shading::{ProjectedVertex, TriIndex};
+use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 use crate::Vec3;
 
 /// Fractional bits of the fixed-point vertex coordinates (1/256 pixel).

@@ -2,7 +2,7 @@
 //!
 //! Conventions (shared with scalismo-faces' `Pose`/`RenderTransforms.modelTransform`):
 //! - Model space: x to the image right in a frontal view, y up, z toward the camera, millimetres.
-//! - Camera space: the camera sits at the origin looking down −z with y up (see [`crate::camera`]).
+//! - Camera space: the camera sits at the origin looking down −z with y up (see [`crate::render::camera`]).
 //! - `p_camera = R · p_model + t` with `R = Rz(roll) · Ry(yaw) · Rx(pitch)`: pitch is applied first,
 //!   then yaw, then roll. All rotations are right-handed (counter-clockwise looking down the axis
 //!   toward the origin).

@@ -1,0 +1,127 @@
+//! The image likelihood, composed from a per-pixel foreground term and a background term (as
+//! scalismo-faces composes `IndependentPixelEvaluator(pixel, background)`), evaluated as a
+//! [`TileSink`] while the model is rendered: no frame is stored.
+//!
+//! For every pixel the model covers, `log p(I | R) − log b(I)` is added (I: target colour, R:
+//! rendered colour, b: the background density of the target's colour); uncovered pixels add 0.
+//! This is the foreground/background likelihood ratio of Schönborn et al. (2017): the whole image
+//! is explained, by the face where it is drawn and by the background model elsewhere, and the
+//! background terms of uncovered pixels cancel in every Metropolis-Hastings ratio. The standard
+//! terms are [`GaussianPixel`] (`log N(I | R, σ² I₃)`) and the histogram [`BackgroundModel`].
+
+use super::image::{to_linear, BackgroundModel, ImageEval, TargetImage};
+use super::FitError;
+use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
+use crate::Vec3;
+
+/// The foreground term: how well a rendered colour explains a target colour.
+pub trait PixelLikelihood {
+    /// `log p(target | rendered)` of one covered pixel (colours linear, in [0, 1]); `sq_dist` is
+    /// `|target − rendered|²` over the three channels, already computed for the RMSE.
+    fn log_likelihood(&self, target: Vec3, rendered: Vec3, sq_dist: f32) -> f32;
+}
+
+/// The background term: how well the background explains a target colour.
+pub trait BackgroundLikelihood {
+    /// `log b(target)` of an 8-bit target colour.
+    fn log_density(&self, target: [u8; 3]) -> f32;
+}
+
+impl BackgroundLikelihood for BackgroundModel {
+    fn log_density(&self, target: [u8; 3]) -> f32 {
+        BackgroundModel::log_density(self, target)
+    }
+}
+
+/// The standard foreground term: an isotropic Gaussian on the colour difference,
+/// `log N(I | R, σ² I₃) = −3 log(σ √(2π)) − |I − R|² / (2σ²)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GaussianPixel {
+    inv_two_var: f32,
+    log_norm: f32,
+}
+
+impl GaussianPixel {
+    /// The term for standard deviation `sigma` on [0, 1] colours (finite, > 0; `BadConfig` otherwise).
+    pub fn new(sigma: f32) -> Result<Self, FitError> {
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        let log_norm = -3.0 * libm::logf(sigma * libm::sqrtf(core::f32::consts::TAU));
+        Ok(Self { inv_two_var: 0.5 / (sigma * sigma), log_norm })
+    }
+}
+
+impl PixelLikelihood for GaussianPixel {
+    #[inline]
+    fn log_likelihood(&self, _target: Vec3, _rendered: Vec3, sq_dist: f32) -> f32 {
+        self.log_norm - sq_dist * self.inv_two_var
+    }
+}
+
+/// A [`TileSink`] accumulating the image likelihood (pixel term `P` against background `B`)
+/// while the model is rendered.
+#[derive(Debug)]
+pub struct ImageLikelihood<'a, 'b, P = GaussianPixel, B: ?Sized = BackgroundModel> {
+    image: TargetImage<'a>,
+    pixel: P,
+    background: &'b B,
+    sum: f64,
+    sq: f64,
+    covered: u32,
+}
+
+impl<'a, 'b> ImageLikelihood<'a, 'b> {
+    /// The standard sink: Gaussian foreground with σ `sigma` (> 0) against the histogram `background`.
+    pub fn new(image: TargetImage<'a>, background: &'b BackgroundModel, sigma: f32) -> Result<Self, FitError> {
+        Ok(Self::with_terms(image, GaussianPixel::new(sigma)?, background))
+    }
+}
+
+impl<'a, 'b, P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'a, 'b, P, B> {
+    /// A sink comparing renders with `image` through the given pixel and background terms.
+    pub fn with_terms(image: TargetImage<'a>, pixel: P, background: &'b B) -> Self {
+        Self { image, pixel, background, sum: 0.0, sq: 0.0, covered: 0 }
+    }
+
+    /// Clears the sums before the next frame.
+    pub fn reset(&mut self) {
+        self.sum = 0.0;
+        self.sq = 0.0;
+        self.covered = 0;
+    }
+
+    /// The sums of the frame(s) consumed since the last reset.
+    pub fn eval(&self) -> ImageEval {
+        let ll = self.sum as f32;
+        ImageEval { log_likelihood: if ll.is_nan() { f32::NEG_INFINITY } else { ll }, covered: self.covered, sq_err: self.sq as f32 }
+    }
+}
+
+impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> TileSink<TW, TH>
+    for ImageLikelihood<'_, '_, P, B>
+{
+    fn consume(&mut self, tile: &Tile<TW, TH>) {
+        let (x0, y0) = tile.origin();
+        let (w, h) = tile.size();
+        let (mut sum, mut sq, mut covered) = (0.0f32, 0.0f32, 0u32);
+        for ((tri_row, col_row), y) in tile.triangles().iter().zip(tile.colors()).zip(y0..y0 + h) {
+            let Some(target_row) = self.image.row(y) else { continue };
+            let Some(target_row) = target_row.get(x0 as usize..) else { continue };
+            for ((t, c), p) in tri_row.iter().zip(col_row).zip(target_row).take(w as usize) {
+                if *t == NO_TRIANGLE {
+                    continue;
+                }
+                let i = to_linear(*p);
+                let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
+                let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+                sq += d2sum;
+                sum += self.pixel.log_likelihood(i, *c, d2sum) - self.background.log_density(*p);
+                covered += 1;
+            }
+        }
+        self.sum += f64::from(sum);
+        self.sq += f64::from(sq);
+        self.covered = self.covered.saturating_add(covered);
+    }
+}

@@ -1,0 +1,171 @@
+//! Watching a chain: every proposal's outcome goes to a [`ChainObserver`] (as scalismo-faces'
+//! chain loggers watch a chain). [`Acceptance`] counts per mixture component; users count by
+//! name, log or trace with their own observers.
+
+use super::proposal::MAX_PROPOSALS;
+
+/// What became of one proposal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StepOutcome {
+    /// The proposal itself refused the move (Hastings term `−∞`, e.g. a distance behind the camera).
+    Impossible,
+    /// Rejected by the first stage (prior and landmarks; in the landmark chain the only stage).
+    RejectedByFilter,
+    /// Passed the first stage, rejected by the image term (image chain only).
+    RejectedByImage,
+    /// Accepted: the proposal is the chain's new state.
+    Accepted,
+}
+
+impl StepOutcome {
+    /// Whether it passed the prior-and-landmark stage (an accepted landmark-chain step did).
+    pub fn passed_filter(self) -> bool {
+        matches!(self, StepOutcome::RejectedByImage | StepOutcome::Accepted)
+    }
+
+    /// Whether it was accepted.
+    pub fn accepted(self) -> bool {
+        self == StepOutcome::Accepted
+    }
+}
+
+/// One proposal as the chain saw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProposalStep {
+    /// The step's index in its chain (0-based).
+    pub step: u32,
+    /// The component's index in the mixture.
+    pub id: usize,
+    /// The component's [`super::Proposal::name`].
+    pub name: &'static str,
+    /// What became of it.
+    pub outcome: StepOutcome,
+    /// The chain's log posterior after the step (up to a constant; the current state's).
+    pub log_posterior: f32,
+}
+
+/// Watches a chain: progress before each step and the outcome of every proposal.
+pub trait ChainObserver {
+    /// Called once per mixture component before the first step (index and
+    /// [`super::Proposal::name`]), so that reports can list components never drawn.
+    fn component(&mut self, _id: usize, _name: &'static str) {}
+
+    /// Called with the number of finished steps before each step and once at the end.
+    fn progress(&mut self, _done: u32) {}
+
+    /// Called once per proposal, after the chain decided.
+    fn proposal(&mut self, _step: &ProposalStep) {}
+}
+
+/// Observes nothing.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct NoObserver;
+
+impl ChainObserver for NoObserver {}
+
+/// A progress callback `FnMut(done)` as an observer (proposals are not reported to it).
+#[derive(Debug, Clone, Copy)]
+pub struct Progress<F>(pub F);
+
+impl<F: FnMut(u32)> ChainObserver for Progress<F> {
+    fn progress(&mut self, done: u32) {
+        (self.0)(done)
+    }
+}
+
+impl<O: ChainObserver + ?Sized> ChainObserver for &mut O {
+    fn component(&mut self, id: usize, name: &'static str) {
+        (**self).component(id, name)
+    }
+
+    fn progress(&mut self, done: u32) {
+        (**self).progress(done)
+    }
+
+    fn proposal(&mut self, step: &ProposalStep) {
+        (**self).proposal(step)
+    }
+}
+
+/// Two observers, both told everything (first `.0`, then `.1`).
+impl<A: ChainObserver, B: ChainObserver> ChainObserver for (A, B) {
+    fn component(&mut self, id: usize, name: &'static str) {
+        self.0.component(id, name);
+        self.1.component(id, name);
+    }
+
+    fn progress(&mut self, done: u32) {
+        self.0.progress(done);
+        self.1.progress(done);
+    }
+
+    fn proposal(&mut self, step: &ProposalStep) {
+        self.0.proposal(step);
+        self.1.proposal(step);
+    }
+}
+
+/// Per-component proposal counts (index = position in the [`super::Mixture`]); an observer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Acceptance {
+    /// Times the component was drawn.
+    pub proposed: [u32; MAX_PROPOSALS],
+    /// Times it passed the prior-and-landmark stage.
+    pub passed_filter: [u32; MAX_PROPOSALS],
+    /// Times it was accepted.
+    pub accepted: [u32; MAX_PROPOSALS],
+}
+
+impl Default for Acceptance {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Acceptance {
+    /// No counts.
+    pub const fn new() -> Self {
+        Self { proposed: [0; MAX_PROPOSALS], passed_filter: [0; MAX_PROPOSALS], accepted: [0; MAX_PROPOSALS] }
+    }
+
+    /// Acceptance rate of component `id` (0 if never drawn).
+    pub fn rate(&self, id: usize) -> f32 {
+        let p = self.proposed.get(id).copied().unwrap_or(0);
+        let a = self.accepted.get(id).copied().unwrap_or(0);
+        if p == 0 {
+            0.0
+        } else {
+            a as f32 / p as f32
+        }
+    }
+
+    /// Accepted over proposed, all components.
+    pub fn overall(&self) -> f32 {
+        let p: u32 = self.proposed.iter().sum();
+        let a: u32 = self.accepted.iter().sum();
+        if p == 0 {
+            0.0
+        } else {
+            a as f32 / p as f32
+        }
+    }
+
+    /// Counts one proposal of component `id` (ids beyond [`MAX_PROPOSALS`] are ignored).
+    pub fn count(&mut self, id: usize, passed: bool, accepted: bool) {
+        if let Some(v) = self.proposed.get_mut(id) {
+            *v = v.saturating_add(1);
+        }
+        if let (true, Some(v)) = (passed, self.passed_filter.get_mut(id)) {
+            *v = v.saturating_add(1);
+        }
+        if let (true, Some(v)) = (accepted, self.accepted.get_mut(id)) {
+            *v = v.saturating_add(1);
+        }
+    }
+}
+
+impl ChainObserver for Acceptance {
+    fn proposal(&mut self, step: &ProposalStep) {
+        self.count(step.id, step.outcome.passed_filter(), step.outcome.accepted());
+    }
+}

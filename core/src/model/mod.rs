@@ -1,0 +1,12 @@
+//! The model: low-rank linear bases ([`basis`]) and the borrowed morphable-model view with its
+//! cached per-vertex instance ([`morphable`]).
+//!
+//! The rest of the crate reads a model only through these types: the blob format builds a
+//! [`MorphableModel`] over its sections, the renderer draws an [`Instance`], the fitter moves
+//! its coefficients.
+
+pub mod basis;
+pub mod morphable;
+
+pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
+pub use morphable::{Instance, InstanceBuffers, MorphableModel};

@@ -1,0 +1,17 @@
+//! Rendering: the pinhole [`camera`], the rigid [`pose`], spherical-harmonics [`light`], the
+//! per-vertex [`shading`] stage, the tiled [`raster`]izer and the [`tile`] buffers it hands to a
+//! [`tile::TileSink`] (an image, or a likelihood that never stores the frame).
+
+pub mod camera;
+pub mod light;
+pub mod pose;
+pub mod raster;
+pub mod shading;
+pub mod tile;
+
+pub use camera::{Camera, ScreenPoint};
+pub use light::ShLight;
+pub use pose::{Mat3, Pose};
+pub use raster::{Cull, FrameStats, RasterError, TileRasterizer};
+pub use shading::{project_vertices, shade_vertices, vertex_normals, vertex_stage, ProjectedVertex, TriIndex, VertexError};
+pub use tile::{Fragment, Tile, TileSink, NO_TRIANGLE};
