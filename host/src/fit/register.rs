@@ -28,7 +28,7 @@
 use crate::gp::model::{GpModel, ModelPart, PartBasis};
 use crate::mesh::closest::{closest_on_triangle, Grid};
 use crate::mesh::geometry::{add, centroid, dist2, mul, sub};
-use crate::mesh::template::Mesh;
+use crate::mesh::Mesh;
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use serde::{Deserialize, Serialize};

@@ -60,16 +60,7 @@ use sha2::{Digest, Sha256};
 
 use crate::mesh::io::{read_landmarks_json, read_mesh_with_info, ColorSource, MeshIoError};
 
-/// A coloured triangle mesh in f64 (positions in the mesh's units, colours linear RGB in [0,1]).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Mesh {
-    /// Vertex positions.
-    pub positions: Vec<[f64; 3]>,
-    /// Per-vertex colours, same length as `positions`.
-    pub colors: Vec<[f64; 3]>,
-    /// Triangles as vertex indices (counter-clockwise seen from outside).
-    pub triangles: Vec<[u32; 3]>,
-}
+pub use crate::mesh::Mesh;
 
 /// Where a template came from and what was done to it (stored in model metadata).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]

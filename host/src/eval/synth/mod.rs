@@ -516,15 +516,7 @@ pub fn read_truth(path: &Path) -> Result<TruthFile, SynthError> {
     serde_json::from_str(&text).map_err(|e| SynthError::Data { path: path.to_path_buf(), message: format!("not a synth truth file: {e}") })
 }
 
-/// Landmarks in the iBUG `.pts` format (`version: 1`, `n_points:  N`, `{`, `x y` lines, `}`), 3 decimals.
-pub fn pts_string(points: &[[f32; 2]]) -> String {
-    let mut s = format!("version: 1\nn_points:  {}\n{{\n", points.len());
-    for p in points {
-        s.push_str(&format!("{:.3} {:.3}\n", p[0], p[1]));
-    }
-    s.push_str("}\n");
-    s
-}
+pub use crate::photo::pts::pts_string;
 
 /// Tiles images (all the size of the first) into a grid of `columns` columns, row-major.
 pub fn contact_sheet(faces: &[SynthFace], columns: usize) -> RgbImage {
