@@ -130,7 +130,10 @@ impl MeshIoError {
         MeshIoError::InvalidMesh { path: path.to_path_buf(), message: message.into() }
     }
     fn ply(path: &Path, message: impl Into<String>) -> Self {
-        MeshIoError::Ply { path: path.to_path_buf(), message: message.into() }
+        // The parser's first line says where and what; the rest repeats its internals.
+        let message: String = message.into();
+        let first = message.lines().next().unwrap_or("").trim().trim_end_matches('.').to_string();
+        MeshIoError::Ply { path: path.to_path_buf(), message: first }
     }
     fn gltf(path: &Path, message: impl Into<String>) -> Self {
         MeshIoError::Gltf { path: path.to_path_buf(), message: message.into() }
