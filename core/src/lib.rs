@@ -9,18 +9,20 @@
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
-pub mod blob;
 pub mod checksum;
 pub mod fit;
+pub mod format;
 pub mod model;
+pub mod profile;
 pub mod render;
 
 // The render modules under their old crate-root paths (`gpmm_core::camera::Camera`, ...).
 pub use render::{camera, light, pose, raster, shading, tile};
 
-pub use blob::{BlobError, ModelBlob};
 pub use camera::{Camera, ScreenPoint};
 pub use checksum::{crc32, FrameChecksum};
+pub use format::blob;
+pub use format::blob::{BlobError, ModelBlob};
 pub use light::ShLight;
 pub use model::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
 pub use pose::{Mat3, Pose};

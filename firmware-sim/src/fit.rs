@@ -1,27 +1,30 @@
 //! The fit on the device: the model blob and the fit input from the data partition, the core's
-//! standard fit (`gpmm_core::fit::standard_fit`, the same function `gpmm fit` runs), the
-//! result and the instruction counts of every stage logged with defmt.
+//! standard fit (`gpmm_core::fit::standard_fit`, the same function `gpmm fit` runs) with the
+//! settings the fit input carries, and the result as a binary fit record
+//! (`gpmm_core::format::fit_record`, logged as `GPFR <hex>` lines) plus one human line.
 //!
 //! RAM: the per-vertex buffers of the fit (positions, albedos and normals: three `Vec3` per
 //! vertex) are carved out of one static `Vec3` pool, the projected vertices out of the
 //! renderer's static array; the rest (parameters, chain states, background model) is stack.
 
-use crate::{clock, fail, fit_input, Rasterizer};
+use crate::{clock, fail, stack, Rasterizer, PROFILE};
 use gpmm_core::blob::ModelBlob;
 use gpmm_core::fit::{
-    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, Stage, TargetImage, MAX_LANDMARKS,
+    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, Stage, StandardFit, TargetImage, MAX_LANDMARKS,
 };
+use gpmm_core::format::fit_input::{self, FitInput};
+use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
 use gpmm_core::{ProjectedVertex, Vec3};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-/// Shape coefficient capacity (`m4f` blobs have 50 components by default, `m7` 80). Every
-/// parameter copy on the stack holds `KS + KC` floats, so the small profile keeps it small.
-pub const KS: usize = if cfg!(feature = "m7") { 100 } else { 64 };
+/// Shape coefficient capacity of this profile's fit. Every parameter copy on the stack holds
+/// `KS + KC` floats, so the small profile keeps it small.
+pub const KS: usize = PROFILE.shape_capacity;
 /// Colour coefficient capacity.
-pub const KC: usize = KS;
-/// Largest image side the firmware accepts (the profile's image size).
-pub const MAX_SIDE: u32 = if cfg!(feature = "m7") { 256 } else { 128 };
+pub const KC: usize = PROFILE.color_capacity;
+/// Record bytes logged per `GPFR` line.
+const RECORD_CHUNK: usize = 96;
 
 /// Instruction counter readings at the stage boundaries.
 #[derive(Default)]
@@ -49,17 +52,14 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
     };
     let model = match blob.morphable() {
         Ok(m) => m,
-        Err(e) => {
-            defmt::error!("model blob: the core refused the model: {}", defmt::Debug2Format(&e));
-            fail();
-        }
+        Err(e) => fit_failed("model blob", e),
     };
-    let t_parsed = instructions_now();
     let input_at = (blob.len() + 15) & !15;
-    let input = match part.get(input_at..).map(|rest| fit_input::parse(rest, MAX_SIDE, MAX_LANDMARKS)) {
+    let parsed = part.get(input_at..).map(|rest| fit_input::parse::<FitSettings>(rest, PROFILE.image_side, MAX_LANDMARKS));
+    let input: FitInput<'_, FitSettings> = match parsed {
         Some(Ok(i)) => i,
         Some(Err(e)) => {
-            defmt::error!("data partition: no valid fit input after the blob: {}", e);
+            defmt::error!("data partition: no valid fit input after the blob: {}", defmt::Display2Format(&e));
             fail();
         }
         None => {
@@ -67,26 +67,8 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
             fail();
         }
     };
+    let t_parsed = instructions_now();
     let n = model.vertices();
-    defmt::info!(
-        "blob_bytes={=u32} model_vertices={=u32} model_triangles={=u32} rank_shape={=u32} rank_color={=u32} bits={=u32} parse_instructions={=u64}",
-        blob.len() as u32,
-        n as u32,
-        model.triangles().len() as u32,
-        model.shape_rank() as u32,
-        model.color_rank() as u32,
-        u32::from(blob.bits()),
-        t_parsed - t_start
-    );
-    defmt::info!(
-        "image_width={=u32} image_height={=u32} landmarks={=u32} seed={=u64} landmark_steps={=u32} image_steps={=u32}",
-        input.width,
-        input.height,
-        input.landmarks.len() as u32,
-        input.seed,
-        input.landmark_steps,
-        input.image_steps
-    );
 
     // Per-vertex buffers: three Vec3 slices from the pool, the projected vertices from the renderer's array.
     let (Some(vec3s), Some(projected)) = (pool.get_mut(..3 * n), projected.get_mut(..n)) else {
@@ -108,14 +90,6 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         Err(e) => fit_failed("target image", e),
     };
     let valid = [true; MAX_LANDMARKS];
-    let settings = FitSettings {
-        landmark_steps: input.landmark_steps,
-        image_steps: input.image_steps,
-        shape_rank: input.shape_rank as usize,
-        color_rank: input.color_rank as usize,
-        landmark_sigma: input.landmark_sigma,
-        ..FitSettings::DEFAULT
-    };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(input.seed);
     let mut marks = Marks::default();
     let mut observer = |stage: Stage, done: u32, total: u32| {
@@ -134,7 +108,7 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         image,
         input.landmarks,
         valid.get(..input.landmarks.len()).unwrap_or(&[]),
-        &settings,
+        &input.settings,
         &mut instance,
         raster,
         &mut rng,
@@ -146,65 +120,97 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         Err(e) => fit_failed("fit", e),
     };
 
-    // The result.
+    let steps = |n: u32| u64::from(n.max(1));
+    let (landmark, image_chain) =
+        (marks.landmark_end.saturating_sub(marks.landmark_start), marks.image_end.saturating_sub(marks.image_start));
+    let counts = DeviceCounts {
+        instructions_parse: t_parsed - t_start,
+        instructions_landmark_chain: landmark,
+        instructions_light_and_start: marks.image_start.saturating_sub(marks.landmark_end),
+        instructions_image_chain: image_chain,
+        instructions_per_landmark_step: if input.settings.landmark_steps > 0 { landmark / steps(input.settings.landmark_steps) } else { 0 },
+        instructions_per_image_step: if input.settings.image_steps > 0 { image_chain / steps(input.settings.image_steps) } else { 0 },
+        instructions_fit: t_end - t_fit,
+        instructions_total: t_end - t_start,
+        shape_updates: instance.shape_updates,
+        color_updates: instance.color_updates,
+        stack_peak_bytes: 0,
+        blob_bytes: blob.len() as u32,
+        partition_bytes: part.len() as u32,
+        model_vertices: n as u32,
+        model_triangles: model.triangles().len() as u32,
+        bits: u32::from(blob.bits()),
+        image_width: input.width,
+        image_height: input.height,
+    };
+    log_record(&model, &fit, &input, counts);
+}
+
+/// Encodes the fit record and logs it as hex lines, then a human summary (a frame of its own, so
+/// the record's buffers are not on the stack during the fit).
+#[inline(never)]
+fn log_record(
+    model: &gpmm_core::fit::MorphableModel<'_, u16>,
+    fit: &StandardFit<KS, KC>,
+    input: &FitInput<'_, FitSettings>,
+    mut counts: DeviceCounts,
+) {
     let p = fit.params();
+    let mut lm = [[0.0f32; 2]; MAX_LANDMARKS];
+    let k = match project_landmarks(model, p, input.width, input.height, &mut lm) {
+        Ok(k) => k,
+        Err(e) => fit_failed("landmark projection", e),
+    };
+    let img = fit.image.best_image.unwrap_or(fit.start_image);
+    let figures = FitFigures {
+        yaw: p.pose.yaw,
+        pitch: p.pose.pitch,
+        roll: p.pose.roll,
+        focal: p.focal,
+        translation: p.pose.translation,
+        log_posterior: fit.image.best_log_posterior,
+        log_likelihood: img.log_likelihood,
+        landmark_log_likelihood: fit.image.best_landmarks.log_likelihood,
+        landmark_rmse_px: fit.image.best_landmarks.rmse(),
+        pixel_rmse: img.rmse(),
+        acceptance_landmark_chain: fit.landmark.acceptance.overall(),
+        acceptance_image_chain: fit.image.acceptance.overall(),
+        covered_pixels: img.covered,
+    };
+    // Everything the fit used is behind us: the high-water mark is the fit's.
+    counts.stack_peak_bytes = stack::peak_bytes();
+    let mut record = [0u8; fit_record::encoded_len(KS, KC, MAX_LANDMARKS)];
+    let len =
+        match fit_record::write(&mut record, &figures, &counts, &p.light, p.shape_coeffs(), p.color_coeffs(), lm.get(..k).unwrap_or(&[])) {
+            Ok(len) => len,
+            Err(e) => {
+                defmt::error!("fit record: {}", e);
+                fail();
+            }
+        };
+    let mut hex = [0u8; 2 * RECORD_CHUNK];
+    for chunk in record.get(..len).unwrap_or(&[]).chunks(RECORD_CHUNK) {
+        for (pair, b) in hex.chunks_exact_mut(2).zip(chunk) {
+            let digit = |v: u8| if v < 10 { b'0' + v } else { b'a' + v - 10 };
+            pair.copy_from_slice(&[digit(b >> 4), digit(b & 15)]);
+        }
+        let text = hex.get(..2 * chunk.len()).and_then(|h| core::str::from_utf8(h).ok()).unwrap_or("");
+        defmt::info!("GPFR {=str}", text);
+    }
     let deg = 180.0 / core::f32::consts::PI;
     defmt::info!(
-        "yaw_deg={=f32} pitch_deg={=f32} roll_deg={=f32} focal_px={=f32}",
+        "fit: yaw {=f32} deg, pitch {=f32} deg, landmark RMSE {=f32} px, log-likelihood {=f32}; {=u64} instructions ({=u64} per image step), stack {=u32} B",
         p.pose.yaw * deg,
         p.pose.pitch * deg,
-        p.pose.roll * deg,
-        p.focal
-    );
-    defmt::info!("fit_translation_mm={=[?]}", p.pose.translation);
-    let img = fit.image.best_image.unwrap_or(fit.start_image);
-    defmt::info!(
-        "log_posterior={=f32} log_likelihood={=f32} landmark_log_likelihood={=f32} landmark_rmse_px={=f32} pixel_rmse={=f32} covered_pixels={=u32}",
-        fit.image.best_log_posterior,
-        img.log_likelihood,
-        fit.image.best_landmarks.log_likelihood,
-        fit.image.best_landmarks.rmse(),
-        img.rmse(),
-        img.covered
-    );
-    defmt::info!(
-        "acceptance_landmark_chain={=f32} acceptance_image_chain={=f32}",
-        fit.landmark.acceptance.overall(),
-        fit.image.acceptance.overall()
-    );
-    defmt::info!("fit_shape={=[?]}", p.shape_coeffs());
-    defmt::info!("fit_color={=[?]}", p.color_coeffs());
-    defmt::info!("fit_light={=[?]}", p.light.coeffs);
-    let mut lm = [[0.0f32; 2]; MAX_LANDMARKS];
-    match project_landmarks(&model, p, input.width, input.height, &mut lm) {
-        Ok(k) => defmt::info!("fit_landmarks_px={=[?]}", lm.get(..k).unwrap_or(&[])),
-        Err(e) => fit_failed("landmark projection", e),
-    }
-
-    // Where the instructions went.
-    let landmark = marks.landmark_end.saturating_sub(marks.landmark_start);
-    let image_chain = marks.image_end.saturating_sub(marks.image_start);
-    let start_and_light = marks.image_start.saturating_sub(marks.landmark_end);
-    let per_step = if input.image_steps > 0 { image_chain / u64::from(input.image_steps) } else { 0 };
-    let per_lm_step = if input.landmark_steps > 0 { landmark / u64::from(input.landmark_steps) } else { 0 };
-    defmt::info!(
-        "instructions_landmark_chain={=u64} instructions_per_landmark_step={=u64} instructions_light_and_start={=u64} instructions_image_chain={=u64} instructions_per_image_step={=u64}",
-        landmark,
-        per_lm_step,
-        start_and_light,
-        image_chain,
-        per_step
-    );
-    defmt::info!(
-        "instructions_fit={=u64} instructions_total={=u64} shape_updates={=u32} color_updates={=u32}",
-        t_end - t_fit,
-        t_end - t_start,
-        instance.shape_updates,
-        instance.color_updates
+        figures.landmark_rmse_px,
+        figures.log_likelihood,
+        counts.instructions_total,
+        counts.instructions_per_image_step,
+        counts.stack_peak_bytes
     );
 }
 
 fn fit_failed(stage: &str, e: FitError) -> ! {
-    defmt::error!("{=str}: the core refused the input: {}", stage, defmt::Debug2Format(&e));
+    defmt::error!("{=str}: the core refused the input: {}", stage, e);
     fail()
 }

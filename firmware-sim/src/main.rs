@@ -6,51 +6,51 @@
 //!    virtual time, SysTick runs on the 25 MHz system clock);
 //! 2. reads the data partition (`GPMM_DATA` in memory.x), flashed separately from the
 //!    program: nothing there (first word erased) logs "no data partition" and exits ok;
-//!    a device mesh (`mesh.rs`, magic `GPDM`) is rendered, anything else must be a model blob
-//!    followed by a fit input (`fit.rs`, `fit_input.rs`), which is fitted;
+//!    a device mesh (`gpmm_core::format::device_mesh`, magic `GPDM`) is rendered, anything else
+//!    must be a model blob followed by a fit input (`gpmm_core::format::fit_input`), which is
+//!    fitted (`fit.rs`);
 //! 3. a device mesh: renders it with gpmm-core exactly as the host does: the vertex stage (normals,
 //!    SH shading, projection) into static buffers, then `TileRasterizer<32, 32, BIN>` into a
 //!    `FrameChecksum` sink; both stages are timed in instructions (`clock::measure`, ±4);
-//!    a model blob: runs the core's standard fit (the same function as `gpmm fit`) and logs the
-//!    fitted pose, coefficients, landmarks, log-likelihood, acceptance and the instructions of every stage;
+//!    a model blob: runs the core's standard fit (the same function as `gpmm fit`) and logs its
+//!    result as a binary fit record (`gpmm_core::format::fit_record`, hex lines `GPFR ...`);
 //! 4. measures the stack's high-water mark (cortex-m-rt's `paint-stack`);
-//! 5. logs `key=value` figures with defmt over semihosting and exits through
+//! 5. logs with defmt over semihosting and exits through
 //!    semihosting: status 0 on success, 1 on any failure (bad data, panic, fault, bad calibration).
 #![no_std]
 #![no_main]
 
 mod clock;
 mod fit;
-mod fit_input;
-mod mesh;
 mod partition;
 mod stack;
 
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
+use gpmm_core::format::device_mesh::{self, DeviceMeshView};
+use gpmm_core::profile::{DeviceProfile, M4F, M7};
 use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasterizer, Vec3};
 
-/// The device profile this image was linked for (memory.x or memory-m7.x).
-const PROFILE: &str = if cfg!(feature = "m7") { "m7" } else { "m4f" };
+/// The device profile this image is built and linked for (build.rs writes its memory map).
+pub(crate) const PROFILE: DeviceProfile = if cfg!(feature = "m7") { M7 } else { M4F };
 
 /// Largest mesh the static buffers hold: a `Vec3` pool and a projected-vertex array of this
 /// many entries (36 bytes of RAM per entry). A render needs one `Vec3` (normal) and one projected
 /// vertex per vertex; a fit three `Vec3` (positions, albedos, normals) and one projected vertex,
-/// so it takes models of up to `MAX_VERTICES / 3` vertices: 1,024 on `m4f` (the m4f blob has at
+/// so it takes models of up to `vertex_pool / 3` vertices: 1,024 on `m4f` (the m4f blob has at
 /// most 1,000), 3,072 on `m7` (its blob has at most 2,000). `m4f`: 108 KiB of buffers + the
-/// renderer's 45 KiB leave 39 KiB of the 192 KiB for the stack (the fit's peak is 34 KiB: chain
-/// states and parameter copies); `m7`: 324 KiB + 45 KiB leave 143 KiB (peak 42 KiB). Nothing
-/// guards the stack's end, so these margins are checked by the tests (static + peak ≤ RAM).
-const MAX_VERTICES: usize = if cfg!(feature = "m7") { 9_216 } else { 3_072 };
-/// Tile size of the renderer: 32×32 (28 KiB of tile buffers). Each tile row scans the whole
-/// triangle list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M
-/// instructions, at 32×32 2.59 M (same fit). The host's `HostRasterizer` uses 32×32 too, so
-/// the likelihood sums tile by tile in the same order on both.
-const TILE: usize = 32;
+/// renderer's 45 KiB leave 39 KiB of the 192 KiB for the stack (the fit's peak is 37 KiB: chain
+/// states and parameter copies). Nothing guards the stack's end, so these margins are checked by
+/// the tests (static + peak <= RAM).
+const MAX_VERTICES: usize = PROFILE.vertex_pool;
+/// Tile side of the renderer (32: 28 KiB of tile buffers). Each tile row scans the whole triangle
+/// list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M instructions, at
+/// 32×32 2.59 M (same fit). The host's parity runs use the profile's tile too.
+const TILE: usize = PROFILE.tile;
 /// Triangles binned per tile row (8 bytes each); a row with more scans the whole list instead
 /// (never lossy, but slow: with 1,024 the template's frame overflowed 2 rows and took 80 M
 /// instead of 28 M instructions).
-const BIN: usize = 2048;
+const BIN: usize = PROFILE.bin;
 
 /// The renderer of this firmware (tile buffers + bin).
 pub(crate) type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
@@ -65,7 +65,7 @@ fn main() -> ! {
     let mut core = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
     clock::start(&mut core.SYST);
 
-    defmt::info!("gpmm-firmware-sim {=str} profile={=str}", env!("CARGO_PKG_VERSION"), PROFILE);
+    defmt::info!("gpmm-firmware-sim {=str} profile={=str}", env!("CARGO_PKG_VERSION"), PROFILE.name);
 
     // 1. SysTick against a loop of known length.
     let cal = clock::calibrate();
@@ -86,13 +86,13 @@ fn main() -> ! {
     defmt::info!("data_partition_addr=0x{=u32:08x} data_partition_bytes={=u32}", part.as_ptr() as u32, part.len() as u32);
     if partition::is_erased(part) {
         defmt::info!("no data partition (first word erased)");
-    } else if !mesh::is_device_mesh(part) {
+    } else if !device_mesh::is_device_mesh(part) {
         fit::run(part, NORMALS, PROJECTED, RASTERIZER);
     } else {
-        let m = match mesh::parse(part, MAX_VERTICES) {
+        let m = match device_mesh::parse(part, MAX_VERTICES) {
             Ok(m) => m,
             Err(e) => {
-                defmt::error!("data partition: not a valid device mesh: {}", e);
+                defmt::error!("data partition: not a valid device mesh: {}", defmt::Display2Format(&e));
                 fail();
             }
         };
@@ -108,7 +108,7 @@ fn main() -> ! {
 }
 
 /// 3. Renders the device mesh into a checksum and logs the frame's figures (fails on bad data).
-fn render(m: &mesh::DeviceMesh<'_>, normals: &mut [Vec3], projected: &mut [ProjectedVertex], rasterizer: &mut Rasterizer) {
+fn render(m: &DeviceMeshView<'_>, normals: &mut [Vec3], projected: &mut [ProjectedVertex], rasterizer: &mut Rasterizer) {
     let n = m.positions.len();
     let (Some(normals), Some(projected)) = (normals.get_mut(..n), projected.get_mut(..n)) else {
         defmt::error!("mesh larger than the buffers");
@@ -118,24 +118,25 @@ fn render(m: &mesh::DeviceMesh<'_>, normals: &mut [Vec3], projected: &mut [Proje
         "mesh_vertices={=u32} mesh_triangles={=u32} width={=u32} height={=u32} renderer_ram_bytes={=u32} vertex_buffers_bytes={=u32}",
         n as u32,
         m.triangles.len() as u32,
-        m.width,
-        m.height,
+        m.scene.width,
+        m.scene.height,
         core::mem::size_of::<Rasterizer>() as u32,
         (MAX_VERTICES * (core::mem::size_of::<Vec3>() + core::mem::size_of::<ProjectedVertex>())) as u32
     );
-    let (r, vertex_instructions) =
-        clock::measure(|| vertex_stage(m.positions, m.albedo, m.triangles, &m.pose, &m.camera, &m.light, normals, projected));
+    let (r, vertex_instructions) = clock::measure(|| {
+        vertex_stage(m.positions, m.albedo, m.triangles, &m.scene.pose, &m.scene.camera, &m.scene.light, normals, projected)
+    });
     if let Err(e) = r {
-        defmt::error!("vertex stage refused the mesh: {=str}", vertex_error_name(e));
+        defmt::error!("vertex stage refused the mesh: {}", e);
         fail();
     }
     let mut sum = FrameChecksum::new();
     let (r, raster_instructions) =
-        clock::measure(|| rasterizer.render(projected, m.triangles, m.width, m.height, Cull::Clockwise, &mut sum));
+        clock::measure(|| rasterizer.render(projected, m.triangles, m.scene.width, m.scene.height, Cull::Clockwise, &mut sum));
     let stats = match r {
         Ok(s) => s,
         Err(e) => {
-            defmt::error!("rasterizer refused the frame: {=str}", raster_error_name(e));
+            defmt::error!("rasterizer refused the frame: {}", e);
             fail();
         }
     };
@@ -155,23 +156,6 @@ fn render(m: &mesh::DeviceMesh<'_>, normals: &mut [Vec3], projected: &mut [Proje
         stats.drawn,
         stats.overflow_rows
     );
-}
-
-fn vertex_error_name(e: gpmm_core::VertexError) -> &'static str {
-    match e {
-        gpmm_core::VertexError::LengthMismatch => "LengthMismatch",
-        gpmm_core::VertexError::IndexOutOfRange => "IndexOutOfRange",
-        gpmm_core::VertexError::NonFinite => "NonFinite",
-    }
-}
-
-fn raster_error_name(e: gpmm_core::RasterError) -> &'static str {
-    match e {
-        gpmm_core::RasterError::IndexOutOfRange => "IndexOutOfRange",
-        gpmm_core::RasterError::ImageTooLarge => "ImageTooLarge",
-        gpmm_core::RasterError::TooManyTriangles => "TooManyTriangles",
-        gpmm_core::RasterError::ZeroTileSize => "ZeroTileSize",
-    }
 }
 
 /// Ends the program with failure (QEMU exits with status 1).

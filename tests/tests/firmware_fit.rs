@@ -14,8 +14,10 @@
 //! Needs QEMU and the thumbv7em toolchain (`tests/run.sh` installs them); missing tools fail,
 //! never skip. Data from `$GPMM_DATA` (default `../shared/data`).
 
+use gpmm_core::fit::FitSettings as CoreSettings;
+use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
-use gpmm_host::device::fit::{fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
+use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
 use gpmm_host::device::quantize::{quantize, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
 use gpmm_host::eval::synth::{synthesize, SynthFace, SynthOptions};
 use gpmm_host::fit::{fit_prepared, prepare, rmse, FitSettings, Prepared};
@@ -70,10 +72,11 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let prep = prepared(face);
     let settings = FitSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..FitSettings::default() };
 
-    let (host, host_lm) = host_fit(blob, &prep, &settings).expect("host fit");
+    let device = device_settings(&settings.core(), &M4F);
+    let (host, host_lm) = host_fit(blob, &prep, &device, settings.seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;
 
-    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings));
+    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &device, settings.seed).expect("fit input"));
     let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f.partition");
     std::fs::write(&file, &part).expect("write partition");
     let log = run_firmware("m4f", &file, 1200).unwrap_or_else(|e| panic!("firmware run: {e}"));
@@ -119,7 +122,7 @@ fn float_model_and_blob_fit_the_same_landmarks() {
     let faces = faces(3, 5);
     for face in &faces {
         let prep = prepared(face);
-        let (_, blob_lm) = host_fit(blob, &prep, &settings).expect("blob fit");
+        let (_, blob_lm) = host_fit(blob, &prep, &device_settings(&settings.core(), &M4F), settings.seed).expect("blob fit");
         let float = fit_prepared(&q.reduced, &prep, &settings, &mut |_, _, _| {}).expect("float fit");
         let d = max_distance(&float.fitted_landmarks, &blob_lm);
         let (rf, rb) = (rmse(&float.fitted_landmarks, &prep.landmarks), rmse(&blob_lm, &prep.landmarks));
@@ -139,11 +142,53 @@ fn firmware_rejects_a_corrupted_blob() {
     let face = &faces(1, 11)[0];
     let prep = prepared(face);
     let settings = FitSettings { landmark_steps: 10, image_steps: 2, ..FitSettings::default() };
-    let mut part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings));
+    let mut part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings.core(), settings.seed).expect("fit input"));
     part[5000] ^= 0x10;
     let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-corrupt.partition");
     std::fs::write(&file, &part).expect("write partition");
     let err = run_firmware("m4f", &file, 300).expect_err("a corrupted blob must fail").to_string();
     assert!(err.contains("not a valid model blob") && err.contains("CRC"), "{err}");
     assert!(!err.contains("panic") && !err.contains("hard fault"), "{err}");
+}
+
+/// The fit input carries every setting: with each one away from its default, host and firmware
+/// still give the same fit, and that fit differs from the default-settings one.
+#[test]
+fn firmware_fit_uses_every_setting() {
+    let (_, blob) = models();
+    let face = &faces(1, 11)[1];
+    let prep = prepared(face);
+    let defaults = CoreSettings::DEFAULT;
+    let settings = CoreSettings {
+        landmark_steps: 1500,
+        pose_share: 0.5,
+        contour_landmarks: 12,
+        contour_sigma_factor: 2.0,
+        image_steps: 40,
+        shape_rank: 30,
+        color_rank: 20,
+        landmark_sigma: 0.008,
+        pixel_sigma: 0.05,
+        background_floor: 0.02,
+        nominal_distance_mm: 600.0,
+    };
+    // Every field differs from the default (a new field must be added here).
+    let fields = format!("{settings:?}");
+    assert_eq!(fields.matches(": ").count(), 11, "update this test for the new settings: {fields}");
+    let seed = 99;
+    let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
+    let host_ll = host.image.best_image.expect("image term").log_likelihood;
+    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings, seed).expect("fit input"));
+    let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-settings.partition");
+    std::fs::write(&file, &part).expect("write partition");
+    let log = run_firmware("m4f", &file, 600).unwrap_or_else(|e| panic!("firmware run: {e}"));
+    let dev = parse_report("m4f", &log).unwrap_or_else(|e| panic!("{e}\n{log}"));
+    let d = max_distance(&host_lm, &dev.landmarks_px);
+    let rel = ((host_ll - dev.log_likelihood) / host_ll.abs()).abs();
+    println!("non-default settings: host vs firmware landmarks {d} px apart, log-likelihood {host_ll} vs {}", dev.log_likelihood);
+    assert!(d <= 1e-3, "fitted landmarks differ by {d} px between host and firmware");
+    assert!(rel <= 1e-5, "log-likelihood differs by {rel}");
+    assert_eq!((dev.shape.len(), dev.color.len()), (30, 20), "the ranks reached the device");
+    let (default_fit, _) = host_fit(blob, &prep, &CoreSettings { shape_rank: 30, color_rank: 20, ..defaults }, seed).expect("default fit");
+    assert_ne!(default_fit.params().pose.yaw, host.params().pose.yaw, "the settings changed nothing");
 }

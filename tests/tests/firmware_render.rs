@@ -15,7 +15,7 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 use gpmm_core::FrameChecksum;
-use gpmm_host::device::mesh::{DeviceMesh, DeviceScene};
+use gpmm_host::device::mesh::{smoke_test_scene, DeviceMesh};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use serde_json::Value;
 
@@ -91,7 +91,7 @@ fn template_device_mesh(data: &Path) -> DeviceMesh {
     // shared with the fit's buffers and stack).
     let opts = TemplateOptions { vertices: Some(3000), ..TemplateOptions::default() };
     let t = load_template(&dir.join("lee-perry-smith.ply"), &dir.join("landmarks_ibug68.json"), &opts).expect("template loads");
-    DeviceMesh::from_mesh(&t.mesh, DeviceScene::smoke_test(128)).expect("device mesh")
+    DeviceMesh::from_mesh(&t.mesh, smoke_test_scene(128)).expect("device mesh")
 }
 
 fn num(f: &Value, key: &str) -> u64 {
@@ -158,9 +158,9 @@ fn firmware_rejects_a_corrupt_device_mesh() {
     let dir = tempfile::tempdir().expect("temp dir");
     type Corrupt = fn(&mut Vec<u8>);
     let cases: [(&str, Corrupt, &str); 3] = [
-        ("flipped byte", |b| b[1000] ^= 0x40, "Crc"),
-        ("truncated", |b| b.truncate(b.len() / 2), "Crc"),
-        ("huge vertex count", |b| b[8..12].copy_from_slice(&u32::MAX.to_le_bytes()), "TooManyVertices"),
+        ("flipped byte", |b| b[1000] ^= 0x40, "CRC-32 mismatch"),
+        ("truncated", |b| b.truncate(b.len() / 2), "CRC-32 mismatch"),
+        ("huge vertex count", |b| b[8..12].copy_from_slice(&u32::MAX.to_le_bytes()), "vertex count is out of range"),
     ];
     for (name, corrupt, error) in cases {
         let mut b = bytes.clone();

@@ -1,4 +1,4 @@
-//! Model fitting by Markov-chain Monte Carlo (DESIGN.md section 5; Schönborn et al., IJCV 2017).
+//! Model fitting by Markov-chain Monte Carlo (docs/design.md, "Fitting"; Schönborn et al., IJCV 2017).
 //!
 //! The pieces, one module each:
 //! - [`params`]: the parameter vector ([`FitParams`]: pose, focal length, SH light, coefficients).
@@ -52,6 +52,7 @@ use crate::{ModelError, RasterError, VertexError};
 
 /// Why a fit (or one of its parts) was refused. Small and `Copy`; never a panic.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FitError {
     /// Slices that must agree in length do not (per-vertex buffers, landmark lists, image pixels).
     LengthMismatch,

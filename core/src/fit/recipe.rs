@@ -39,6 +39,8 @@ const IBUG68: usize = 68;
 
 /// Settings of [`standard_fit`] (defaults: the documented default fit).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FitSettings {
     /// Landmark-chain steps, both phases: the first [`Self::pose_share`] of them move the pose, the
     /// rest the shape.

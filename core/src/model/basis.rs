@@ -1,6 +1,6 @@
 //! Low-rank linear models: `instance = mean + Σ_k c_k · b_k`.
 //!
-//! Two basis layouts exist (see DESIGN.md, "Low rank"):
+//! Two basis layouts exist (see docs/design.md, "Low rank"):
 //! - [`FactoredBasis`]: component `k` is a scalar per-vertex field `f_k`
 //!   (already scaled by `sqrt(eigenvalue)`) times one fixed unit 3-vector `e_k`.
 //!   Every Gaussian-process kernel of the paper factors this way, which costs
@@ -13,6 +13,7 @@ pub type Vec3 = [f32; 3];
 
 /// Why a model operation was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ModelError {
     /// Slice lengths do not agree with the basis dimensions.
     LengthMismatch,

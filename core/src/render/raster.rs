@@ -47,6 +47,7 @@ const SMALL_EXTENT: i32 = 1 << 14;
 
 /// Which on-screen winding to discard.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Cull {
     /// Draw both windings.
     None,
@@ -58,6 +59,7 @@ pub enum Cull {
 
 /// Why a frame was refused (before any tile is handed to the sink).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RasterError {
     /// A triangle refers to a vertex index `>=` the number of vertices.
     IndexOutOfRange,

@@ -30,6 +30,7 @@ impl TriIndex for u32 {
 
 /// Why the vertex stage refused its input.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum VertexError {
     /// Slices that need one entry per vertex have different lengths.
     LengthMismatch,

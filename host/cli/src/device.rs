@@ -3,7 +3,7 @@
 use crate::progress::spinner;
 use anyhow::{Context, Result};
 use clap::Args;
-use gpmm_host::device::fit::{fit_input_bytes, host_fit, parse_report, partition_bytes, profile_image_size, run_firmware};
+use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
 use gpmm_host::device::quantize::BlobBuf;
 use gpmm_host::fit::FitSettings;
 use gpmm_host::gp::model_io;
@@ -156,7 +156,9 @@ pub fn inspect(a: InspectArgs) -> Result<()> {
 pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     let blob = BlobBuf::read(&a.blob).with_context(|| format!("reading the model blob {}", a.blob.display()))?;
     let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", a.blob.display()))?;
-    let size = profile_image_size(&a.profile);
+    let profile =
+        gpmm_core::profile::DeviceProfile::by_name(&a.profile).with_context(|| format!("unknown device profile {}", a.profile))?;
+    let size = profile.image_side;
     let pts = gpmm_host::photo::pts::read_pts(&a.landmarks, a.pts_one_based)?;
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
     pts.check(&a.landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
@@ -171,8 +173,9 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
         ..FitSettings::default()
     };
     settings.validate()?;
+    let device = device_settings(&settings.core(), &profile);
     if a.host_only {
-        let (fit, lm) = host_fit(&blob, &prepared, &settings)?;
+        let (fit, lm) = host_fit(&blob, &prepared, &device, settings.seed)?;
         let p = fit.params();
         let json = serde_json::json!({
             "profile": a.profile,
@@ -187,7 +190,7 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&json)?);
         return Ok(());
     }
-    let partition = partition_bytes(blob.bytes(), &fit_input_bytes(&prepared, &settings));
+    let partition = partition_bytes(blob.bytes(), &fit_input_bytes(&prepared, &device, settings.seed)?);
     let dir = tempfile::tempdir().context("creating a temporary directory")?;
     let path = a.keep_partition.clone().unwrap_or_else(|| dir.path().join("partition.bin"));
     std::fs::write(&path, &partition).with_context(|| format!("writing {}", path.display()))?;
@@ -201,7 +204,7 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     report.landmarks_original_px = Some(report.landmarks_px.iter().map(|p| prepared.crop.to_original(*p, size)).collect());
     let mut json = serde_json::to_value(&report)?;
     if a.compare_host {
-        let (fit, lm) = host_fit(&blob, &prepared, &settings)?;
+        let (fit, lm) = host_fit(&blob, &prepared, &device, settings.seed)?;
         let max_diff = lm.iter().zip(&report.landmarks_px).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0f32, f32::max);
         let host_ll = fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood);
         json["host"] = serde_json::json!({

@@ -9,9 +9,10 @@
 //! The fit-input layout is documented in `firmware-sim/src/fit_input.rs` and its README.
 
 use crate::device::quantize::BlobBuf;
-use crate::fit::{FitSettings, Prepared};
-use gpmm_core::checksum::crc32;
-use gpmm_core::fit::{project_landmarks, standard_fit, FitError, Instance, InstanceBuffers, StandardFit, TargetImage};
+use crate::fit::Prepared;
+use gpmm_core::fit::{project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, StandardFit, TargetImage};
+use gpmm_core::format::{fit_input, fit_record, FormatError};
+use gpmm_core::profile::{DeviceProfile, M4F};
 use gpmm_core::ProjectedVertex;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -19,19 +20,15 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Shape coefficient capacity of the firmware's fit on `m4f` (`firmware-sim/src/fit.rs`, `KS`;
-/// `m7` has 100). The capacity does not change the fit: only the leading `rank` coefficients are
-/// ever drawn or read, so the host uses one capacity for both profiles.
-pub const DEVICE_KS: usize = 64;
-/// Colour coefficient capacity of the firmware's fit (`KC`).
-pub const DEVICE_KC: usize = 64;
-/// The firmware's renderer (`firmware-sim/src/main.rs`, `Rasterizer`): the same tile size and bin,
-/// so the image likelihood is summed in the same order as on the device.
-pub type DeviceRasterizer = gpmm_core::TileRasterizer<32, 32, 2048>;
-/// Magic of the fit input.
-pub const FIT_INPUT_MAGIC: [u8; 4] = *b"GPFI";
-/// Version of the fit-input layout.
-pub const FIT_INPUT_VERSION: u32 = 1;
+/// Shape coefficient capacity of the host's run of a device fit: the m4f profile's. The capacity
+/// does not change the fit (only the leading `rank` coefficients are ever drawn or read), and
+/// [`device_settings`] caps the ranks at it, so the host uses one capacity for both profiles.
+pub const DEVICE_KS: usize = M4F.shape_capacity;
+/// Colour coefficient capacity of the host's run of a device fit.
+pub const DEVICE_KC: usize = M4F.color_capacity;
+/// The devices' renderer (the profile's tile and bin sizes): the image likelihood sums in the
+/// same order as on the device.
+pub type DeviceRasterizer = gpmm_core::TileRasterizer<{ M4F.tile }, { M4F.tile }, { M4F.bin }>;
 
 /// Why a device fit failed.
 #[derive(Debug, thiserror::Error)]
@@ -63,6 +60,12 @@ pub enum DeviceFitError {
     /// The log lacks a figure.
     #[error("the firmware log has no {0}")]
     Missing(&'static str),
+    /// The firmware's fit record is malformed.
+    #[error("the firmware's fit record is malformed: {0}")]
+    Record(FormatError),
+    /// The fit input could not be written.
+    #[error("the fit input could not be written: {0}")]
+    Input(FormatError),
     /// The core refused the fit on the host.
     #[error("the core fitter refused the input on the host: {0:?}")]
     Core(FitError),
@@ -71,31 +74,25 @@ pub enum DeviceFitError {
     Blob(String),
 }
 
-/// The fit input section (see `firmware-sim/src/fit_input.rs`): `prepared`'s working image and
-/// landmarks, the step counts, ranks and landmark σ of `settings`, and `seed`.
-pub fn fit_input_bytes(prepared: &Prepared, settings: &FitSettings) -> Vec<u8> {
+/// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
+/// of both the device and the host's run of it.
+pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
+    FitSettings {
+        shape_rank: settings.shape_rank.min(profile.shape_capacity).min(DEVICE_KS),
+        color_rank: settings.color_rank.min(profile.color_capacity).min(DEVICE_KC),
+        ..*settings
+    }
+}
+
+/// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and
+/// landmarks, the whole `settings` and `seed`.
+pub fn fit_input_bytes(prepared: &Prepared, settings: &FitSettings, seed: u64) -> Result<Vec<u8>, DeviceFitError> {
     let (w, h) = prepared.image.dimensions();
-    let mut b = Vec::new();
-    b.extend_from_slice(&FIT_INPUT_MAGIC);
-    for v in [FIT_INPUT_VERSION, w, h, prepared.landmarks.len() as u32, settings.landmark_steps, settings.image_steps] {
-        b.extend_from_slice(&v.to_le_bytes());
-    }
-    for v in [settings.shape_rank.min(DEVICE_KS), settings.color_rank.min(DEVICE_KC)] {
-        b.extend_from_slice(&(v as u32).to_le_bytes());
-    }
-    b.extend_from_slice(&settings.seed.to_le_bytes());
-    b.extend_from_slice(&settings.landmark_sigma.to_le_bytes());
-    for p in &prepared.landmarks {
-        b.extend_from_slice(&p[0].to_le_bytes());
-        b.extend_from_slice(&p[1].to_le_bytes());
-    }
-    b.extend_from_slice(prepared.image.as_raw());
-    while !b.len().is_multiple_of(4) {
-        b.push(0);
-    }
-    let crc = crc32(&b);
-    b.extend_from_slice(&crc.to_le_bytes());
-    b
+    let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
+    let mut out = vec![0u8; fit_input::buffer_len(w, h, prepared.landmarks.len())];
+    let n = fit_input::write(&mut out, w, h, seed, settings, &prepared.landmarks, &pixels).map_err(DeviceFitError::Input)?;
+    out.truncate(n);
+    Ok(out)
 }
 
 /// The data partition: the blob, zero padding to 16 bytes, the fit input.
@@ -109,11 +106,13 @@ pub fn partition_bytes(blob: &[u8], input: &[u8]) -> Vec<u8> {
 }
 
 /// The host's run of the firmware's fit: the core's standard fit on the blob, with the
-/// firmware's coefficient capacities, settings and seed. Returns the fit and its landmarks (px).
+/// firmware's coefficient capacities, `settings` (see [`device_settings`]) and seed. Returns the
+/// fit and its landmarks (px).
 pub fn host_fit(
     blob: &BlobBuf,
     prepared: &Prepared,
     settings: &FitSettings,
+    seed: u64,
 ) -> Result<(StandardFit<DEVICE_KS, DEVICE_KC>, Vec<[f32; 2]>), DeviceFitError> {
     let view = blob.view().map_err(|e| DeviceFitError::Blob(e.to_string()))?;
     let model = view.morphable().map_err(DeviceFitError::Core)?;
@@ -129,14 +128,9 @@ pub fn host_fit(
     )
     .map_err(DeviceFitError::Core)?;
     let mut raster: Box<DeviceRasterizer> = Box::new(DeviceRasterizer::new());
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
-    let core_settings = gpmm_core::fit::FitSettings {
-        shape_rank: settings.shape_rank.min(DEVICE_KS),
-        color_rank: settings.color_rank.min(DEVICE_KC),
-        ..settings.core()
-    };
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let valid = vec![true; prepared.landmarks.len()];
-    let fit = standard_fit(&model, image, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut rng, &mut |_, _, _| {})
+    let fit = standard_fit(&model, image, &prepared.landmarks, &valid, settings, &mut inst, &mut raster, &mut rng, &mut |_, _, _| {})
         .map_err(DeviceFitError::Core)?;
     let mut lm = vec![[0.0f32; 2]; model.landmarks().len()];
     let k = project_landmarks(&model, fit.params(), w, h, &mut lm).map_err(DeviceFitError::Core)?;
@@ -177,6 +171,14 @@ pub struct DeviceFitReport {
     pub instructions_per_image_step: u64,
     /// Landmark-chain instructions per step.
     pub instructions_per_landmark_step: u64,
+    /// Instructions to parse the blob and the fit input.
+    pub instructions_parse: u64,
+    /// Instructions of the fit itself (after parsing).
+    pub instructions_fit: u64,
+    /// Shape-instance recomputations on the device.
+    pub shape_updates: u32,
+    /// Colour-instance recomputations on the device.
+    pub color_updates: u32,
     /// Seconds at 168 MHz, assuming one instruction per cycle.
     pub seconds_at_168mhz: f64,
     /// Fitted yaw (degrees).
@@ -203,6 +205,8 @@ pub struct DeviceFitReport {
     pub shape: Vec<f32>,
     /// Fitted colour coefficients.
     pub color: Vec<f32>,
+    /// Fitted SH light, 9 × (r, g, b).
+    pub light: Vec<[f32; 3]>,
     /// The fitted 68 landmarks in the working image (px).
     pub landmarks_px: Vec<[f32; 2]>,
     /// The same in the original photo (px), when known.
@@ -240,94 +244,64 @@ pub fn run_firmware(profile: &str, partition: &Path, timeout_s: u32) -> Result<S
     Ok(stdout)
 }
 
-/// The value of `key=` in the decoded log: the text after `key=` up to the next space, or the
-/// bracketed list that starts there.
-fn raw_value<'a>(log: &'a str, key: &str) -> Option<&'a str> {
-    let pat = format!("{key}=");
-    let mut found = None;
-    for line in log.lines() {
-        let mut rest = line;
-        while let Some(i) = rest.find(&pat) {
-            let before_ok = i == 0 || rest[..i].ends_with(' ');
-            let after = &rest[i + pat.len()..];
-            if before_ok {
-                let v = if after.starts_with('[') {
-                    let mut depth = 0usize;
-                    let end = after
-                        .char_indices()
-                        .find(|&(_, c)| {
-                            match c {
-                                '[' => depth += 1,
-                                ']' => depth = depth.saturating_sub(1),
-                                _ => {}
-                            }
-                            depth == 0
-                        })
-                        .map_or(after.len(), |(j, _)| j + 1);
-                    &after[..end]
-                } else {
-                    after.split(' ').next().unwrap_or("")
-                };
-                found = Some(v);
-            }
-            rest = after;
-        }
+/// The fit record the firmware logged as `GPFR <hex>` lines, as bytes.
+pub fn record_bytes(log: &str) -> Result<Vec<u8>, DeviceFitError> {
+    let hex: String = log.lines().filter_map(|l| l.split_once("GPFR ").map(|(_, h)| h.trim())).collect();
+    if hex.is_empty() {
+        return Err(DeviceFitError::Missing("fit record (GPFR lines)"));
     }
-    found
+    let digits: Option<Vec<u8>> = hex.chars().map(|c| c.to_digit(16).map(|d| d as u8)).collect();
+    let digits = digits.filter(|d| d.len() % 2 == 0).ok_or(DeviceFitError::Missing("well-formed fit record (hex digits)"))?;
+    Ok(digits.chunks_exact(2).map(|p| p[0] << 4 | p[1]).collect())
 }
 
-fn number<T: std::str::FromStr>(log: &str, key: &'static str) -> Result<T, DeviceFitError> {
-    raw_value(log, key).and_then(|v| v.trim_end_matches([',', ';']).parse().ok()).ok_or(DeviceFitError::Missing(key))
-}
-
-fn floats(log: &str, key: &'static str) -> Result<Vec<f32>, DeviceFitError> {
-    let v = raw_value(log, key).ok_or(DeviceFitError::Missing(key))?;
-    v.split(|c: char| c == '[' || c == ']' || c == ',' || c.is_whitespace())
-        .filter(|t| !t.is_empty())
-        .map(|t| t.parse::<f32>().map_err(|_| DeviceFitError::Missing(key)))
-        .collect()
-}
-
-/// Reads the report out of the decoded log and the `GPMM_FIGURES` line of `run.sh`.
+/// Reads the report out of the firmware's fit record and the `GPMM_FIGURES` line of `run.sh`.
 pub fn parse_report(profile: &str, log: &str) -> Result<DeviceFitReport, DeviceFitError> {
+    let bytes = record_bytes(log)?;
+    let r = fit_record::parse(&bytes).map_err(DeviceFitError::Record)?;
+    let (f, c) = (r.figures, r.counts);
     let flash_bytes: u64 = figure(log, "flash_bytes")?;
     let ram_static_bytes: u64 = figure(log, "ram_static_bytes")?;
-    let stack_peak_bytes: u64 = number(log, "stack_peak_bytes")?;
     let flash_code_budget: u64 = figure(log, "flash_code_budget_bytes")?;
     let ram_budget_bytes: u64 = figure(log, "ram_budget_bytes")?;
-    let blob_bytes: u64 = number(log, "blob_bytes")?;
-    let partition: u64 = number(log, "data_partition_bytes")?;
-    let instructions_total: u64 = number(log, "instructions_total")?;
-    let lm: Vec<f32> = floats(log, "fit_landmarks_px")?;
+    // The record's peak is taken after the fit; the firmware's last line covers the whole run.
+    let stack_peak_bytes = u64::from(c.stack_peak_bytes).max(figure(log, "stack_peak_bytes").unwrap_or(0));
+    let blob_bytes = u64::from(c.blob_bytes);
+    let lm: Vec<f32> = r.landmarks.iter().collect();
     Ok(DeviceFitReport {
         profile: profile.to_string(),
         flash_bytes,
         blob_bytes,
         flash_total_bytes: flash_bytes + blob_bytes,
-        flash_budget_bytes: flash_code_budget + partition,
+        flash_budget_bytes: flash_code_budget + u64::from(c.partition_bytes),
         ram_static_bytes,
         stack_peak_bytes,
         ram_total_bytes: ram_static_bytes + stack_peak_bytes,
         ram_budget_bytes,
-        instructions_total,
-        instructions_landmark_chain: number(log, "instructions_landmark_chain")?,
-        instructions_light_and_start: number(log, "instructions_light_and_start")?,
-        instructions_image_chain: number(log, "instructions_image_chain")?,
-        instructions_per_image_step: number(log, "instructions_per_image_step")?,
-        instructions_per_landmark_step: number(log, "instructions_per_landmark_step")?,
-        seconds_at_168mhz: instructions_total as f64 / 168e6,
-        yaw_deg: number(log, "yaw_deg")?,
-        pitch_deg: number(log, "pitch_deg")?,
-        roll_deg: number(log, "roll_deg")?,
-        focal_px: number(log, "focal_px")?,
-        log_posterior: number(log, "log_posterior")?,
-        log_likelihood: number(log, "log_likelihood")?,
-        landmark_rmse_px: number(log, "landmark_rmse_px")?,
-        pixel_rmse: number(log, "pixel_rmse")?,
-        acceptance_landmark_chain: number(log, "acceptance_landmark_chain")?,
-        acceptance_image_chain: number(log, "acceptance_image_chain")?,
-        shape: floats(log, "fit_shape")?,
-        color: floats(log, "fit_color")?,
+        instructions_total: c.instructions_total,
+        instructions_landmark_chain: c.instructions_landmark_chain,
+        instructions_light_and_start: c.instructions_light_and_start,
+        instructions_image_chain: c.instructions_image_chain,
+        instructions_per_image_step: c.instructions_per_image_step,
+        instructions_per_landmark_step: c.instructions_per_landmark_step,
+        instructions_parse: c.instructions_parse,
+        instructions_fit: c.instructions_fit,
+        shape_updates: c.shape_updates,
+        color_updates: c.color_updates,
+        seconds_at_168mhz: c.instructions_total as f64 / 168e6,
+        yaw_deg: f.yaw.to_degrees(),
+        pitch_deg: f.pitch.to_degrees(),
+        roll_deg: f.roll.to_degrees(),
+        focal_px: f.focal,
+        log_posterior: f.log_posterior,
+        log_likelihood: f.log_likelihood,
+        landmark_rmse_px: f.landmark_rmse_px,
+        pixel_rmse: f.pixel_rmse,
+        acceptance_landmark_chain: f.acceptance_landmark_chain,
+        acceptance_image_chain: f.acceptance_image_chain,
+        shape: r.shape.iter().collect(),
+        color: r.color.iter().collect(),
+        light: r.light.coeffs.to_vec(),
         landmarks_px: lm.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
         landmarks_original_px: None,
     })
@@ -340,28 +314,34 @@ fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError> {
     v.get(key).and_then(|x| x.as_u64().or_else(|| x.as_str().and_then(|s| s.parse().ok()))).ok_or(DeviceFitError::Missing(key))
 }
 
-/// The profile's working image side.
-pub fn profile_image_size(profile: &str) -> u32 {
-    if profile == "m7" {
-        256
-    } else {
-        128
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gpmm_core::format::fit_record::{DeviceCounts, FitFigures};
+    use gpmm_core::ShLight;
 
     #[test]
-    fn log_values_are_found_with_lists() {
-        let log = "INFO  yaw_deg=1.5 pitch_deg=-2\nINFO  fit_landmarks_px=[[1.0, 2.5], [3.0, -4.0]]\nINFO  instructions_total=123\n";
-        assert_eq!(number::<f32>(log, "yaw_deg").unwrap(), 1.5);
-        assert_eq!(number::<f32>(log, "pitch_deg").unwrap(), -2.0);
-        assert_eq!(number::<u64>(log, "instructions_total").unwrap(), 123);
-        assert_eq!(floats(log, "fit_landmarks_px").unwrap(), vec![1.0, 2.5, 3.0, -4.0]);
-        assert!(number::<f32>(log, "roll_deg").is_err());
-        // A key that is the suffix of another is not confused with it.
-        assert!(number::<f32>("INFO  xyaw_deg=3", "yaw_deg").is_err());
+    fn the_record_is_read_back_from_hex_lines() {
+        let figures = FitFigures { yaw: 0.5, covered_pixels: 77, ..FitFigures::default() };
+        let counts =
+            DeviceCounts { instructions_total: 123_456_789, stack_peak_bytes: 4096, partition_bytes: 1000, ..DeviceCounts::default() };
+        let mut rec = vec![0u8; fit_record::encoded_len(2, 1, 1)];
+        fit_record::write(&mut rec, &figures, &counts, &ShLight::frontal(), &[1.0, 2.0], &[3.0], &[[4.0, 5.0]]).unwrap();
+        let hex: Vec<String> = rec.chunks(50).map(|c| c.iter().map(|b| format!("{b:02x}")).collect()).collect();
+        let mut log = String::from("INFO  gpmm-firmware-sim 0.1.0 profile=m4f\n");
+        for h in &hex {
+            log.push_str(&format!("INFO  GPFR {h}\n"));
+        }
+        log.push_str(
+            r#"GPMM_FIGURES {"flash_bytes": 100, "ram_static_bytes": 200, "flash_code_budget_bytes": 512, "ram_budget_bytes": 192}"#,
+        );
+        let r = parse_report("m4f", &log).unwrap();
+        assert_eq!((r.instructions_total, r.stack_peak_bytes, r.flash_budget_bytes, r.ram_total_bytes), (123_456_789, 4096, 1512, 4296));
+        assert_eq!((r.shape.clone(), r.color.clone(), r.landmarks_px.clone()), (vec![1.0, 2.0], vec![3.0], vec![[4.0, 5.0]]));
+        assert!((r.yaw_deg - 0.5f32.to_degrees()).abs() < 1e-4);
+        // One flipped digit: the CRC refuses the record.
+        let bad = log.replacen("GPFR 4750", "GPFR 4751", 1);
+        assert!(matches!(parse_report("m4f", &bad), Err(DeviceFitError::Record(_))));
+        assert!(matches!(parse_report("m4f", "INFO nothing"), Err(DeviceFitError::Missing(_))));
     }
 }

@@ -25,7 +25,8 @@ use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::path::Path;
 
-/// A device profile: the budgets a blob for that board class must meet (DESIGN.md, "Device profiles").
+/// A device profile on the command line; its numbers are `gpmm_core::profile`'s (the one place
+/// the firmware and the host read them from).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Profile {
     /// Cortex-M4F class (STM32F405 / nRF52840): 512 KiB data partition, 128×128 images.
@@ -38,33 +39,32 @@ impl Profile {
     /// Both profiles.
     pub const ALL: [Profile; 2] = [Profile::M4f, Profile::M7];
 
+    /// The core's description of this profile.
+    pub fn device(self) -> gpmm_core::profile::DeviceProfile {
+        match self {
+            Profile::M4f => gpmm_core::profile::M4F,
+            Profile::M7 => gpmm_core::profile::M7,
+        }
+    }
+
     /// `m4f` or `m7`.
     pub fn name(self) -> &'static str {
-        match self {
-            Profile::M4f => "m4f",
-            Profile::M7 => "m7",
-        }
+        self.device().name
     }
 
     /// Default vertex budget.
     pub fn vertices(self) -> usize {
-        match self {
-            Profile::M4f => 1000,
-            Profile::M7 => 2000,
-        }
+        self.device().model_vertices
     }
 
     /// Default shape rank.
     pub fn rank_shape(self) -> usize {
-        match self {
-            Profile::M4f => 50,
-            Profile::M7 => 80,
-        }
+        self.device().model_rank
     }
 
     /// Default colour rank.
     pub fn rank_color(self) -> usize {
-        self.rank_shape()
+        self.device().model_rank
     }
 
     /// Default bits per basis value.
@@ -74,32 +74,22 @@ impl Profile {
 
     /// Side of the square RGB target image the firmware fits.
     pub fn image_side(self) -> u32 {
-        match self {
-            Profile::M4f => 128,
-            Profile::M7 => 256,
-        }
+        self.device().image_side
     }
 
     /// Bytes of the 8-bit RGB target image.
     pub fn image_bytes(self) -> usize {
-        let s = self.image_side() as usize;
-        s * s * 3
+        self.device().image_bytes()
     }
 
-    /// Size of the flash data partition (memory-*.x) that holds the blob, image and landmarks.
+    /// Size of the flash data partition that holds the blob and the fit input.
     pub fn partition_bytes(self) -> usize {
-        match self {
-            Profile::M4f => 512 * 1024,
-            Profile::M7 => 1024 * 1024,
-        }
+        self.device().partition_bytes
     }
 
     /// Largest blob `gpmm quantize` writes for this profile (leaves room for the image and landmarks).
     pub fn blob_budget(self) -> usize {
-        match self {
-            Profile::M4f => 400 * 1024,
-            Profile::M7 => 800 * 1024,
-        }
+        self.device().blob_budget
     }
 }
 

@@ -7,7 +7,7 @@
 //! orthonormal basis every `A_t` is diagonal, so the matrix kernel splits into
 //! independent scalar kernels, one per basis direction; directions with the
 //! same coefficients form a [`DirectionClass`] and share one scalar
-//! eigenproblem. See DESIGN.md, "Low rank".
+//! eigenproblem. See docs/design.md, "Low rank".
 //!
 //! Nothing here is face-specific: the kernels see only vertex positions (mm)
 //! and template colours (linear RGB in [0,1]).

@@ -4,7 +4,7 @@
 //! the tile rasterizer are the same code the device runs; the host only adds an [`ImageSink`] that
 //! copies each finished tile into an [`RgbaImage`], and a default [`Framing`] (camera focal length
 //! from a field of view, model distance from its bounding box). Colours are linear RGB in [0, 1]
-//! written as-is (no gamma, DESIGN.md), rounded to 8 bits. Back faces are culled: the model's
+//! written as-is (no gamma, docs/design.md), rounded to 8 bits. Back faces are culled: the model's
 //! triangles are counter-clockwise seen from outside, so [`Cull::Clockwise`] keeps the front faces.
 
 pub mod figure;
@@ -17,8 +17,9 @@ use gpmm_core::{
 };
 use image::{Rgba, RgbaImage};
 
-/// Tile width and height of the host rasterizer (pixels).
-pub const TILE: usize = 32;
+/// Tile width and height of the host rasterizer (pixels): the devices' (`gpmm_core::profile`), so
+/// host and device sum the image likelihood tile by tile in the same order.
+pub const TILE: usize = gpmm_core::profile::M4F.tile;
 /// Triangle capacity of the host rasterizer's per-tile-row bin.
 pub const BIN: usize = 8192;
 /// The rasterizer configuration the host uses.

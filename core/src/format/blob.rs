@@ -44,6 +44,7 @@ pub const UNIT_TOLERANCE: f32 = 1e-3;
 
 /// The sections, in table (and file) order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Section {
     /// Shape mean, `f32[N][3]` (mm).
     ShapeMean,
@@ -105,6 +106,7 @@ impl Section {
 
 /// How a part's basis is stored.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Layout {
     /// One scalar per vertex per component, times a unit direction per component (code 0).
     Factored,
@@ -141,6 +143,7 @@ impl Layout {
 
 /// What is wrong with one section-table entry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SectionProblem {
     /// The offset is not a multiple of [`SECTION_ALIGN`].
     Misaligned,
@@ -161,6 +164,7 @@ pub enum SectionProblem {
 
 /// Why a blob was refused. Small and `Copy`; every message names the field concerned.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum BlobError {
     /// The blob does not start at a 4-byte aligned address.
     Misaligned,

@@ -1,0 +1,127 @@
+//! The fit input (`GPFI`): what a camera and a landmark detector deliver on a board (the target
+//! image and its landmarks) plus the seed and the whole fit settings, read in place.
+//!
+//! The settings travel as a postcard payload of the caller's settings type (the core's
+//! `FitSettings` in practice), so every setting the host uses reaches the device.
+//! Layout, version 2 (little-endian; offsets in bytes):
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 4 | magic `GPFI` |
+//! | 4 | 4 | version (`u32`, 2) |
+//! | 8 | 4 | image width `W` |
+//! | 12 | 4 | image height `H` |
+//! | 16 | 4 | landmark count `L` |
+//! | 20 | 4 | settings payload bytes `S` (at most [`SETTINGS_CAPACITY`]) |
+//! | 24 | 8 | seed (`u64`) |
+//! | 32 | S | settings, postcard-encoded, zero padding to 4 bytes |
+//! | … | 8 L | landmarks `[f32; 2]`, pixel coordinates (pixel centres at +0.5) |
+//! | … | 3 W H | pixels, RGB8, row-major from the top-left, zero padding to 4 bytes |
+//! | end − 4 | 4 | CRC-32 of every byte before it |
+
+use super::bytes::{check_crc, check_magic, Reader, Writer};
+use super::FormatError;
+use serde::{de::DeserializeOwned, Serialize};
+
+/// Magic bytes.
+pub const MAGIC: [u8; 4] = *b"GPFI";
+/// The layout version written and read.
+pub const VERSION: u32 = 2;
+/// Bytes before the settings payload.
+pub const HEADER_BYTES: usize = 32;
+/// Largest settings payload.
+pub const SETTINGS_CAPACITY: usize = 1024;
+
+/// A fit input borrowed from its bytes, with its settings decoded.
+#[derive(Debug, Clone)]
+pub struct FitInput<'a, S> {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Seed of the chains.
+    pub seed: u64,
+    /// The fit settings.
+    pub settings: S,
+    /// Target landmarks (image pixels).
+    pub landmarks: &'a [[f32; 2]],
+    /// RGB8 pixels, row-major.
+    pub pixels: &'a [[u8; 3]],
+}
+
+/// A buffer length that holds any fit input of this size (the writer says the exact length).
+pub fn buffer_len(width: u32, height: u32, landmarks: usize) -> usize {
+    HEADER_BYTES + SETTINGS_CAPACITY + 8 * landmarks + (3 * width as usize * height as usize).next_multiple_of(4) + 4
+}
+
+/// Writes a fit input into `out` (see [`buffer_len`]); returns the bytes written.
+pub fn write<S: Serialize>(
+    out: &mut [u8],
+    width: u32,
+    height: u32,
+    seed: u64,
+    settings: &S,
+    landmarks: &[[f32; 2]],
+    pixels: &[[u8; 3]],
+) -> Result<usize, FormatError> {
+    if width == 0 || height == 0 || pixels.len() != width as usize * height as usize {
+        return Err(FormatError::BadField("image size"));
+    }
+    let room = out.len();
+    let payload = out.get_mut(HEADER_BYTES..).ok_or(FormatError::BufferTooSmall { needed: buffer_len(width, height, landmarks.len()) })?;
+    let cap = payload.len().min(SETTINGS_CAPACITY);
+    let s = postcard::to_slice(settings, payload.get_mut(..cap).unwrap_or(&mut [])).map_err(|_| FormatError::Payload)?.len();
+    let mut w = Writer::new(out);
+    w.bytes(&MAGIC)?;
+    w.u32(VERSION)?;
+    w.u32(width)?;
+    w.u32(height)?;
+    w.u32(landmarks.len() as u32)?;
+    w.u32(s as u32)?;
+    w.u64(seed)?;
+    w.advance(s)?;
+    w.align4()?;
+    w.f32s(landmarks.iter().flatten().copied())?;
+    for p in pixels {
+        w.bytes(p)?;
+    }
+    w.align4()?;
+    let len = w.position() + 4;
+    if len > room {
+        return Err(FormatError::BufferTooSmall { needed: len });
+    }
+    w.finish_crc()
+}
+
+/// Reads and checks the fit input at the start of `bytes` (more bytes may follow), for images
+/// of at most `max_side` pixels a side and at most `max_landmarks` landmarks.
+pub fn parse<S: DeserializeOwned>(bytes: &[u8], max_side: u32, max_landmarks: usize) -> Result<FitInput<'_, S>, FormatError> {
+    check_magic(bytes, MAGIC)?;
+    let mut r = Reader::new(bytes);
+    r.take(4)?;
+    let version = r.u32()?;
+    if version != VERSION {
+        return Err(FormatError::BadVersion { found: version, supported: VERSION });
+    }
+    let (width, height, count, s) = (r.u32()?, r.u32()?, r.u32()? as usize, r.u32()? as usize);
+    let seed = r.u64()?;
+    if width == 0 || width > max_side {
+        return Err(FormatError::BadField("image width"));
+    }
+    if height == 0 || height > max_side {
+        return Err(FormatError::BadField("image height"));
+    }
+    if count == 0 || count > max_landmarks {
+        return Err(FormatError::BadField("landmark count"));
+    }
+    if s > SETTINGS_CAPACITY {
+        return Err(FormatError::BadField("settings size"));
+    }
+    let body = HEADER_BYTES + s.next_multiple_of(4) + 8 * count + (3 * width as usize * height as usize).next_multiple_of(4);
+    check_crc(bytes, body)?;
+    let settings = postcard::from_bytes(r.take(s)?).map_err(|_| FormatError::Payload)?;
+    r.align4()?;
+    let landmarks = r.slice(count)?;
+    let pixels = r.slice(width as usize * height as usize)?;
+    Ok(FitInput { width, height, seed, settings, landmarks, pixels })
+}

@@ -1,0 +1,121 @@
+//! The wire formats of `gpmm_core::format`: what is written is read back exactly, and every
+//! corruption (any single flipped bit, any truncation) is refused with an error, never a panic.
+#![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
+
+use gpmm_core::fit::FitSettings;
+use gpmm_core::format::device_mesh::{self, DeviceMeshView, DeviceScene};
+use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
+use gpmm_core::format::{fit_input, FormatError};
+use gpmm_core::{Camera, Pose, ShLight};
+
+/// Bytes copied into a 4-byte aligned buffer (formats are read in place).
+fn aligned(bytes: &[u8]) -> Vec<u32> {
+    let mut words = vec![0u32; bytes.len().div_ceil(4)];
+    bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
+    words
+}
+
+fn as_bytes(words: &[u32], len: usize) -> &[u8] {
+    &bytemuck::cast_slice::<u32, u8>(words)[..len]
+}
+
+/// Every single-bit flip and every truncation of `bytes` is refused by `parse`.
+fn refuses_corruption(bytes: &[u8], parse: impl Fn(&[u8]) -> bool) {
+    for i in 0..bytes.len() {
+        for bit in 0..8 {
+            let mut c = bytes.to_vec();
+            c[i] ^= 1 << bit;
+            let w = aligned(&c);
+            assert!(!parse(as_bytes(&w, c.len())), "flip of bit {bit} of byte {i} was accepted");
+        }
+    }
+    for cut in 0..bytes.len() {
+        let w = aligned(&bytes[..cut]);
+        assert!(!parse(as_bytes(&w, cut)), "truncation to {cut} bytes was accepted");
+    }
+}
+
+fn scene() -> DeviceScene {
+    DeviceScene {
+        width: 64,
+        height: 48,
+        pose: Pose { yaw: 0.3, pitch: -0.1, roll: 0.05, translation: [1.0, -2.0, -600.0] },
+        camera: Camera::centered(64, 48, 120.0),
+        light: ShLight::from_ambient_diffuse([0.6; 3], [0.5, 0.45, 0.4], [-0.4, 0.5, 0.77]),
+    }
+}
+
+#[test]
+fn device_mesh_round_trip_and_corruption() {
+    let positions = [[-50.0, -50.0, 0.0], [50.0, -50.0, 0.0], [50.0, 50.0, 0.0], [0.0, 0.0, 30.0]];
+    let albedo = [[0.9, 0.2, 0.1], [0.1, 0.8, 0.2], [0.2, 0.3, 0.9], [1.0, 1.0, 1.0]];
+    let triangles = [[0u16, 1, 3], [1, 2, 3], [2, 0, 3]];
+    let view = DeviceMeshView { positions: &positions, albedo: &albedo, triangles: &triangles, scene: scene() };
+    let mut out = vec![0u8; device_mesh::encoded_len(4, 3)];
+    assert_eq!(device_mesh::write(&view, &mut out).unwrap(), out.len());
+    assert_eq!(out.len(), 168 + 24 * 4 + 18 + 2 + 4);
+    assert_eq!(device_mesh::encoded_len(4249, 8352), 152_260);
+    let w = aligned(&out);
+    let back = device_mesh::parse(as_bytes(&w, out.len()), 100).unwrap();
+    assert_eq!(back.positions, &positions);
+    assert_eq!(back.albedo, &albedo);
+    assert_eq!(back.triangles, &triangles);
+    assert_eq!(back.scene, scene());
+    assert_eq!(device_mesh::parse(as_bytes(&w, out.len()), 3).unwrap_err(), FormatError::TooMany("vertices"));
+    refuses_corruption(&out, |b| device_mesh::parse(b, 100).is_ok());
+    // An index out of range is refused by the writer, and by the reader even with a valid CRC.
+    let bad = [[0u16, 1, 4]];
+    let v = DeviceMeshView { triangles: &bad, ..view };
+    assert_eq!(device_mesh::write(&v, &mut out).unwrap_err(), FormatError::BadField("triangle index"));
+}
+
+#[test]
+fn fit_input_carries_every_setting() {
+    let settings =
+        FitSettings { landmark_steps: 123, image_steps: 45, pixel_sigma: 0.07, nominal_distance_mm: 800.0, ..FitSettings::DEFAULT };
+    let (w, h) = (5u32, 3u32);
+    let pixels: Vec<[u8; 3]> = (0..w * h).map(|i| [i as u8, 2 * i as u8, 255 - i as u8]).collect();
+    let landmarks = [[1.5f32, 2.5], [3.25, 0.5]];
+    let mut out = vec![0u8; fit_input::buffer_len(w, h, 2)];
+    let n = fit_input::write(&mut out, w, h, 0xdead_beef_1234, &settings, &landmarks, &pixels).unwrap();
+    out.truncate(n);
+    let words = aligned(&out);
+    let back: fit_input::FitInput<'_, FitSettings> = fit_input::parse(as_bytes(&words, n), 128, 68).unwrap();
+    assert_eq!((back.width, back.height, back.seed), (w, h, 0xdead_beef_1234));
+    assert_eq!(back.settings, settings);
+    assert_eq!(back.landmarks, &landmarks);
+    assert_eq!(back.pixels, &pixels[..]);
+    assert_eq!(fit_input::parse::<FitSettings>(as_bytes(&words, n), 4, 68).unwrap_err(), FormatError::BadField("image width"));
+    assert_eq!(fit_input::parse::<FitSettings>(as_bytes(&words, n), 128, 1).unwrap_err(), FormatError::BadField("landmark count"));
+    refuses_corruption(&out, |b| fit_input::parse::<FitSettings>(b, 128, 68).is_ok());
+    // A buffer too small for the image is an error, not a panic.
+    let mut small = vec![0u8; 40];
+    assert!(fit_input::write(&mut small, w, h, 1, &settings, &landmarks, &pixels).is_err());
+}
+
+#[test]
+fn fit_record_round_trip_and_corruption() {
+    let figures = FitFigures {
+        yaw: 0.1,
+        pitch: -0.2,
+        focal: 333.0,
+        translation: [1.0, 2.0, -500.0],
+        covered_pixels: 4321,
+        log_likelihood: 45.5,
+        ..FitFigures::default()
+    };
+    let counts =
+        DeviceCounts { instructions_total: 1_711_172_480, stack_peak_bytes: 37_264, blob_bytes: 300_000, ..DeviceCounts::default() };
+    let light = ShLight::frontal();
+    let (shape, color, lm) = ([0.5f32, -1.0, 2.0], [0.25f32], [[10.0f32, 20.0], [30.5, 40.5]]);
+    let mut out = vec![0u8; fit_record::encoded_len(3, 1, 2)];
+    assert_eq!(fit_record::write(&mut out, &figures, &counts, &light, &shape, &color, &lm).unwrap(), out.len());
+    let r = fit_record::parse(&out).unwrap();
+    assert_eq!(r.figures, figures);
+    assert_eq!(r.counts, counts);
+    assert_eq!(r.light, light);
+    assert_eq!(r.shape.iter().collect::<Vec<_>>(), shape);
+    assert_eq!(r.color.iter().collect::<Vec<_>>(), color);
+    assert_eq!(r.landmarks.iter().collect::<Vec<_>>(), [10.0, 20.0, 30.5, 40.5]);
+    refuses_corruption(&out, |b| fit_record::parse(b).is_ok());
+}
