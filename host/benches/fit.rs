@@ -6,7 +6,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gpmm_host::eval::synth::{synthesize, SynthOptions};
-use gpmm_host::fit::{fit_prepared, prepare, FitSettings};
+use gpmm_host::fit::{fit_prepared, prepare, FitOptions, FitSettings};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions};
@@ -35,7 +35,7 @@ fn bench(c: &mut Criterion) {
     let synth = SynthOptions { count: 1, yaws_deg: vec![30.0], seed: 1, ..SynthOptions::with_data_dir(&data) };
     let faces = synthesize(&synth, |_, _| {}).unwrap_or_else(|e| panic!("cannot render the synthetic face: {e}"));
     let face = &faces[0];
-    let settings = FitSettings::default();
+    let settings = FitOptions::default();
     let prepared = prepare(&face.image, &face.truth.landmarks, settings.size).unwrap_or_else(|e| panic!("{e}"));
     eprintln!("model: {} vertices, {} triangles; settings {settings:?}", model.vertices(), model.triangles.len());
 
@@ -44,7 +44,7 @@ fn bench(c: &mut Criterion) {
     g.bench_function("default_fit_128", |b| {
         b.iter(|| black_box(fit_prepared(&model, &prepared, &settings, &mut |_, _, _| {}).map(|o| o.pixel_rmse).unwrap_or(f32::NAN)))
     });
-    let lm_only = FitSettings { image_steps: 0, ..settings };
+    let lm_only = FitOptions { fit: FitSettings { image_steps: 0, ..settings.fit }, ..settings };
     g.bench_function("landmark_chain_5000_steps", |b| {
         b.iter(|| black_box(fit_prepared(&model, &prepared, &lm_only, &mut |_, _, _| {}).map(|o| o.landmark_rmse_px).unwrap_or(f32::NAN)))
     });

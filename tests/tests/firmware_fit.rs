@@ -15,12 +15,13 @@
 //! never skip. Data from `$GPMM_DATA` (default `../shared/data`).
 
 use gpmm_core::fit::FitSettings as CoreSettings;
+use gpmm_core::fit::{Drift, DriftSettings, LightSettings, MixtureShares, ProposalSettings};
 use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
 use gpmm_host::device::quantize::{quantize, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
 use gpmm_host::eval::synth::{synthesize, SynthFace, SynthOptions};
-use gpmm_host::fit::{fit_prepared, prepare, rmse, FitSettings, Prepared};
+use gpmm_host::fit::{fit_prepared, prepare, rmse, FitOptions, Prepared};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
@@ -70,7 +71,10 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let (q, blob) = models();
     let face = &faces(1, 11)[1];
     let prep = prepared(face);
-    let settings = FitSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..FitSettings::default() };
+    let settings = FitOptions {
+        fit: CoreSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..CoreSettings::DEFAULT },
+        ..FitOptions::DEFAULT
+    };
 
     let device = device_settings(&settings.core(), &M4F);
     let (host, host_lm) = host_fit(blob, &prep, &device, settings.seed).expect("host fit");
@@ -117,7 +121,10 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
 #[test]
 fn float_model_and_blob_fit_the_same_landmarks() {
     let (q, blob) = models();
-    let settings = FitSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..FitSettings::default() };
+    let settings = FitOptions {
+        fit: CoreSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..CoreSettings::DEFAULT },
+        ..FitOptions::DEFAULT
+    };
     let (mut worst, mut same, mut worst_quality) = (0.0f32, 0, 0.0f32);
     let faces = faces(3, 5);
     for face in &faces {
@@ -141,7 +148,7 @@ fn firmware_rejects_a_corrupted_blob() {
     let (_, blob) = models();
     let face = &faces(1, 11)[0];
     let prep = prepared(face);
-    let settings = FitSettings { landmark_steps: 10, image_steps: 2, ..FitSettings::default() };
+    let settings = FitOptions { fit: CoreSettings { landmark_steps: 10, image_steps: 2, ..CoreSettings::DEFAULT }, ..FitOptions::DEFAULT };
     let mut part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings.core(), settings.seed).expect("fit input"));
     part[5000] ^= 0x10;
     let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-corrupt.partition");
@@ -171,10 +178,21 @@ fn firmware_fit_uses_every_setting() {
         pixel_sigma: 0.05,
         background_floor: 0.02,
         nominal_distance_mm: 600.0,
+        proposals: ProposalSettings {
+            landmark_pose: MixtureShares { pose: 0.9, ..defaults.proposals.landmark_pose },
+            landmark_shape: MixtureShares { shape: 0.5, ..defaults.proposals.landmark_shape },
+            image: MixtureShares { light_solve: 0.08, ..defaults.proposals.image },
+            drift: DriftSettings {
+                shape: Drift { sigmas: [0.25, 0.1, 0.03], ..defaults.proposals.drift.shape },
+                ..defaults.proposals.drift
+            },
+        },
+        light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
-    // Every field differs from the default (a new field must be added here).
+    // Every top-level field and group differs from the default (a new field must be added here;
+    // 74 fields counting the groups' own).
     let fields = format!("{settings:?}");
-    assert_eq!(fields.matches(": ").count(), 11, "update this test for the new settings: {fields}");
+    assert_eq!(fields.matches(": ").count(), 74, "update this test for the new settings: {fields}");
     let seed = 99;
     let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;

@@ -12,6 +12,7 @@
 //! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
 //! - [`chain`]: Metropolis-Hastings with delayed acceptance (prior and landmarks, then the image).
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
+//! - [`settings`]: its one [`FitSettings`] (steps, ranks, σ's, proposal mixtures, light).
 //! - [`normal`]: uniform and standard-normal samples over any `rand_core` generator.
 //!
 //! All log densities are `f32` and "up to an additive constant" unless stated otherwise; the
@@ -29,6 +30,7 @@ pub mod params;
 pub mod prior;
 pub mod proposal;
 pub mod recipe;
+pub mod settings;
 
 /// The morphable-model view under its old path (`gpmm_core::fit::morph`); it lives in [`crate::model`].
 pub use crate::model::morphable as morph;
@@ -46,7 +48,8 @@ pub use observer::{Acceptance, ChainObserver, NoObserver, Progress, ProposalStep
 pub use params::FitParams;
 pub use prior::Prior;
 pub use proposal::{Mixture, MixtureEntry, OneOf, Proposal, ProposalContext, ProposalKind, Scale, StandardProposal, MAX_PROPOSALS};
-pub use recipe::{project_landmarks, standard_fit, FitObserver, FitSettings, Stage, StandardFit};
+pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};
+pub use settings::{Drift, DriftSettings, FitSettings, LightSettings, MixtureShares, ProposalSettings};
 
 use crate::{ModelError, RasterError, VertexError};
 

@@ -19,98 +19,24 @@
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
 use super::chain::{image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, FitResult, ImageProblem, Problem};
-use super::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
+use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
-use super::light_fit::{solve_light, LightSolveConfig};
+use super::light_fit::solve_light;
 use super::likelihood::GaussianPixel;
 use super::observer::{Acceptance, ChainObserver, ProposalStep};
 use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::Mixture;
+use super::settings::FitSettings;
 use super::FitError;
 use crate::model::morphable::{Instance, MorphableModel};
 use crate::render::shading::TriIndex;
-use crate::{ShLight, TileRasterizer};
+use crate::TileRasterizer;
 use rand_core::Rng;
 
 /// Landmark count of the iBUG-68 scheme, whose first 17 points are the jaw contour.
 const IBUG68: usize = 68;
-
-/// Settings of [`standard_fit`] (defaults: the documented default fit).
-#[derive(Debug, Clone, Copy, PartialEq)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FitSettings {
-    /// Landmark-chain steps, both phases: the first [`Self::pose_share`] of them move the pose, the
-    /// rest the shape.
-    pub landmark_steps: u32,
-    /// Fraction of the landmark steps spent on the pose phase (0 to 1; the rest fit the shape
-    /// with yaw and distance held).
-    pub pose_share: f32,
-    /// Leading landmarks that follow the face's silhouette (17 for iBUG-68: the jaw contour);
-    /// only used when the model has exactly 68 landmarks.
-    pub contour_landmarks: usize,
-    /// σ factor of the contour landmarks in the pose phase (their 3-D definition is view
-    /// dependent, so they say less about the pose than the inner points).
-    pub contour_sigma_factor: f32,
-    /// Image-chain steps (each renders the model at most once).
-    pub image_steps: u32,
-    /// Shape components fitted (the leading ones; capped by the model's rank and `KS`).
-    pub shape_rank: usize,
-    /// Colour components fitted (capped by the model's rank and `KC`).
-    pub color_rank: usize,
-    /// Landmark σ as a fraction of the larger image side.
-    pub landmark_sigma: f32,
-    /// Foreground σ of the image likelihood on [0, 1] colours.
-    pub pixel_sigma: f32,
-    /// Uniform floor mixed into the background colour histogram.
-    pub background_floor: f32,
-    /// Distance of the start pose (mm); the start focal length is chosen to match it.
-    pub nominal_distance_mm: f32,
-}
-
-impl FitSettings {
-    /// The default fit: 5000 landmark steps (2000 pose, 3000 shape; contour σ × 3 for the pose),
-    /// 600 image steps, 200 shape and 50 colour components, landmark σ 0.5 % of the image side,
-    /// pixel σ 0.043, background floor 0.01, start at 500 mm.
-    pub const DEFAULT: Self = Self {
-        landmark_steps: 5000,
-        pose_share: 0.4,
-        contour_landmarks: 17,
-        contour_sigma_factor: 3.0,
-        image_steps: 600,
-        shape_rank: 200,
-        color_rank: 50,
-        landmark_sigma: 0.005,
-        pixel_sigma: DEFAULT_PIXEL_SIGMA,
-        background_floor: 0.01,
-        nominal_distance_mm: 500.0,
-    };
-
-    /// Checks ranges (σ and factors > 0 and finite, distance > 0, pose share in [0, 1]);
-    /// `BadConfig` otherwise.
-    pub fn validate(&self) -> Result<(), FitError> {
-        let positive = |v: f32| v > 0.0 && v.is_finite();
-        if positive(self.landmark_sigma)
-            && positive(self.pixel_sigma)
-            && positive(self.nominal_distance_mm)
-            && positive(self.contour_sigma_factor)
-            && self.background_floor >= 0.0
-            && (0.0..=1.0).contains(&self.pose_share)
-        {
-            Ok(())
-        } else {
-            Err(FitError::BadConfig)
-        }
-    }
-}
-
-impl Default for FitSettings {
-    fn default() -> Self {
-        Self::DEFAULT
-    }
-}
 
 /// The stage a progress report is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -216,7 +142,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let (shape_len, color_len) = (settings.shape_rank, settings.color_rank);
 
     // 1. The start and the prior.
-    let ambient = ShLight::ambient([0.8; 3]);
+    let ambient = settings.light.start_light();
     let probe: FitParams<KS, KC> = initial_guess(model, &lm, w as f32, w, h, ambient, shape_len, color_len)?;
     let pivot = landmark_pivot(model, Some(&lm))?;
     let depth = -(probe.pose.translation[2] + pivot[2]);
@@ -233,11 +159,11 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         image,
         pixel: GaussianPixel::new(settings.pixel_sigma)?,
         background: &background,
-        light_solve: LightSolveConfig::default(),
+        light_solve: settings.light.solve_config(settings.light.solve_stride),
     };
     let mut start = landmark.best;
     instance.update(model, &start, w, h)?;
-    let every_vertex = LightSolveConfig { stride: 1, ..LightSolveConfig::default() };
+    let every_vertex = settings.light.solve_config(settings.light.start_stride);
     if let Ok(l) =
         solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &start.camera(w, h), &image, &every_vertex)
     {
@@ -245,7 +171,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     }
 
     // 4. The image chain.
-    let img_mix = Mixture::image_default(side);
+    let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
     let problem = Problem { model: *model, landmarks: lm, prior: &prior, mixture: &img_mix, width: w, height: h };
     let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
@@ -280,7 +206,7 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
         }
     }
     let pose_lm = lm.with_sigma_factors(factors.get(..n).ok_or(FitError::TooManyLandmarks)?)?;
-    let pose_mix = Mixture::landmark_pose(w.max(h) as f32);
+    let pose_mix = Mixture::from_shares(&settings.proposals.landmark_pose, &settings.proposals.drift, w.max(h) as f32)?;
     let pose_problem = Problem { model: *model, landmarks: pose_lm, prior, mixture: &pose_mix, width: w, height: h };
     let total = settings.landmark_steps;
     // The pose phase's share, rounded down (f32 → u32 saturates; the share is checked to be ≤ 1).
@@ -288,7 +214,7 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     let phase =
         PhaseObserver { observer: &mut *observer, stage: Stage::LandmarkChain, offset: 0, total, steps: pose_steps, report_end: false };
     let pose = landmark_chain_with(&pose_problem, init, pose_steps, rng, phase)?;
-    let shape_mix = Mixture::landmark_shape(w.max(h) as f32);
+    let shape_mix = Mixture::from_shares(&settings.proposals.landmark_shape, &settings.proposals.drift, w.max(h) as f32)?;
     let shape_problem = Problem { landmarks: lm, mixture: &shape_mix, ..pose_problem };
     let shape_steps = total - pose_steps;
     let phase = PhaseObserver { observer, stage: Stage::LandmarkChain, offset: pose_steps, total, steps: shape_steps, report_end: true };
@@ -315,29 +241,4 @@ pub fn project_landmarks<I: TriIndex, const KS: usize, const KC: usize>(
         *o = cam.project(params.pose.transform_point(*p)).map_or([f32::NAN; 2], |s| [s.x, s.y]);
     }
     Ok(n)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn settings_are_checked() {
-        assert_eq!(FitSettings::DEFAULT.validate(), Ok(()));
-        let bad = [
-            FitSettings { pose_share: 1.5, ..FitSettings::DEFAULT },
-            FitSettings { pose_share: -0.1, ..FitSettings::DEFAULT },
-            FitSettings { pose_share: f32::NAN, ..FitSettings::DEFAULT },
-            FitSettings { contour_sigma_factor: 0.0, ..FitSettings::DEFAULT },
-            FitSettings { contour_sigma_factor: f32::INFINITY, ..FitSettings::DEFAULT },
-            FitSettings { landmark_sigma: -1.0, ..FitSettings::DEFAULT },
-            FitSettings { background_floor: -0.5, ..FitSettings::DEFAULT },
-        ];
-        for s in bad {
-            assert_eq!(s.validate(), Err(FitError::BadConfig), "{s:?}");
-        }
-        // The extremes of the pose share are allowed: all pose or all shape.
-        assert_eq!(FitSettings { pose_share: 0.0, ..FitSettings::DEFAULT }.validate(), Ok(()));
-        assert_eq!(FitSettings { pose_share: 1.0, ..FitSettings::DEFAULT }.validate(), Ok(()));
-    }
 }

@@ -6,7 +6,7 @@ use crate::render::{figure_kernels, render, sample, KernelFigureArgs, RenderArgs
 use crate::synth::{synth, SynthArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use gpmm_host::fit::{FitJob, FitSettings};
+use gpmm_host::fit::{FitJob, FitOptions, FitSettings};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::NystromOptions;
 use gpmm_host::render::Background;
@@ -130,7 +130,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             image: photo,
             landmarks: pts,
             pts_one_based: false,
-            settings: FitSettings { landmark_steps, image_steps, ..FitSettings::default() },
+            settings: FitOptions { fit: FitSettings { landmark_steps, image_steps, ..FitSettings::DEFAULT }, ..FitOptions::DEFAULT },
             out_dir: out.join("fit"),
             timing: true,
         })?;

@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
 use gpmm_host::device::quantize::BlobBuf;
-use gpmm_host::fit::FitSettings;
+use gpmm_host::fit::{FitOptions, FitSettings};
 use gpmm_host::gp::model_io;
 use std::path::PathBuf;
 
@@ -26,13 +26,13 @@ pub struct DeviceFitArgs {
     #[arg(long)]
     pub pts_one_based: bool,
     /// Seed of the chains.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
+    #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
     /// Landmark-chain steps.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
+    #[arg(long, default_value_t = FitSettings::DEFAULT.landmark_steps, value_name = "N")]
     pub landmark_steps: u32,
     /// Image-chain steps.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
+    #[arg(long, default_value_t = FitSettings::DEFAULT.image_steps, value_name = "N")]
     pub image_steps: u32,
     /// Also run the same fit on the host (the core on the same blob) and report the differences.
     #[arg(long)]
@@ -163,14 +163,16 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
     pts.check(&a.landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
     let prepared = gpmm_host::fit::prepare(&photo, &pts.points, size)?;
-    let settings = FitSettings {
+    let settings = FitOptions {
         size,
-        landmark_steps: a.landmark_steps,
-        image_steps: a.image_steps,
         seed: a.seed,
-        shape_rank: view.rank_shape(),
-        color_rank: view.rank_color(),
-        ..FitSettings::default()
+        fit: FitSettings {
+            landmark_steps: a.landmark_steps,
+            image_steps: a.image_steps,
+            shape_rank: view.rank_shape(),
+            color_rank: view.rank_color(),
+            ..FitSettings::DEFAULT
+        },
     };
     settings.validate()?;
     let device = device_settings(&settings.core(), &profile);

@@ -100,7 +100,7 @@ pub struct RecognitionArgs {
     #[arg(long, value_name = "N")]
     pub identities: Option<usize>,
     /// Working image side of the fits (pixels).
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.size, value_parser = clap::value_parser!(u32).range(16..=1024))]
     pub size: u32,
     /// Landmark-chain steps per fit (default 5000; 1500 with --quick).
     #[arg(long, value_name = "N")]
@@ -117,10 +117,10 @@ pub struct RecognitionArgs {
     #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.color_rank, value_name = "K")]
     pub color_rank: usize,
     /// Seed of the fitting chains.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
     pub fit_seed: u64,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
@@ -232,18 +232,23 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         note(&pb, format!("model {label}: {}", if built { "built" } else { "reused" }));
     })?;
     pb.finish_and_clear();
-    let settings = gpmm_host::fit::FitSettings {
+    let defaults = gpmm_host::fit::FitSettings::DEFAULT;
+    let settings = gpmm_host::fit::FitOptions {
         size: a.size,
-        landmark_steps: a.landmark_steps.unwrap_or(if q { 1500 } else { gpmm_host::fit::DEFAULT_LANDMARK_STEPS }),
-        image_steps: a.image_steps.unwrap_or(if q { 40 } else { gpmm_host::fit::DEFAULT_IMAGE_STEPS }),
         seed: a.fit_seed,
-        shape_rank: a.shape_rank,
-        color_rank: a.color_rank,
-        landmark_sigma: gpmm_host::fit::DEFAULT_LANDMARK_SIGMA,
-        contour_sigma: gpmm_host::fit::DEFAULT_CONTOUR_SIGMA,
+        fit: gpmm_host::fit::FitSettings {
+            landmark_steps: a.landmark_steps.unwrap_or(if q { 1500 } else { defaults.landmark_steps }),
+            image_steps: a.image_steps.unwrap_or(if q { 40 } else { defaults.image_steps }),
+            shape_rank: a.shape_rank,
+            color_rank: a.color_rank,
+            ..defaults
+        },
     };
     settings.validate()?;
-    let kde_settings = gpmm_host::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.image_steps), ..settings };
+    let kde_settings = gpmm_host::fit::FitOptions {
+        fit: gpmm_host::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.fit.image_steps), ..settings.fit },
+        ..settings
+    };
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let bar = ProgressBar::new(0);
     bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));

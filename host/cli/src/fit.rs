@@ -36,45 +36,48 @@ pub struct FitArgs {
 #[derive(Debug, Args)]
 pub struct FitSettingsArgs {
     /// Working image side (pixels): the crop is resampled to SIZE x SIZE.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SIZE, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.size, value_parser = clap::value_parser!(u32).range(16..=1024))]
     pub size: u32,
     /// Landmark-chain steps: 40 % on the pose, then the shape (no rendering; about 20 us each).
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_STEPS, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmark_steps, value_name = "N")]
     pub landmark_steps: u32,
     /// Image-chain steps (one render each).
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_IMAGE_STEPS, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.image_steps, value_name = "N")]
     pub image_steps: u32,
     /// Seed of the chains.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SEED)]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
     pub seed: u64,
     /// Shape components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_SHAPE_RANK, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.shape_rank, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_COLOR_RANK, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.color_rank, value_name = "K")]
     pub color_rank: usize,
     /// Landmark standard deviation as a fraction of the working image side.
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_LANDMARK_SIGMA, value_name = "FRACTION")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmark_sigma, value_name = "FRACTION")]
     pub landmark_sigma: f32,
     /// Factor on the landmark σ of the 17 jaw-contour points (iBUG-68) while the landmark chain
     /// fits the pose: where a detector puts them depends on the view, so they say less about the
     /// pose than the inner points (1 treats them like the others).
-    #[arg(long, default_value_t = gpmm_host::fit::DEFAULT_CONTOUR_SIGMA, value_name = "FACTOR")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.contour_sigma_factor, value_name = "FACTOR")]
     pub contour_sigma: f32,
 }
 
 impl FitSettingsArgs {
-    /// The settings.
-    pub fn settings(&self) -> gpmm_host::fit::FitSettings {
-        gpmm_host::fit::FitSettings {
+    /// The flags mapped into the one settings type (everything not on the command line: defaults).
+    pub fn settings(&self) -> gpmm_host::fit::FitOptions {
+        gpmm_host::fit::FitOptions {
             size: self.size,
-            landmark_steps: self.landmark_steps,
-            image_steps: self.image_steps,
             seed: self.seed,
-            shape_rank: self.shape_rank,
-            color_rank: self.color_rank,
-            landmark_sigma: self.landmark_sigma,
-            contour_sigma: self.contour_sigma,
+            fit: gpmm_host::fit::FitSettings {
+                landmark_steps: self.landmark_steps,
+                image_steps: self.image_steps,
+                shape_rank: self.shape_rank,
+                color_rank: self.color_rank,
+                landmark_sigma: self.landmark_sigma,
+                contour_sigma_factor: self.contour_sigma,
+                ..gpmm_host::fit::FitSettings::DEFAULT
+            },
         }
     }
 }
@@ -116,11 +119,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
 
 /// Fits one photo with a progress bar and prints a summary (`gpmm fit`, the demo).
 pub fn run_fit(job: &FitJob) -> Result<()> {
-    let bar = ProgressBar::new(u64::from(job.settings.landmark_steps) + u64::from(job.settings.image_steps));
+    let bar = ProgressBar::new(u64::from(job.settings.fit.landmark_steps) + u64::from(job.settings.fit.image_steps));
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} steps ({msg}) [{elapsed}]").unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let lm_total = u64::from(job.settings.landmark_steps);
+    let lm_total = u64::from(job.settings.fit.landmark_steps);
     let t0 = Instant::now();
     let rep = gpmm_host::fit::fit_files(job, &mut |phase, done, _| {
         bar.set_message(phase.to_string());

@@ -14,7 +14,7 @@
 //! - wall-clock seconds of the fit (crop and both chains).
 
 use crate::eval::synth::{read_truth, ImageTruth};
-use crate::fit::{fit_prepared, load_photo, FitSettings};
+use crate::fit::{fit_prepared, load_photo, FitOptions};
 use crate::gp::model::GpModel;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -59,7 +59,7 @@ pub struct BenchSummary {
     /// Images whose fit failed (their errors are printed).
     pub failed: usize,
     /// The fit settings.
-    pub settings: FitSettings,
+    pub settings: FitOptions,
     /// |yaw| error (degrees).
     pub yaw_error_deg: Stat,
     /// |pitch| error (degrees).
@@ -129,7 +129,7 @@ fn iod_error(fit: &[[f32; 2]], truth: &[[f32; 2]]) -> f32 {
 }
 
 /// Fits one synthetic image (its `.pts` file, the `gpmm fit` path) and compares with its truth.
-pub fn bench_one(model: &GpModel, dir: &Path, truth: &ImageTruth, settings: &FitSettings) -> Result<BenchImage, String> {
+pub fn bench_one(model: &GpModel, dir: &Path, truth: &ImageTruth, settings: &FitOptions) -> Result<BenchImage, String> {
     let t0 = Instant::now();
     let prepared = load_photo(model, &dir.join(&truth.image), &dir.join(&truth.landmarks_file), false, settings.size)
         .map_err(|e| format!("{}: {e}", truth.image))?;
@@ -157,7 +157,7 @@ pub fn bench_one(model: &GpModel, dir: &Path, truth: &ImageTruth, settings: &Fit
 pub fn bench(
     model: &GpModel,
     dir: &Path,
-    settings: &FitSettings,
+    settings: &FitOptions,
     limit: Option<usize>,
     jobs: usize,
     progress: &(dyn Fn(usize, usize) + Sync),

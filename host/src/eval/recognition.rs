@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::eval::synth::{read_truth, ImageTruth};
-use crate::fit::{fit_prepared, load_photo, FitSettings};
+use crate::fit::{fit_prepared, load_photo, FitOptions};
 
 use super::plot::{line_chart, Chart, Series};
 use super::{create_dir, wilson_interval, write_text, EvalError};
@@ -157,9 +157,9 @@ pub struct RecognitionReport {
     /// Chance rate of rank-1 identification.
     pub chance: f64,
     /// Fit settings.
-    pub settings: FitSettings,
+    pub settings: FitOptions,
     /// Settings of the KDE components' fits, if different.
-    pub kde_settings: Option<FitSettings>,
+    pub kde_settings: Option<FitOptions>,
     /// Threads.
     pub jobs: usize,
     /// The command line that produced the report.
@@ -223,7 +223,7 @@ impl SynthSet {
     }
 }
 
-fn fit_one(model: &crate::gp::model::GpModel, dir: &Path, t: &ImageTruth, settings: &FitSettings) -> Result<ImageFit, String> {
+fn fit_one(model: &crate::gp::model::GpModel, dir: &Path, t: &ImageTruth, settings: &FitOptions) -> Result<ImageFit, String> {
     let t0 = Instant::now();
     let prepared = load_photo(model, &dir.join(&t.image), &dir.join(&t.landmarks_file), false, settings.size)
         .map_err(|e| format!("{}: {e}", t.image))?;
@@ -243,7 +243,7 @@ fn fit_one(model: &crate::gp::model::GpModel, dir: &Path, t: &ImageTruth, settin
 pub fn fit_set(
     model_path: &Path,
     set: &SynthSet,
-    settings: &FitSettings,
+    settings: &FitOptions,
     jobs: usize,
     cache: &Path,
     progress: &(dyn Fn(usize, usize) + Sync),
@@ -375,8 +375,8 @@ pub enum Progress<'a> {
 pub fn evaluate(
     rows: &[Row],
     set: &SynthSet,
-    settings: &FitSettings,
-    kde_settings: &FitSettings,
+    settings: &FitOptions,
+    kde_settings: &FitOptions,
     jobs: usize,
     out: &Path,
     progress: &(dyn Fn(Progress<'_>) + Sync),
@@ -439,15 +439,15 @@ fit: {} landmark + {} image steps at {}x{} px, {} shape + {} colour components",
         report.gallery,
         pct(report.chance),
         report.synth_seed,
-        report.settings.landmark_steps,
-        report.settings.image_steps,
+        report.settings.fit.landmark_steps,
+        report.settings.fit.image_steps,
         report.settings.size,
         report.settings.size,
-        report.settings.shape_rank,
-        report.settings.color_rank
+        report.settings.fit.shape_rank,
+        report.settings.fit.color_rank
     ));
     if let Some(k) = &report.kde_settings {
-        s.push_str(&format!(" (KDE components: {} image steps)", k.image_steps));
+        s.push_str(&format!(" (KDE components: {} image steps)", k.fit.image_steps));
     }
     s.push_str(".\n\n| model |");
     for y in &yaws {

@@ -4,7 +4,7 @@
 //! Steps ([`fit_prepared`]; 2 to 5 are the core's [`standard_fit`], which the firmware runs too):
 //! 1. The photo is cropped and resampled to `size × size` ([`crate::photo`]); the landmarks follow.
 //! 2. Start ([`gpmm_core::fit::initial_guess`]): the scaled-orthographic pose of the mean face's
-//!    landmarks, at [`NOMINAL_DISTANCE_MM`] (the focal length follows from that distance).
+//!    landmarks, at [`FitSettings::nominal_distance_mm`] (the focal length follows from that distance).
 //! 3. Landmark chain (`prior × landmarks`, no rendering), [`FitSettings::landmark_steps`] steps:
 //!    the pose first (40 %; jaw contour σ × 3, no distance changes), then the shape with yaw and
 //!    distance held.
@@ -32,8 +32,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-/// The core's settings of the standard fit (the defaults below are its defaults).
-pub use gpmm_core::fit::FitSettings as CoreSettings;
+pub use gpmm_core::fit::FitSettings;
 
 /// Shape coefficient capacity of a fit (a model of higher rank is fitted in its first `KS` components).
 pub const KS: usize = 200;
@@ -41,33 +40,6 @@ pub const KS: usize = 200;
 pub const KC: usize = 200;
 /// The parameter vector of a host fit.
 pub type Params = FitParams<KS, KC>;
-
-/// Default working image side (pixels).
-pub const DEFAULT_SIZE: u32 = 128;
-/// Default landmark-chain steps (about 2 µs each: a few ms in all).
-pub const DEFAULT_LANDMARK_STEPS: u32 = CoreSettings::DEFAULT.landmark_steps;
-/// Default image-chain steps (each renders the model once; about 1 s in all at 128×128 on one core).
-pub const DEFAULT_IMAGE_STEPS: u32 = CoreSettings::DEFAULT.image_steps;
-/// Default seed.
-pub const DEFAULT_SEED: u64 = 0;
-/// Default number of shape components fitted (the leading ones; capped by the model's rank and [`KS`]).
-///
-/// All of a default model's 200: on synthetic ICT faces (three seeds, 52 faces each) 50 components
-/// left 3.5 % inter-ocular landmark error and compressed yaw (the template's jaw-corner landmarks sit
-/// up to 20 mm deeper than ICT's mean face, beyond what 50 components express); 200 gave 2.8 % and a
-/// median yaw error of 2°, for about 15 % more time per fit.
-pub const DEFAULT_SHAPE_RANK: usize = CoreSettings::DEFAULT.shape_rank;
-/// Default number of colour components fitted.
-pub const DEFAULT_COLOR_RANK: usize = CoreSettings::DEFAULT.color_rank;
-/// Default landmark σ as a fraction of the working image side (0.64 px at 128; the core's
-/// `LandmarkTarget::default_sigma` of 1.5 % left 5 % inter-ocular landmark error on synthetic faces).
-pub const DEFAULT_LANDMARK_SIGMA: f32 = CoreSettings::DEFAULT.landmark_sigma;
-/// Default σ factor of the jaw-contour landmarks in the landmark chain's pose phase.
-pub const DEFAULT_CONTOUR_SIGMA: f32 = CoreSettings::DEFAULT.contour_sigma_factor;
-/// Distance of the start pose (mm); the start focal length is chosen to match the landmark spread.
-pub const NOMINAL_DISTANCE_MM: f32 = CoreSettings::DEFAULT.nominal_distance_mm;
-/// Uniform floor mixed into the background colour histogram.
-pub const BACKGROUND_FLOOR: f32 = CoreSettings::DEFAULT.background_floor;
 
 /// Why a fit failed.
 #[derive(Debug, thiserror::Error)]
@@ -98,73 +70,52 @@ fn core(stage: &'static str) -> impl Fn(FitError) -> FitRunError {
     move |error| FitRunError::Core { stage, error }
 }
 
-/// What a fit does (defaults: the constants above).
+/// A host fit: the working image side and the seed around the core's one [`FitSettings`]
+/// (serialized flat: `size`, `seed` and the settings' fields side by side).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct FitSettings {
-    /// Working image side (pixels, 16 to 1024).
+pub struct FitOptions {
+    /// Working image side (pixels, 16 to 1024): the crop is resampled to `size × size`.
     pub size: u32,
-    /// Landmark-chain steps.
-    pub landmark_steps: u32,
-    /// Image-chain steps.
-    pub image_steps: u32,
     /// Seed of the chains' generator.
     pub seed: u64,
-    /// Shape components fitted (capped by the model's rank and [`KS`]).
-    pub shape_rank: usize,
-    /// Colour components fitted (capped by the model's rank and [`KC`]).
-    pub color_rank: usize,
-    /// Landmark σ as a fraction of the working image side.
-    pub landmark_sigma: f32,
-    /// σ factor of the 17 jaw-contour landmarks while the landmark chain fits the pose.
-    #[serde(default = "default_contour_sigma")]
-    pub contour_sigma: f32,
+    /// The standard fit's settings (ranks beyond [`KS`] / [`KC`] are capped).
+    #[serde(flatten)]
+    pub fit: FitSettings,
 }
 
-fn default_contour_sigma() -> f32 {
-    DEFAULT_CONTOUR_SIGMA
-}
+impl FitOptions {
+    /// A 128 × 128 working image, seed 0, the core's default settings.
+    pub const DEFAULT: Self = Self { size: 128, seed: 0, fit: FitSettings::DEFAULT };
 
-impl Default for FitSettings {
-    fn default() -> Self {
-        Self {
-            size: DEFAULT_SIZE,
-            landmark_steps: DEFAULT_LANDMARK_STEPS,
-            image_steps: DEFAULT_IMAGE_STEPS,
-            seed: DEFAULT_SEED,
-            shape_rank: DEFAULT_SHAPE_RANK,
-            color_rank: DEFAULT_COLOR_RANK,
-            landmark_sigma: DEFAULT_LANDMARK_SIGMA,
-            contour_sigma: DEFAULT_CONTOUR_SIGMA,
-        }
-    }
-}
-
-impl FitSettings {
     /// The core's settings for this fit (ranks capped at [`KS`] / [`KC`]).
-    pub fn core(&self) -> CoreSettings {
-        CoreSettings {
-            landmark_steps: self.landmark_steps,
-            image_steps: self.image_steps,
-            shape_rank: self.shape_rank.min(KS),
-            color_rank: self.color_rank.min(KC),
-            landmark_sigma: self.landmark_sigma,
-            contour_sigma_factor: self.contour_sigma,
-            ..CoreSettings::DEFAULT
-        }
+    pub fn core(&self) -> FitSettings {
+        FitSettings { shape_rank: self.fit.shape_rank.min(KS), color_rank: self.fit.color_rank.min(KC), ..self.fit }
     }
 
-    /// Checks the ranges.
+    /// Checks the ranges (the host's limits, then the core's own check).
     pub fn validate(&self) -> Result<(), FitRunError> {
-        if !(self.contour_sigma > 0.0 && self.contour_sigma <= 100.0) {
-            return Err(FitRunError::Settings(format!("contour sigma factor {} is invalid: it must be in (0, 100]", self.contour_sigma)));
+        let f = &self.fit;
+        if !(f.contour_sigma_factor > 0.0 && f.contour_sigma_factor <= 100.0) {
+            return Err(FitRunError::Settings(format!(
+                "contour sigma factor {} is invalid: it must be in (0, 100]",
+                f.contour_sigma_factor
+            )));
         }
-        if !(self.landmark_sigma > 0.0 && self.landmark_sigma <= 0.5) {
-            return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", self.landmark_sigma)));
+        if !(f.landmark_sigma > 0.0 && f.landmark_sigma <= 0.5) {
+            return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", f.landmark_sigma)));
         }
         if !(16..=1024).contains(&self.size) {
             return Err(FitRunError::Settings(format!("working size {} is invalid: it must be 16 to 1024 pixels", self.size)));
         }
-        Ok(())
+        f.validate().map_err(|_| {
+            FitRunError::Settings("the fit settings are out of range (a σ, share, stride or step size is not positive and finite)".into())
+        })
+    }
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self::DEFAULT
     }
 }
 
@@ -250,7 +201,7 @@ pub struct Outcome {
 pub fn fit_prepared(
     model: &GpModel,
     prepared: &Prepared,
-    settings: &FitSettings,
+    settings: &FitOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<Outcome, FitRunError> {
     settings.validate()?;
@@ -477,7 +428,7 @@ pub fn report(
     model: &GpModel,
     inputs: &ReportInputs<'_>,
     prepared: &Prepared,
-    settings: &FitSettings,
+    settings: &FitOptions,
     o: &Outcome,
     seconds: Option<f64>,
 ) -> FitReport {
@@ -487,8 +438,8 @@ pub fn report(
     let timing = seconds.map(|_| Timing {
         landmark_chain_seconds: o.landmark_seconds,
         image_chain_seconds: o.image_seconds,
-        landmark_step_us: o.landmark_seconds * 1e6 / f64::from(settings.landmark_steps.max(1)),
-        image_step_ms: o.image_seconds * 1e3 / f64::from(settings.image_steps.max(1)),
+        landmark_step_us: o.landmark_seconds * 1e6 / f64::from(settings.fit.landmark_steps.max(1)),
+        image_step_ms: o.image_seconds * 1e3 / f64::from(settings.fit.image_steps.max(1)),
     });
     FitReport {
         format: "gpmm-fit".into(),
@@ -505,8 +456,8 @@ pub fn report(
         crop: prepared.crop,
         working_size: size,
         seed: settings.seed,
-        landmark_steps: settings.landmark_steps,
-        image_steps: settings.image_steps,
+        landmark_steps: settings.fit.landmark_steps,
+        image_steps: settings.fit.image_steps,
         yaw_deg: p.pose.yaw.to_degrees(),
         pitch_deg: p.pose.pitch.to_degrees(),
         roll_deg: p.pose.roll.to_degrees(),
@@ -616,7 +567,7 @@ pub struct FitJob {
     /// Read the landmark file as 1-based.
     pub pts_one_based: bool,
     /// Fit settings.
-    pub settings: FitSettings,
+    pub settings: FitOptions,
     /// Output directory (created if needed).
     pub out_dir: std::path::PathBuf,
     /// Record timing in `fit.json`.

@@ -24,6 +24,7 @@
 use super::{Mixture, Proposal, ProposalContext};
 use crate::fit::normal::{add_normals, standard_normal};
 use crate::fit::params::FitParams;
+use crate::fit::settings::{Drift, DriftSettings, MixtureShares};
 use crate::fit::FitError;
 use crate::render::pose::mat_vec;
 use crate::Vec3;
@@ -146,70 +147,85 @@ impl Mixture<StandardProposal> {
         Ok(())
     }
 
-    fn add_pose(&mut self, image_size: f32, share: f32) -> Result<(), FitError> {
-        self.add_pose_parts(image_size, share, true, true)
+    /// Adds coarse, intermediate and fine components of one kind from a [`Drift`], weights `share · w_i`.
+    fn push_drift(&mut self, kind: ProposalKind, drift: &Drift, share: f32) -> Result<(), FitError> {
+        self.push3(kind, drift.sigmas, drift.weights, share)
     }
 
     /// Pitch, roll, scaling and translation components, and yaw and distance ones if asked;
-    /// weights are fractions of `share` (yaw 0.3, pitch 0.2, roll 0.1, distance 0.05, scaling
-    /// 0.15, translation 0.2), so leaving parts out lowers the total.
-    fn add_pose_parts(&mut self, image_size: f32, share: f32, yaw: bool, distance: bool) -> Result<(), FitError> {
-        let rot_w = [0.1, 0.4, 0.5];
-        let rot_s = [0.75, 0.10, 0.01];
+    /// weights are fractions of `share` ([`DriftSettings::pose_fractions`]: yaw, pitch, roll,
+    /// distance, scaling, translation), so leaving parts out lowers the total. Translation σ's
+    /// are fractions of `image_size`.
+    fn add_pose_parts(&mut self, drift: &DriftSettings, image_size: f32, share: f32, yaw: bool, distance: bool) -> Result<(), FitError> {
+        let [f_yaw, f_pitch, f_roll, f_distance, f_scaling, f_translation] = drift.pose_fractions;
         if yaw {
-            self.push3(ProposalKind::Yaw, rot_s, rot_w, 0.3 * share)?;
+            self.push_drift(ProposalKind::Yaw, &drift.rotation, f_yaw * share)?;
         }
-        self.push3(ProposalKind::Pitch, rot_s, rot_w, 0.2 * share)?;
-        self.push3(ProposalKind::Roll, rot_s, rot_w, 0.1 * share)?;
+        self.push_drift(ProposalKind::Pitch, &drift.rotation, f_pitch * share)?;
+        self.push_drift(ProposalKind::Roll, &drift.rotation, f_roll * share)?;
         if distance {
-            self.push3(ProposalKind::Distance, [200.0, 50.0, 5.0], [0.2, 0.6, 0.2], 0.05 * share)?;
+            self.push_drift(ProposalKind::Distance, &drift.distance, f_distance * share)?;
         }
-        self.push3(ProposalKind::Scaling, [0.15, 0.05, 0.01], [0.2, 0.6, 0.2], 0.15 * share)?;
+        self.push_drift(ProposalKind::Scaling, &drift.scaling, f_scaling * share)?;
         let px = image_size.max(1.0);
-        self.push3(ProposalKind::Translation, [0.1 * px, 0.02 * px, 0.004 * px], [0.2, 0.2, 0.6], 0.2 * share)
+        let t = drift.translation.sigmas;
+        self.push3(ProposalKind::Translation, [t[0] * px, t[1] * px, t[2] * px], drift.translation.weights, f_translation * share)
     }
 
-    /// The pose phase of the landmark chain: rotation, scaling (focal length) and translation, no
-    /// distance changes (landmarks hardly tell perspective from shape) and no shape.
+    /// The mixture with `shares` of the built-in kinds and the step sizes `drift`, for a working
+    /// image whose larger side is `image_size` px (kinds with share 0 are left out). `BadConfig`
+    /// if a σ or weight is invalid or the components exceed the capacity.
+    pub fn from_shares(shares: &MixtureShares, drift: &DriftSettings, image_size: f32) -> Result<Self, FitError> {
+        let mut m = Self::new();
+        if shares.shape_first && shares.shape > 0.0 {
+            m.push_drift(ProposalKind::Shape, &drift.shape, shares.shape)?;
+        }
+        if shares.pose > 0.0 {
+            m.add_pose_parts(drift, image_size, shares.pose, shares.yaw, shares.distance)?;
+        }
+        if !shares.shape_first && shares.shape > 0.0 {
+            m.push_drift(ProposalKind::Shape, &drift.shape, shares.shape)?;
+        }
+        if shares.color > 0.0 {
+            m.push_drift(ProposalKind::Color, &drift.color, shares.color)?;
+        }
+        if shares.light > 0.0 {
+            m.push_drift(ProposalKind::Light, &drift.light, shares.light)?;
+        }
+        if shares.light_intensity > 0.0 {
+            m.push_standard(ProposalKind::LightIntensity, Scale::Intermediate, drift.light_intensity_sigma, shares.light_intensity)?;
+        }
+        if shares.light_solve > 0.0 {
+            m.push_standard(ProposalKind::LightSolve, Scale::Fine, drift.light_solve_sigma, shares.light_solve)?;
+        }
+        Ok(m)
+    }
+
+    /// The pose phase of the landmark chain ([`MixtureShares::LANDMARK_POSE`]): rotation, scaling
+    /// (focal length) and translation, no distance changes (landmarks hardly tell perspective
+    /// from shape) and no shape.
     pub fn landmark_pose(image_size: f32) -> Self {
-        let mut m = Self::new();
-        // 15 components: within the capacity, all σ/weights valid.
-        let _ = m.add_pose_parts(image_size, 1.0, true, false);
-        m
+        Self::from_shares(&MixtureShares::LANDMARK_POSE, &DriftSettings::DEFAULT, image_size).unwrap_or_default()
     }
 
-    /// The shape phase of the landmark chain: shape drift (60 %) with the pose free except for
-    /// yaw and distance, the directions along which the landmarks trade pose for shape.
+    /// The shape phase of the landmark chain ([`MixtureShares::LANDMARK_SHAPE`]): shape drift
+    /// (60 %) with the pose free except for yaw and distance, the directions along which the
+    /// landmarks trade pose for shape.
     pub fn landmark_shape(image_size: f32) -> Self {
-        let mut m = Self::new();
-        // 15 components: within the capacity, all σ/weights valid.
-        let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.6);
-        let _ = m.add_pose_parts(image_size, 0.6, false, false);
-        m
+        Self::from_shares(&MixtureShares::LANDMARK_SHAPE, &DriftSettings::DEFAULT, image_size).unwrap_or_default()
     }
 
-    /// A joint landmark mixture: pose (70 %) and shape (30 %) for a working image whose larger side
-    /// is `image_size` px. [`crate::fit::standard_fit`] no longer uses it: moving yaw and shape
-    /// together biases yaw, so it runs [`Self::landmark_pose`] and then [`Self::landmark_shape`].
+    /// A joint landmark mixture ([`MixtureShares::LANDMARK_JOINT`]): pose (70 %) and shape (30 %).
+    /// [`crate::fit::standard_fit`] does not use it: moving yaw and shape together biases yaw, so
+    /// it runs [`Self::landmark_pose`] and then [`Self::landmark_shape`].
     pub fn landmark_default(image_size: f32) -> Self {
-        let mut m = Self::new();
-        // 21 components: cannot exceed the capacity, and all σ/weights are valid constants.
-        let _ = m.add_pose(image_size, 0.7);
-        let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.3);
-        m
+        Self::from_shares(&MixtureShares::LANDMARK_JOINT, &DriftSettings::DEFAULT, image_size).unwrap_or_default()
     }
 
-    /// The image chain's default: pose 30 %, shape 25 %, colour 20 %, light 25 % (a fifth of it the least-squares light).
+    /// The image chain's default ([`MixtureShares::IMAGE`]): pose 30 %, shape 25 %, colour 20 %,
+    /// light 25 % (a fifth of it the least-squares light).
     pub fn image_default(image_size: f32) -> Self {
-        let mut m = Self::new();
-        // 30 components: within the capacity, all σ/weights valid.
-        let _ = m.add_pose(image_size, 0.3);
-        let _ = m.push3(ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.25);
-        let _ = m.push3(ProposalKind::Color, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.2);
-        let _ = m.push3(ProposalKind::Light, [0.05, 0.01, 0.002], [0.2, 0.5, 0.3], 0.12);
-        let _ = m.push_standard(ProposalKind::LightIntensity, Scale::Intermediate, 0.05, 0.08);
-        let _ = m.push_standard(ProposalKind::LightSolve, Scale::Fine, 0.02, 0.05);
-        m
+        Self::from_shares(&MixtureShares::IMAGE, &DriftSettings::DEFAULT, image_size).unwrap_or_default()
     }
 }
 

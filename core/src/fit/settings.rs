@@ -1,0 +1,395 @@
+//! The settings of the standard fit in one type: what the CLI, the host, the fit input and the
+//! firmware all use. Flat fields for the step counts, ranks and σ's; groups for the proposal
+//! mixtures ([`ProposalSettings`]) and the light ([`LightSettings`]). Every knob the standard fit
+//! used to hard-code is here, with its old value as the default.
+
+use super::image::DEFAULT_PIXEL_SIGMA;
+use super::light_fit::LightSolveConfig;
+use super::FitError;
+use crate::{ShLight, Vec3};
+
+/// Settings of [`super::standard_fit`] (defaults: the documented default fit): the step counts,
+/// ranks and likelihood σ's (flat, as the fit input and the host read them), and the proposal
+/// mixtures and light solves in their groups ([`Self::proposals`], [`Self::light`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FitSettings {
+    /// Landmark-chain steps, both phases: the first [`Self::pose_share`] of them move the pose, the
+    /// rest the shape.
+    pub landmark_steps: u32,
+    /// Fraction of the landmark steps spent on the pose phase (0 to 1; the rest fit the shape
+    /// with yaw and distance held).
+    pub pose_share: f32,
+    /// Leading landmarks that follow the face's silhouette (17 for iBUG-68: the jaw contour);
+    /// only used when the model has exactly 68 landmarks.
+    pub contour_landmarks: usize,
+    /// σ factor of the contour landmarks in the pose phase (their 3-D definition is view
+    /// dependent, so they say less about the pose than the inner points).
+    pub contour_sigma_factor: f32,
+    /// Image-chain steps (each renders the model at most once).
+    pub image_steps: u32,
+    /// Shape components fitted (the leading ones; capped by the model's rank and `KS`). All of a
+    /// default model's 200: on synthetic ICT faces (three seeds, 52 faces each) 50 components left
+    /// 3.5 % inter-ocular landmark error and compressed yaw (the template's jaw-corner landmarks sit
+    /// up to 20 mm deeper than ICT's mean face); 200 gave 2.8 % and a median yaw error of 2°, for
+    /// about 15 % more time per fit.
+    pub shape_rank: usize,
+    /// Colour components fitted (capped by the model's rank and `KC`).
+    pub color_rank: usize,
+    /// Landmark σ as a fraction of the larger image side (0.005: 0.64 px at 128; 1.5 % left 5 %
+    /// inter-ocular landmark error on synthetic faces).
+    pub landmark_sigma: f32,
+    /// Foreground σ of the image likelihood on [0, 1] colours.
+    pub pixel_sigma: f32,
+    /// Uniform floor mixed into the background colour histogram.
+    pub background_floor: f32,
+    /// Distance of the start pose (mm); the start focal length is chosen to match it.
+    pub nominal_distance_mm: f32,
+    /// The proposal mixtures of the landmark chain's two phases and of the image chain.
+    pub proposals: ProposalSettings,
+    /// The start light and the least-squares light solves.
+    pub light: LightSettings,
+}
+
+impl FitSettings {
+    /// The default fit: 5000 landmark steps (2000 pose, 3000 shape; contour σ × 3 for the pose),
+    /// 600 image steps, 200 shape and 50 colour components, landmark σ 0.5 % of the image side,
+    /// pixel σ 0.043, background floor 0.01, start at 500 mm; the default mixtures and light.
+    pub const DEFAULT: Self = Self {
+        landmark_steps: 5000,
+        pose_share: 0.4,
+        contour_landmarks: 17,
+        contour_sigma_factor: 3.0,
+        image_steps: 600,
+        shape_rank: 200,
+        color_rank: 50,
+        landmark_sigma: 0.005,
+        pixel_sigma: DEFAULT_PIXEL_SIGMA,
+        background_floor: 0.01,
+        nominal_distance_mm: 500.0,
+        proposals: ProposalSettings::DEFAULT,
+        light: LightSettings::DEFAULT,
+    };
+
+    /// Checks ranges (σ and factors > 0 and finite, distance > 0, pose share in [0, 1], and the
+    /// groups' own checks); `BadConfig` otherwise.
+    pub fn validate(&self) -> Result<(), FitError> {
+        let positive = |v: f32| v > 0.0 && v.is_finite();
+        if positive(self.landmark_sigma)
+            && positive(self.pixel_sigma)
+            && positive(self.nominal_distance_mm)
+            && positive(self.contour_sigma_factor)
+            && self.background_floor >= 0.0
+            && (0.0..=1.0).contains(&self.pose_share)
+        {
+            self.proposals.validate()?;
+            self.light.validate()
+        } else {
+            Err(FitError::BadConfig)
+        }
+    }
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Coarse, intermediate and fine steps of one proposal kind: σ's and relative weights.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Drift {
+    /// σ of the coarse, intermediate and fine steps (units per proposal kind).
+    pub sigmas: [f32; 3],
+    /// Their relative weights (normalized within the kind).
+    pub weights: [f32; 3],
+}
+
+impl Drift {
+    fn validate(&self) -> Result<(), FitError> {
+        let sum: f32 = self.weights.iter().sum();
+        let ok = self.sigmas.iter().all(|s| *s > 0.0 && s.is_finite())
+            && self.weights.iter().all(|w| *w >= 0.0 && w.is_finite())
+            && sum > 0.0
+            && sum.is_finite();
+        if ok {
+            Ok(())
+        } else {
+            Err(FitError::BadConfig)
+        }
+    }
+}
+
+/// The step sizes of every built-in proposal kind, shared by all mixtures.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DriftSettings {
+    /// Yaw, pitch and roll (radians).
+    pub rotation: Drift,
+    /// Distance (mm).
+    pub distance: Drift,
+    /// Focal-length scaling (log units).
+    pub scaling: Drift,
+    /// Translation, σ as a fraction of the larger image side.
+    pub translation: Drift,
+    /// Shape coefficients.
+    pub shape: Drift,
+    /// Colour coefficients.
+    pub color: Drift,
+    /// SH light coefficients.
+    pub light: Drift,
+    /// σ of the light-intensity proposal (log units).
+    pub light_intensity_sigma: f32,
+    /// σ of the least-squares light proposal around the solved light.
+    pub light_solve_sigma: f32,
+    /// Fractions of a mixture's pose share: yaw, pitch, roll, distance, scaling, translation.
+    pub pose_fractions: [f32; 6],
+}
+
+impl DriftSettings {
+    /// The step sizes of scalismo-faces' standard fit as gpmm uses them.
+    pub const DEFAULT: Self = Self {
+        rotation: Drift { sigmas: [0.75, 0.10, 0.01], weights: [0.1, 0.4, 0.5] },
+        distance: Drift { sigmas: [200.0, 50.0, 5.0], weights: [0.2, 0.6, 0.2] },
+        scaling: Drift { sigmas: [0.15, 0.05, 0.01], weights: [0.2, 0.6, 0.2] },
+        translation: Drift { sigmas: [0.1, 0.02, 0.004], weights: [0.2, 0.2, 0.6] },
+        shape: Drift { sigmas: [0.2, 0.1, 0.025], weights: [0.1, 0.5, 0.2] },
+        color: Drift { sigmas: [0.2, 0.1, 0.025], weights: [0.1, 0.5, 0.2] },
+        light: Drift { sigmas: [0.05, 0.01, 0.002], weights: [0.2, 0.5, 0.3] },
+        light_intensity_sigma: 0.05,
+        light_solve_sigma: 0.02,
+        pose_fractions: [0.3, 0.2, 0.1, 0.05, 0.15, 0.2],
+    };
+
+    fn validate(&self) -> Result<(), FitError> {
+        for d in [&self.rotation, &self.distance, &self.scaling, &self.translation, &self.shape, &self.color, &self.light] {
+            d.validate()?;
+        }
+        let positive = |v: f32| v > 0.0 && v.is_finite();
+        if positive(self.light_intensity_sigma)
+            && positive(self.light_solve_sigma)
+            && self.pose_fractions.iter().all(|f| *f >= 0.0 && f.is_finite())
+        {
+            Ok(())
+        } else {
+            Err(FitError::BadConfig)
+        }
+    }
+}
+
+/// The shares of one mixture (unnormalized weights; a share of 0 leaves the kind out).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MixtureShares {
+    /// The pose's share, split by [`DriftSettings::pose_fractions`].
+    pub pose: f32,
+    /// Whether the pose part includes yaw.
+    pub yaw: bool,
+    /// Whether the pose part includes distance changes.
+    pub distance: bool,
+    /// The shape's share.
+    pub shape: f32,
+    /// Whether the shape components come before the pose ones (the order matters for which
+    /// component a uniform draw picks, so it is part of the mixture).
+    pub shape_first: bool,
+    /// The colour's share.
+    pub color: f32,
+    /// The additive SH light's share.
+    pub light: f32,
+    /// The light-intensity proposal's weight.
+    pub light_intensity: f32,
+    /// The least-squares light proposal's weight.
+    pub light_solve: f32,
+}
+
+impl MixtureShares {
+    /// Nothing: every share 0.
+    pub const NONE: Self = Self {
+        pose: 0.0,
+        yaw: false,
+        distance: false,
+        shape: 0.0,
+        shape_first: false,
+        color: 0.0,
+        light: 0.0,
+        light_intensity: 0.0,
+        light_solve: 0.0,
+    };
+
+    /// The landmark chain's pose phase: rotation, scaling and translation; no distance, no shape.
+    pub const LANDMARK_POSE: Self = Self { pose: 1.0, yaw: true, ..Self::NONE };
+
+    /// The landmark chain's shape phase: shape 60 %, the pose without yaw and distance 60 %.
+    pub const LANDMARK_SHAPE: Self = Self { pose: 0.6, shape: 0.6, shape_first: true, ..Self::NONE };
+
+    /// A joint landmark mixture: the whole pose 70 %, shape 30 %.
+    pub const LANDMARK_JOINT: Self = Self { pose: 0.7, yaw: true, distance: true, shape: 0.3, ..Self::NONE };
+
+    /// The image chain: pose 30 %, shape 25 %, colour 20 %, light 25 % (a fifth of it the least-squares light).
+    pub const IMAGE: Self = Self {
+        pose: 0.3,
+        yaw: true,
+        distance: true,
+        shape: 0.25,
+        shape_first: false,
+        color: 0.2,
+        light: 0.12,
+        light_intensity: 0.08,
+        light_solve: 0.05,
+    };
+
+    fn validate(&self) -> Result<(), FitError> {
+        let shares = [self.pose, self.shape, self.color, self.light, self.light_intensity, self.light_solve];
+        if shares.iter().all(|s| *s >= 0.0 && s.is_finite()) && shares.iter().any(|s| *s > 0.0) {
+            Ok(())
+        } else {
+            Err(FitError::BadConfig)
+        }
+    }
+}
+
+/// The proposal mixtures of the standard fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ProposalSettings {
+    /// The landmark chain's pose phase.
+    pub landmark_pose: MixtureShares,
+    /// The landmark chain's shape phase.
+    pub landmark_shape: MixtureShares,
+    /// The image chain.
+    pub image: MixtureShares,
+    /// Step sizes shared by the three.
+    pub drift: DriftSettings,
+}
+
+impl ProposalSettings {
+    /// The standard fit's mixtures.
+    pub const DEFAULT: Self = Self {
+        landmark_pose: MixtureShares::LANDMARK_POSE,
+        landmark_shape: MixtureShares::LANDMARK_SHAPE,
+        image: MixtureShares::IMAGE,
+        drift: DriftSettings::DEFAULT,
+    };
+
+    /// Checks every share and step size.
+    pub fn validate(&self) -> Result<(), FitError> {
+        self.landmark_pose.validate()?;
+        self.landmark_shape.validate()?;
+        self.image.validate()?;
+        self.drift.validate()
+    }
+}
+
+/// The light: the start light and the least-squares solves (the image chain's start light on
+/// every `start_stride`-th vertex; the light-solve proposal on every `solve_stride`-th).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LightSettings {
+    /// Ambient RGB irradiance of the start light (before the landmark chain).
+    pub start_ambient: Vec3,
+    /// Vertex stride of the light solved for the image chain's start (≥ 1).
+    pub start_stride: usize,
+    /// Vertex stride of the least-squares light proposal (≥ 1; its offset is drawn per use).
+    pub solve_stride: usize,
+    /// Minimum cosine between a sampled vertex's normal and the direction to the camera.
+    pub min_cos: f32,
+    /// Ridge weight per sample toward the ridge light.
+    pub lambda: f32,
+    /// Ambient RGB irradiance of the light the ridge pulls toward.
+    pub ridge_ambient: Vec3,
+}
+
+impl LightSettings {
+    /// Start at ambient 0.8; the start light on every vertex, the proposal on every 7th; cosine
+    /// ≥ 0.2, ridge 1e-3 toward ambient 0.8.
+    pub const DEFAULT: Self =
+        Self { start_ambient: [0.8; 3], start_stride: 1, solve_stride: 7, min_cos: 0.2, lambda: 1e-3, ridge_ambient: [0.8; 3] };
+
+    /// Checks strides ≥ 1, a finite cosine, a finite ridge ≥ 0 and finite ambient colours.
+    pub fn validate(&self) -> Result<(), FitError> {
+        let finite3 = |v: &Vec3| v.iter().all(|c| c.is_finite());
+        if self.start_stride >= 1
+            && self.solve_stride >= 1
+            && self.min_cos.is_finite()
+            && self.lambda >= 0.0
+            && self.lambda.is_finite()
+            && finite3(&self.start_ambient)
+            && finite3(&self.ridge_ambient)
+        {
+            Ok(())
+        } else {
+            Err(FitError::BadConfig)
+        }
+    }
+
+    /// The start light: ambient [`Self::start_ambient`].
+    pub fn start_light(&self) -> ShLight {
+        ShLight::ambient(self.start_ambient)
+    }
+
+    /// The least-squares solve on every `stride`-th vertex from offset 0.
+    pub fn solve_config(&self, stride: usize) -> LightSolveConfig {
+        LightSolveConfig { stride, offset: 0, min_cos: self.min_cos, lambda: self.lambda, mean: ShLight::ambient(self.ridge_ambient) }
+    }
+}
+
+impl Default for LightSettings {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn settings_are_checked() {
+        assert_eq!(FitSettings::DEFAULT.validate(), Ok(()));
+        let d = FitSettings::DEFAULT;
+        let bad = [
+            FitSettings { pose_share: 1.5, ..d },
+            FitSettings { pose_share: -0.1, ..d },
+            FitSettings { pose_share: f32::NAN, ..d },
+            FitSettings { contour_sigma_factor: 0.0, ..d },
+            FitSettings { contour_sigma_factor: f32::INFINITY, ..d },
+            FitSettings { landmark_sigma: -1.0, ..d },
+            FitSettings { background_floor: -0.5, ..d },
+            FitSettings { light: LightSettings { solve_stride: 0, ..d.light }, ..d },
+            FitSettings { light: LightSettings { lambda: f32::NAN, ..d.light }, ..d },
+            FitSettings { proposals: ProposalSettings { image: MixtureShares::NONE, ..d.proposals }, ..d },
+            FitSettings {
+                proposals: ProposalSettings { image: MixtureShares { color: -1.0, ..MixtureShares::IMAGE }, ..d.proposals },
+                ..d
+            },
+            FitSettings {
+                proposals: ProposalSettings {
+                    drift: DriftSettings { shape: Drift { sigmas: [0.0, 0.1, 0.1], weights: [1.0; 3] }, ..d.proposals.drift },
+                    ..d.proposals
+                },
+                ..d
+            },
+        ];
+        for s in bad {
+            assert_eq!(s.validate(), Err(FitError::BadConfig), "{s:?}");
+        }
+        // The extremes of the pose share are allowed: all pose or all shape.
+        assert_eq!(FitSettings { pose_share: 0.0, ..d }.validate(), Ok(()));
+        assert_eq!(FitSettings { pose_share: 1.0, ..d }.validate(), Ok(()));
+    }
+
+    #[test]
+    fn the_default_light_solves_are_the_old_ones() {
+        let l = LightSettings::DEFAULT;
+        assert_eq!(l.solve_config(l.solve_stride), LightSolveConfig::default());
+        assert_eq!(l.solve_config(l.start_stride), LightSolveConfig { stride: 1, ..LightSolveConfig::default() });
+        assert_eq!(l.start_light(), ShLight::ambient([0.8; 3]));
+    }
+}
