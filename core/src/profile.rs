@@ -19,9 +19,11 @@ pub struct DeviceProfile {
     pub tile: usize,
     /// Triangles binned per tile row (8 bytes each).
     pub bin: usize,
-    /// Entries of the device's vertex pool: one `Vec3` and one projected vertex each; a fit needs
-    /// three `Vec3` per model vertex, a render one.
+    /// `Vec3` entries of the device's vertex pool: a fit takes three per model vertex (positions,
+    /// albedos, normals), a render one (normals).
     pub vertex_pool: usize,
+    /// Projected-vertex entries (24 B each): one per model vertex, for a fit or a render.
+    pub projected_pool: usize,
     /// Program flash (bytes), from address 0.
     pub flash_code_bytes: usize,
     /// Data partition (bytes) right after the program flash: the blob and the fit input.
@@ -45,6 +47,7 @@ pub const M4F: DeviceProfile = DeviceProfile {
     tile: 32,
     bin: 2048,
     vertex_pool: 3072,
+    projected_pool: 1024,
     flash_code_bytes: 512 * 1024,
     partition_bytes: 512 * 1024,
     ram_bytes: 192 * 1024,
@@ -62,6 +65,7 @@ pub const M7: DeviceProfile = DeviceProfile {
     tile: 32,
     bin: 2048,
     vertex_pool: 9216,
+    projected_pool: 3072,
     flash_code_bytes: 1024 * 1024,
     partition_bytes: 1024 * 1024,
     ram_bytes: 512 * 1024,

@@ -34,15 +34,17 @@ use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasteriz
 /// The device profile this image is built and linked for (build.rs writes its memory map).
 pub(crate) const PROFILE: DeviceProfile = if cfg!(feature = "m7") { M7 } else { M4F };
 
-/// Largest mesh the static buffers hold: a `Vec3` pool and a projected-vertex array of this
-/// many entries (36 bytes of RAM per entry). A render needs one `Vec3` (normal) and one projected
-/// vertex per vertex; a fit three `Vec3` (positions, albedos, normals) and one projected vertex,
-/// so it takes models of up to `vertex_pool / 3` vertices: 1,024 on `m4f` (the m4f blob has at
-/// most 1,000), 3,072 on `m7` (its blob has at most 2,000). `m4f`: 108 KiB of buffers + the
-/// renderer's 45 KiB leave 39 KiB of the 192 KiB for the stack (the fit's peak is 37 KiB: chain
+/// The static per-vertex buffers: a `Vec3` pool of `vertex_pool` entries and a projected-vertex
+/// array of `projected_pool` entries (12 and 24 bytes of RAM each). A fit takes three `Vec3`
+/// (positions, albedos, normals) and one projected vertex per model vertex, a render one of each,
+/// so both take meshes of up to `projected_pool` vertices: 1,024 on `m4f` (its blob has at most
+/// 1,000), 3,072 on `m7` (at most 2,000). `m4f`: 36 + 24 KiB of buffers and the renderer's
+/// 45 KiB leave about 85 KiB of the 192 KiB for the stack (the fit's peak is about 40 KiB: chain
 /// states and parameter copies). Nothing guards the stack's end, so these margins are checked by
 /// the tests (static + peak <= RAM).
 const MAX_VERTICES: usize = PROFILE.vertex_pool;
+/// Entries of the projected-vertex array: the largest mesh a fit or a render takes.
+const MAX_PROJECTED: usize = PROFILE.projected_pool;
 /// Tile side of the renderer (32: 28 KiB of tile buffers). Each tile row scans the whole triangle
 /// list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M instructions, at
 /// 32×32 2.59 M (same fit). The host's parity runs use the profile's tile too.
@@ -59,7 +61,7 @@ pub(crate) type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
 fn main() -> ! {
     // cortex-m-rt turns these into `&'static mut` (zero-initialised ones go to .bss).
     static mut NORMALS: [Vec3; MAX_VERTICES] = [[0.0; 3]; MAX_VERTICES];
-    static mut PROJECTED: [ProjectedVertex; MAX_VERTICES] = [ProjectedVertex::INVALID; MAX_VERTICES];
+    static mut PROJECTED: [ProjectedVertex; MAX_PROJECTED] = [ProjectedVertex::INVALID; MAX_PROJECTED];
     static mut RASTERIZER: Rasterizer = Rasterizer::new();
 
     let mut core = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
@@ -89,7 +91,7 @@ fn main() -> ! {
     } else if !device_mesh::is_device_mesh(part) {
         fit::run(part, NORMALS, PROJECTED, RASTERIZER);
     } else {
-        let m = match device_mesh::parse(part, MAX_VERTICES) {
+        let m = match device_mesh::parse(part, MAX_PROJECTED.min(MAX_VERTICES)) {
             Ok(m) => m,
             Err(e) => {
                 defmt::error!("data partition: not a valid device mesh: {}", defmt::Display2Format(&e));
@@ -121,7 +123,7 @@ fn render(m: &DeviceMeshView<'_>, normals: &mut [Vec3], projected: &mut [Project
         m.scene.width,
         m.scene.height,
         core::mem::size_of::<Rasterizer>() as u32,
-        (MAX_VERTICES * (core::mem::size_of::<Vec3>() + core::mem::size_of::<ProjectedVertex>())) as u32
+        (MAX_VERTICES * core::mem::size_of::<Vec3>() + MAX_PROJECTED * core::mem::size_of::<ProjectedVertex>()) as u32
     );
     let (r, vertex_instructions) = clock::measure(|| {
         vertex_stage(m.positions, m.albedo, m.triangles, &m.scene.pose, &m.scene.camera, &m.scene.light, normals, projected)

@@ -1,4 +1,4 @@
-//! The firmware smoke test: the cropped template (simplified to 3,000 vertices) rendered at 128×128 by the core on the host and by
+//! The firmware smoke test: the cropped template (simplified to 1,000 vertices) rendered at 128×128 by the core on the host and by
 //! the Cortex-M4F firmware under QEMU must give the same frame checksum.
 //!
 //! The host writes the template as a device mesh (`gpmm_host::device::mesh`: mesh + pose, camera
@@ -87,9 +87,9 @@ fn run_firmware(data: &Path) -> Run {
 
 fn template_device_mesh(data: &Path) -> DeviceMesh {
     let dir = data.join("template/lee-perry-smith");
-    // Simplified to 3,000 vertices: the m4f firmware's vertex buffers hold 3,072 (its RAM is
-    // shared with the fit's buffers and stack).
-    let opts = TemplateOptions { vertices: Some(3000), ..TemplateOptions::default() };
+    // Simplified to 1,000 vertices: the m4f firmware's projected-vertex buffer holds 1,024
+    // (`gpmm_core::profile::M4F.projected_pool`; its RAM is shared with the fit's buffers and stack).
+    let opts = TemplateOptions { vertices: Some(1000), ..TemplateOptions::default() };
     let t = load_template(&dir.join("lee-perry-smith.ply"), &dir.join("landmarks_ibug68.json"), &opts).expect("template loads");
     DeviceMesh::from_mesh(&t.mesh, smoke_test_scene(128)).expect("device mesh")
 }
