@@ -261,7 +261,7 @@ impl Proposal for StandardProposal {
         rng: &mut R,
         out: &mut FitParams<KS, KC>,
     ) -> f32 {
-        *out = *current;
+        out.clone_from(current);
         let s = self.sigma;
         match self.kind {
             ProposalKind::Yaw | ProposalKind::Pitch | ProposalKind::Roll => {
@@ -358,7 +358,7 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
         let ctx = ProposalContext { pivot: [10.0, 20.0, 30.0], light_solution: None };
         let p = params();
-        let mut out = p;
+        let mut out = p.clone();
         for kind in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll] {
             let h = StandardProposal::new(kind, Scale::Coarse, 0.5).unwrap().propose(&p, &ctx, &mut rng, &mut out);
             assert_eq!(h, 0.0);
@@ -375,7 +375,7 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
         let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
         let p = params();
-        let mut out = p;
+        let mut out = p.clone();
         let h = StandardProposal::new(ProposalKind::Distance, Scale::Coarse, 50.0).unwrap().propose(&p, &ctx, &mut rng, &mut out);
         let (w, w2) = (-p.pose.translation[2], -out.pose.translation[2]);
         assert!((out.focal / w2 - p.focal / w).abs() < 1e-4);
@@ -457,7 +457,7 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
         let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
         let p = params();
-        let mut out = p;
+        let mut out = p.clone();
         let pr = StandardProposal::new(ProposalKind::LightSolve, Scale::Fine, 0.1).unwrap();
         assert!(pr.needs_light_solution());
         assert_eq!(pr.propose(&p, &ctx, &mut rng, &mut out), f32::NEG_INFINITY);
