@@ -21,6 +21,18 @@ impl<'a> Reader<'a> {
         self.at
     }
 
+    /// A reader after the `magic` and `u32` `version` that `bytes` must start with.
+    pub fn after_header(bytes: &'a [u8], magic: [u8; 4], version: u32) -> Result<Self, FormatError> {
+        check_magic(bytes, magic)?;
+        let mut r = Self::new(bytes);
+        r.take(4)?;
+        let found = r.u32()?;
+        if found != version {
+            return Err(FormatError::BadVersion { found, supported: version });
+        }
+        Ok(r)
+    }
+
     /// The next `n` bytes.
     pub fn take(&mut self, n: usize) -> Result<&'a [u8], FormatError> {
         let end = self.at.checked_add(n).ok_or(FormatError::Truncated { needed: usize::MAX, available: self.bytes.len() })?;

@@ -19,7 +19,7 @@
 //! | … | 3 W H | pixels, RGB8, row-major from the top-left, zero padding to 4 bytes |
 //! | end − 4 | 4 | CRC-32 of every byte before it |
 
-use super::bytes::{check_crc, check_magic, Reader, Writer};
+use super::bytes::{check_crc, Reader, Writer};
 use super::FormatError;
 use serde::{de::DeserializeOwned, Serialize};
 
@@ -96,13 +96,7 @@ pub fn write<S: Serialize>(
 /// Reads and checks the fit input at the start of `bytes` (more bytes may follow), for images
 /// of at most `max_side` pixels a side and at most `max_landmarks` landmarks.
 pub fn parse<S: DeserializeOwned>(bytes: &[u8], max_side: u32, max_landmarks: usize) -> Result<FitInput<'_, S>, FormatError> {
-    check_magic(bytes, MAGIC)?;
-    let mut r = Reader::new(bytes);
-    r.take(4)?;
-    let version = r.u32()?;
-    if version != VERSION {
-        return Err(FormatError::BadVersion { found: version, supported: VERSION });
-    }
+    let mut r = Reader::after_header(bytes, MAGIC, VERSION)?;
     let (width, height, count, s) = (r.u32()?, r.u32()?, r.u32()? as usize, r.u32()? as usize);
     let seed = r.u64()?;
     if width == 0 || width > max_side {

@@ -16,7 +16,7 @@
 //! | 292 | 4 (Ks + Kc + 2 L) | shape, colour coefficients, landmarks `[f32; 2]` (image px) |
 //! | end − 4 | 4 | CRC-32 of every byte before it |
 
-use super::bytes::{check_crc, check_magic, Reader, Writer};
+use super::bytes::{check_crc, Reader, Writer};
 use super::FormatError;
 use crate::light::SH_COEFFS;
 use crate::ShLight;
@@ -202,13 +202,7 @@ pub fn write(
 
 /// Reads and checks the record at the start of `bytes`.
 pub fn parse(bytes: &[u8]) -> Result<FitRecord<'_>, FormatError> {
-    check_magic(bytes, MAGIC)?;
-    let mut r = Reader::new(bytes);
-    r.take(4)?;
-    let version = r.u32()?;
-    if version != VERSION {
-        return Err(FormatError::BadVersion { found: version, supported: VERSION });
-    }
+    let mut r = Reader::after_header(bytes, MAGIC, VERSION)?;
     let (ks, kc, l) = (r.u32()? as usize, r.u32()? as usize, r.u32()? as usize);
     if ks > 1 << 16 || kc > 1 << 16 || l > 1 << 16 {
         return Err(FormatError::BadField("count"));

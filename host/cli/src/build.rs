@@ -87,6 +87,7 @@ pub fn parse_rgb(s: &str) -> Result<[f64; 3], String> {
 /// The rank of one part from `--rank-*` or `--captured-*` (200 components if neither is given).
 pub fn rank_spec(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<RankSpec> {
     match (count, captured) {
+        (Some(0), _) => bail!("--rank-{what} 0: a model needs at least one {what} component"),
         (Some(k), _) => Ok(RankSpec::Count(k)),
         (None, Some(f)) if f > 0.0 && f <= 1.0 => Ok(RankSpec::Captured(f)),
         (None, Some(f)) => bail!("--captured-{what} {f} must be in (0, 1]"),
@@ -143,6 +144,17 @@ pub fn build(a: BuildArgs) -> Result<()> {
     });
     bar.finish_and_clear();
     let t_build = t0.elapsed() - t_template;
+    for (what, spec, got) in [("shape", opts.rank_shape, model.shape.rank()), ("color", opts.rank_color, model.color.rank())] {
+        if let RankSpec::Count(asked) = spec {
+            if got < asked {
+                eprintln!(
+                    "warning: --rank-{what} {asked} is more than the {} Nyström points support: the model keeps all {got} components \
+                     (more --nystrom-points allow more)",
+                    opts.nystrom.points
+                );
+            }
+        }
+    }
     model_io::save(&model, &a.output)?;
     eprintln!(
         "{}: kernel {}, rank {} shape / {} colour, captured {:.4} of the shape and {:.4} of the colour kernel trace",

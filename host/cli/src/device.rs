@@ -103,8 +103,8 @@ pub fn quantize(a: QuantizeArgs) -> Result<()> {
     let blob = quantized.to_blob()?;
     let view = blob.view().context("the written blob does not validate (a bug)")?;
     let pb = spinner("measuring the quantization and simplification error");
-    let stats = q::quantization_error(&quantized.reduced, &view, a.draws, a.seed)?;
-    let simp = q::simplification_error(&model, &quantized);
+    let stats = gpmm_host::device::accuracy::quantization_error(&quantized.reduced, &view, a.draws, a.seed)?;
+    let simp = gpmm_host::device::accuracy::simplification_error(&model, &quantized);
     pb.finish_and_clear();
     blob.write(&a.output)?;
     eprintln!(

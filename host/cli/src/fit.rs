@@ -159,7 +159,7 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         bar.set_length(t as u64);
         bar.set_position(d as u64);
     };
-    let (summary, images, errors) = gpmm_host::fit::bench::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
+    let (summary, images, errors) = gpmm_host::eval::bench_fit::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
     bar.finish_and_clear();
     for e in &errors {
         eprintln!("fit failed: {e}");

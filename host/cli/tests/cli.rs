@@ -1,7 +1,7 @@
 //! End-to-end tests of the `gpmm` program: build (all nine kernels), info, sample, bad input.
 
 mod common;
-use common::{gpmm, ok};
+use common::{fails, gpmm, ok};
 
 use std::path::{Path, PathBuf};
 
@@ -149,6 +149,34 @@ fn bad_input_gives_clear_errors() {
     std::fs::write(&cfg, "shape_alpha = 2.0\n").unwrap();
     let o = gpmm(&["build", "--template", "x.ply", "--landmarks", "x.json", "--config", cfg.to_str().unwrap(), "-o", "m"]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("shape_alpha"));
+    // A malformed PLY: the file and the line in words, not the parser's internals.
+    let bad = dir.path().join("bad.ply");
+    std::fs::write(&bad, "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nend_header\n0 0\n1 zz\n").unwrap();
+    let err =
+        fails(&gpmm(&["build", "--template", bad.to_str().unwrap(), "--landmarks", lm.to_str().unwrap(), "-o", out.to_str().unwrap()]));
+    assert!(err.contains("bad.ply") && err.contains("invalid PLY file") && err.contains("Line 8"), "{err}");
+    assert!(!err.contains("String:") && !err.contains("expected one of") && err.lines().count() <= 2, "{err}");
+    // Rank 0 is refused before anything is built.
+    let err = fails(&gpmm(&["build", "--template", "x.ply", "--landmarks", "x.json", "--rank-shape", "0", "-o", "m"]));
+    assert!(err.contains("--rank-shape 0") && err.contains("at least one"), "{err}");
+}
+
+#[test]
+fn ranks_beyond_the_nystrom_points_are_clamped_with_a_warning() {
+    let Some(data) = data_dir() else { return };
+    let (ply, lm) = template_args(&data);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("m.gpmm");
+    let o = out.to_str().unwrap();
+    let args = ["build", "--template", &ply, "--landmarks", &lm, "--rank-shape", "10", "--rank-color", "100000000"];
+    let run = gpmm(&[&args[..], &["--vertices", "600", "--nystrom-points", "50", "-o", o]].concat());
+    ok(&run);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("warning: --rank-color 100000000") && err.contains("50 Nyström points"), "{err}");
+    let info: serde_json::Value = serde_json::from_str(&ok(&gpmm(&["info", o]))).unwrap();
+    let kept = info["rank_color"].as_u64().unwrap();
+    assert!(kept > 10 && kept <= 150, "colour rank clamped to what 50 points support: {kept}");
+    assert_eq!(info["rank_shape"].as_u64().unwrap(), 10);
 }
 
 #[test]

@@ -4,7 +4,8 @@
 mod common;
 use common::{fails, gpmm, ok};
 
-use gpmm_host::device::quantize::{quantization_error, quantize, Bits, BlobBuf, Profile, QuantizeError, QuantizeOptions};
+use gpmm_host::device::accuracy::quantization_error;
+use gpmm_host::device::quantize::{quantize, Bits, BlobBuf, Profile, QuantizeError, QuantizeOptions};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 

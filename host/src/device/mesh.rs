@@ -15,7 +15,7 @@ use gpmm_core::format::device_mesh::{self, DeviceMeshView};
 use gpmm_core::{vertex_stage, Camera, Cull, FrameStats, Pose, ProjectedVertex, ShLight, TileRasterizer, Vec3};
 
 use crate::gp::model::GpModel;
-use crate::mesh::template::Mesh;
+use crate::mesh::Mesh;
 
 pub use gpmm_core::format::device_mesh::{encoded_len as file_len, DeviceScene, HEADER_BYTES, MAGIC, MAX_VERTICES, VERSION};
 

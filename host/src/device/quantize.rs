@@ -11,8 +11,8 @@
 //!    (8 bits) or `/ 32767` (16 bits), `q = round(value / scale)`; means stay `f32`, triangle
 //!    indices become `u16`.
 //!
-//! [`quantization_error`] measures what step 3 costs (float model of steps 1–2 against the blob,
-//! over random coefficient draws); [`simplification_error`] what step 1 costs (distance of the
+//! [`crate::device::accuracy`] measures what step 3 costs (float model of steps 1–2 against the blob,
+//! over random coefficient draws) and what step 1 costs (distance of the
 //! original mean surface's vertices to the simplified mean surface).
 
 use crate::gp::model::{GpModel, ModelPart, PartBasis};
@@ -20,9 +20,6 @@ use gpmm_core::blob::{
     blob_crc, parse_header, BlobDims, Layout, Section, CRC_OFFSET, HEADER_BYTES, MAGIC, MAX_METADATA_BYTES, MAX_VERTICES, VERSION,
 };
 use gpmm_core::{BlobError, ModelBlob, Vec3};
-use rand::{RngExt, SeedableRng};
-use rand_distr::StandardNormal;
-use rand_xoshiro::Xoshiro256PlusPlus;
 use std::path::Path;
 
 /// A device profile on the command line; its numbers are `gpmm_core::profile`'s (the one place
@@ -480,59 +477,16 @@ pub fn inspect(blob: &BlobBuf) -> (serde_json::Value, Result<(), BlobError>) {
 // ------------------------------------------------------------------ reduce
 
 /// Picks the vertices to keep: all of them within the budget, else a meshoptimizer
-/// simplification with landmark vertices locked. Returns kept ids (ascending) and the triangles
-/// in source ids.
+/// simplification with landmark vertices locked ([`crate::mesh::simplify`]). Returns kept ids
+/// (ascending) and the triangles in source ids.
 fn simplify(model: &GpModel, target: usize) -> Result<(Vec<u32>, Vec<[u32; 3]>), QuantizeError> {
-    let n = model.vertices();
-    if n <= target {
-        return Ok(((0..n as u32).collect(), model.triangles.clone()));
-    }
     let landmarks = &model.landmarks;
-    if target < landmarks.len() {
+    if model.vertices() > target && target < landmarks.len() {
         return Err(QuantizeError::BudgetBelowLandmarks { vertices: target, landmarks: landmarks.len() });
     }
-    let positions = &model.shape.mean;
-    let attributes: Vec<f32> = model.color.mean.iter().flatten().copied().collect();
-    let weights = [0.5f32; 3];
-    let mut lock = vec![false; n];
-    for &id in landmarks {
-        lock[id as usize] = true;
-    }
-    let indices: Vec<u32> = model.triangles.iter().flatten().copied().collect();
-    let adapter = meshopt::VertexDataAdapter::new(meshopt::typed_to_bytes(positions), std::mem::size_of::<Vec3>(), 0)
-        .map_err(|e| QuantizeError::Simplify(format!("meshopt: {e}")))?;
-    let mut target_indices = ((indices.len() as f64) * target as f64 / n as f64) as usize / 3 * 3;
-    for _ in 0..40 {
-        let out = meshopt::simplify_with_attributes_and_locks(
-            &indices,
-            &adapter,
-            &attributes,
-            &weights,
-            std::mem::size_of::<Vec3>(),
-            &lock,
-            target_indices,
-            1.0,
-            meshopt::SimplifyOptions::None,
-            None,
-        );
-        let mut used = lock.clone();
-        for &i in &out {
-            if let Some(u) = used.get_mut(i as usize) {
-                *u = true;
-            }
-        }
-        let count = used.iter().filter(|&&u| u).count();
-        if count <= target {
-            let kept = (0..n as u32).filter(|&i| used[i as usize]).collect();
-            return Ok((kept, out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect()));
-        }
-        let next = ((target_indices as f64) * target as f64 / count as f64 * 0.98) as usize / 3 * 3;
-        target_indices = if next == 0 || next >= target_indices { target_indices.saturating_sub(3) } else { next };
-        if target_indices == 0 {
-            break;
-        }
-    }
-    Err(QuantizeError::Simplify(format!("could not simplify {n} vertices to at most {target}")))
+    let s = crate::mesh::simplify::simplify_to(&model.shape.mean, &model.color.mean, &model.triangles, landmarks, target)
+        .map_err(QuantizeError::Simplify)?;
+    Ok((s.kept, s.triangles))
 }
 
 fn check_rank(part: &'static str, requested: usize, available: usize) -> Result<(), QuantizeError> {
@@ -693,191 +647,9 @@ pub fn quantize(model: &GpModel, opts: &QuantizeOptions) -> Result<QuantizedMode
     Ok(q)
 }
 
-// ------------------------------------------------------------------ errors
-
-/// How far a blob is from the float model it was quantized from, over random coefficients.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct QuantizationStats {
-    /// Coefficient draws (all coefficients N(0, 1)).
-    pub draws: usize,
-    /// Seed of the draws.
-    pub seed: u64,
-    /// RMS over draws and vertices of the position distance (mm).
-    pub shape_rms_mm: f64,
-    /// Largest position distance (mm).
-    pub shape_max_mm: f64,
-    /// RMS over draws and vertices of the RGB distance (colours on [0, 1], not clamped).
-    pub color_rms: f64,
-    /// Largest RGB distance.
-    pub color_max: f64,
-}
-
-fn distance(a: Vec3, b: Vec3) -> f64 {
-    a.iter().zip(&b).map(|(x, y)| (f64::from(*x) - f64::from(*y)).powi(2)).sum::<f64>().sqrt()
-}
-
-/// Compares `reference` (the float model of the same vertices and ranks, e.g.
-/// [`QuantizedModel::reduced`]) with `blob` over `draws` random coefficient vectors.
-pub fn quantization_error(reference: &GpModel, blob: &ModelBlob<'_>, draws: usize, seed: u64) -> Result<QuantizationStats, QuantizeError> {
-    if reference.vertices() != blob.vertices() || reference.shape.rank() != blob.rank_shape() || reference.color.rank() != blob.rank_color()
-    {
-        return Err(QuantizeError::Model(format!(
-            "the reference model ({} vertices, ranks {}/{}) does not match the blob ({} vertices, ranks {}/{})",
-            reference.vertices(),
-            reference.shape.rank(),
-            reference.color.rank(),
-            blob.vertices(),
-            blob.rank_shape(),
-            blob.rank_color()
-        )));
-    }
-    let model_err = |e: gpmm_core::ModelError| QuantizeError::Model(format!("{e:?}"));
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let (mut s2, mut smax, mut c2, mut cmax, mut count) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
-    for _ in 0..draws {
-        let a: Vec<f32> = (0..blob.rank_shape()).map(|_| rng.sample(StandardNormal)).collect();
-        let b: Vec<f32> = (0..blob.rank_color()).map(|_| rng.sample(StandardNormal)).collect();
-        let want_s = reference.shape.instance(&a).map_err(model_err)?;
-        let want_c = reference.color.instance(&b).map_err(model_err)?;
-        let mut got_s = blob.shape_mean().to_vec();
-        blob.shape_basis().add_instance(&a, &mut got_s).map_err(model_err)?;
-        let mut got_c = blob.color_mean().to_vec();
-        blob.color_basis().add_instance(&b, &mut got_c).map_err(model_err)?;
-        for i in 0..want_s.len() {
-            let ds = distance(want_s[i], got_s[i]);
-            let dc = distance(want_c[i], got_c[i]);
-            s2 += ds * ds;
-            c2 += dc * dc;
-            smax = smax.max(ds);
-            cmax = cmax.max(dc);
-        }
-        count += want_s.len();
-    }
-    let rms = |sum: f64| if count > 0 { (sum / count as f64).sqrt() } else { 0.0 };
-    Ok(QuantizationStats { draws, seed, shape_rms_mm: rms(s2), shape_max_mm: smax, color_rms: rms(c2), color_max: cmax })
-}
-
-/// What simplification costs: distances of the source mean shape's vertices to the simplified mean surface.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct SimplificationStats {
-    /// Source vertices.
-    pub source_vertices: usize,
-    /// Kept vertices.
-    pub kept_vertices: usize,
-    /// RMS over all source vertices of the distance to the simplified surface (mm; kept vertices count as 0).
-    pub mean_shape_rms_mm: f64,
-    /// Largest distance (mm).
-    pub mean_shape_max_mm: f64,
-}
-
-type P3 = [f64; 3];
-
-fn sub(a: P3, b: P3) -> P3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: P3, b: P3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// Squared distance from `p` to triangle `abc` (Ericson, Real-Time Collision Detection, 5.1.5).
-fn point_triangle_dist2(p: P3, a: P3, b: P3, c: P3) -> f64 {
-    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
-    let at = |s: f64, t: f64| {
-        let q = [a[0] + s * ab[0] + t * ac[0], a[1] + s * ab[1] + t * ac[1], a[2] + s * ab[2] + t * ac[2]];
-        let d = sub(p, q);
-        dot(d, d)
-    };
-    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return at(0.0, 0.0);
-    }
-    let bp = sub(p, b);
-    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return at(1.0, 0.0);
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return at(d1 / (d1 - d3), 0.0);
-    }
-    let cp = sub(p, c);
-    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return at(0.0, 1.0);
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return at(0.0, d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return at(1.0 - w, w);
-    }
-    let denom = va + vb + vc;
-    if denom.abs() < 1e-300 {
-        return at(0.0, 0.0).min(at(1.0, 0.0)).min(at(0.0, 1.0));
-    }
-    at(vb / denom, vc / denom)
-}
-
-/// Distances of every vertex of `source`'s mean shape to the mean surface of `q` (its simplification).
-pub fn simplification_error(source: &GpModel, q: &QuantizedModel) -> SimplificationStats {
-    let p64 = |v: Vec3| v.map(f64::from);
-    let tris: Vec<[P3; 3]> = q.reduced.triangles.iter().map(|t| t.map(|i| p64(q.reduced.shape.mean[i as usize]))).collect();
-    let boxes: Vec<(P3, P3)> = tris
-        .iter()
-        .map(|t| {
-            let lo = [0, 1, 2].map(|a| t[0][a].min(t[1][a]).min(t[2][a]));
-            let hi = [0, 1, 2].map(|a| t[0][a].max(t[1][a]).max(t[2][a]));
-            (lo, hi)
-        })
-        .collect();
-    let mut kept = vec![false; source.vertices()];
-    for &k in &q.kept {
-        kept[k as usize] = true;
-    }
-    let (mut sum, mut max) = (0.0f64, 0.0f64);
-    for (v, &p) in source.shape.mean.iter().enumerate() {
-        if kept[v] {
-            continue;
-        }
-        let p = p64(p);
-        let mut best = f64::INFINITY;
-        for (t, (lo, hi)) in tris.iter().zip(&boxes) {
-            let outside: f64 = (0..3).map(|a| (lo[a] - p[a]).max(0.0).max(p[a] - hi[a]).powi(2)).sum();
-            if outside < best {
-                best = best.min(point_triangle_dist2(p, t[0], t[1], t[2]));
-            }
-        }
-        if best.is_finite() {
-            sum += best;
-            max = max.max(best.sqrt());
-        }
-    }
-    let n = source.vertices().max(1);
-    SimplificationStats {
-        source_vertices: source.vertices(),
-        kept_vertices: q.kept.len(),
-        mean_shape_rms_mm: (sum / n as f64).sqrt(),
-        mean_shape_max_mm: max,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn point_triangle_distances() {
-        let (a, b, c) = ([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
-        assert!((point_triangle_dist2([0.2, 0.2, 3.0], a, b, c) - 9.0).abs() < 1e-12);
-        assert!((point_triangle_dist2([-1.0, -1.0, 0.0], a, b, c) - 2.0).abs() < 1e-12);
-        assert!((point_triangle_dist2([2.0, 0.0, 0.0], a, b, c) - 1.0).abs() < 1e-12);
-        assert!((point_triangle_dist2([1.0, 1.0, 0.0], a, b, c) - 0.5).abs() < 1e-12);
-        assert!((point_triangle_dist2([0.5, -2.0, 0.0], a, b, c) - 4.0).abs() < 1e-12);
-    }
 
     #[test]
     fn rows_quantize_symmetrically_per_component() {

@@ -1,12 +1,13 @@
 //! The paper's evaluation on synthetic faces: recognition across yaw ([`recognition`]), the
 //! multi-scan KDE mixture ([`kde`]), the 10-scan PCA baseline ([`pca`]), the generating world as an
 //! upper-bound model ([`world`]), and specificity / generalization / compactness ([`specgen`]),
-//! with line plots ([`plot`]).
+//! with line plots ([`plot`]), and fits scored against a synthetic set's truth ([`bench_fit`]).
 //!
 //! Multi-PIE (the paper's recognition data) is not available, so the protocol runs on images
 //! rendered by `gpmm synth` from the ICT-FaceKit identity model: a real face model made by
 //! others, which none of the evaluated models is built from (except the upper bound, on purpose).
 
+pub mod bench_fit;
 pub mod kde;
 pub mod models;
 pub mod npy;

@@ -8,7 +8,8 @@
 
 use crate::gp::kernel::Hyperparameters;
 use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
-use crate::mesh::template::{Mesh, Provenance};
+use crate::mesh::template::Provenance;
+use crate::mesh::Mesh;
 
 use super::EvalError;
 

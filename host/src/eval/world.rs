@@ -18,7 +18,8 @@
 use crate::eval::synth::{SynthOptions, SynthWorld};
 use crate::gp::model::GpModel;
 use crate::mesh::geometry::{centroid, dot, sub};
-use crate::mesh::template::{face_crop_indices, ibug_frame, Mesh};
+use crate::mesh::template::{face_crop_indices, ibug_frame};
+use crate::mesh::Mesh;
 
 use super::pca::{covariance_basis, dense_part, learned_metadata, pca_model};
 use super::EvalError;

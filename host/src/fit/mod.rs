@@ -16,7 +16,6 @@
 //! result is a deterministic function of the inputs, the settings and the seed: `fit.json` is
 //! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
 
-pub mod bench;
 mod observe;
 pub mod register;
 

@@ -25,10 +25,10 @@
 //! over the vertices whose closest target vertex is not on the border (no distance cut); the colour
 //! residual is the Euclidean RGB distance between the fitted albedo and the target's colour there.
 
-use crate::eval::synth::{closest_on_triangle, Grid};
 use crate::gp::model::{GpModel, ModelPart, PartBasis};
+use crate::mesh::closest::{closest_on_triangle, Grid};
 use crate::mesh::geometry::{add, centroid, dist2, mul, sub};
-use crate::mesh::template::Mesh;
+use crate::mesh::Mesh;
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use serde::{Deserialize, Serialize};

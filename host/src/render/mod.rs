@@ -10,7 +10,7 @@
 pub mod figure;
 
 use crate::gp::model::GpModel;
-use crate::mesh::template::Mesh;
+use crate::mesh::Mesh;
 use gpmm_core::{
     vertex_stage, Camera, Cull, FrameStats, ModelError, Pose, ProjectedVertex, RasterError, ShLight, Tile, TileRasterizer, TileSink, Vec3,
     VertexError,
