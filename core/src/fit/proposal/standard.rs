@@ -32,6 +32,7 @@ use rand_core::Rng;
 
 /// Which block a proposal moves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ProposalKind {
     /// Yaw angle (pivot-compensated).
     Yaw,
@@ -88,6 +89,7 @@ impl ProposalKind {
 
 /// Step size class (for reports).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Scale {
     /// Large steps.
     Coarse,
@@ -111,6 +113,7 @@ impl Scale {
 /// One built-in proposal: a kind (the block it moves), a step class and a σ (units per
 /// [`ProposalKind`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StandardProposal {
     /// The block it moves.
     pub kind: ProposalKind,
