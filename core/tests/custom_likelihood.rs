@@ -73,7 +73,7 @@ impl Proposal for Custom {
         _rng: &mut R,
         out: &mut FitParams<KS, KC>,
     ) -> f32 {
-        *out = *current;
+        out.clone_from(current);
         match self {
             Custom::Never => f32::NEG_INFINITY,
             Custom::Stay => 0.0,

@@ -111,22 +111,22 @@ fn image_likelihood_is_highest_at_the_truth() {
     assert!(at_truth.rmse() < 0.01, "8-bit rounding only: {}", at_truth.rmse());
     assert!(at_truth.covered > 2000);
     let mut perturbed = Vec::new();
-    let mut p = truth;
+    let mut p = truth.clone();
     p.pose.yaw += 4f32.to_radians();
     perturbed.push(("yaw +4°", p));
-    let mut p = truth;
+    let mut p = truth.clone();
     p.pose.translation[0] += 3.0;
     perturbed.push(("x +3 mm", p));
-    let mut p = truth;
-    p.shape[0] += 0.5;
+    let mut p = truth.clone();
+    p.shape_coeffs_mut()[0] += 0.5;
     perturbed.push(("shape", p));
-    let mut p = truth;
-    p.color[1] += 0.5;
+    let mut p = truth.clone();
+    p.color_coeffs_mut()[1] += 0.5;
     perturbed.push(("colour", p));
-    let mut p = truth;
+    let mut p = truth.clone();
     p.light = ShLight::ambient([0.8; 3]);
     perturbed.push(("light", p));
-    let mut p = truth;
+    let mut p = truth.clone();
     p.focal *= 1.05;
     perturbed.push(("focal", p));
     for (name, p) in perturbed {
@@ -136,7 +136,7 @@ fn image_likelihood_is_highest_at_the_truth() {
     }
     // A pose-only change reuses the shape and colour instances.
     let (s0, c0) = (inst.shape_updates, inst.color_updates);
-    let mut p = truth;
+    let mut p = truth.clone();
     p.pose.roll += 0.01;
     image_log_likelihood(&problem, &ip, &p, &mut inst, &mut raster).unwrap();
     image_log_likelihood(&problem, &ip, &truth, &mut inst, &mut raster).unwrap();
@@ -307,12 +307,12 @@ fn bad_input_is_an_error_not_a_panic() {
     let problem = Problem { landmarks: lm, ..problem };
     // Zero-size working image, NaN start, empty mixture, start behind the camera.
     assert_eq!(landmark_chain(&Problem { width: 0, ..problem }, &init, 10, &mut rng).err(), Some(FitError::EmptyImage));
-    let mut bad = init;
+    let mut bad = init.clone();
     bad.pose.yaw = f32::NAN;
     assert_eq!(landmark_chain(&problem, &bad, 10, &mut rng).err(), Some(FitError::NonFinite));
     let empty = Mixture::new();
     assert_eq!(landmark_chain(&Problem { mixture: &empty, ..problem }, &init, 10, &mut rng).err(), Some(FitError::BadConfig));
-    let mut behind = init;
+    let mut behind = init.clone();
     behind.pose.translation[2] = 600.0;
     assert_eq!(landmark_chain(&problem, &behind, 10, &mut rng).err(), Some(FitError::ImpossibleStart));
     // Images: zero size, wrong pixel count, size different from the problem's.
@@ -396,7 +396,7 @@ fn timing_breakdown_of_an_image_evaluation() {
     let mut raster = Raster::new();
     let n = 300;
     let t0 = Instant::now();
-    let mut p = truth;
+    let mut p = truth.clone();
     for i in 0..n {
         p.pose.roll = truth.pose.roll + 1e-4 * i as f32;
         image_log_likelihood(&problem, &ip, &p, &mut inst, &mut raster).unwrap();

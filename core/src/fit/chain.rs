@@ -64,7 +64,7 @@ pub struct ImageProblem<'a, L = GaussianPixel, B = BackgroundModel> {
 }
 
 /// Outcome of a chain.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FitResult<const KS: usize, const KC: usize> {
     /// The sample with the highest log posterior seen (the start counts).
     pub best: FitParams<KS, KC>,
@@ -86,7 +86,7 @@ pub struct FitResult<const KS: usize, const KC: usize> {
 
 /// A chain's state: the parameters with their evaluated terms (and the landmark vertices, kept
 /// so that a move that leaves the shape alone does not recompute them).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ChainState<const KS: usize, const KC: usize> {
     /// The parameters.
     pub params: FitParams<KS, KC>,
@@ -106,7 +106,7 @@ impl<const KS: usize, const KC: usize> ChainState<KS, KC> {
         let n = problem.model.landmark_positions(params.shape_coeffs(), &mut lm)?;
         let cam = params.camera(problem.width, problem.height);
         let landmarks = evaluate_landmarks(lm.get(..n).unwrap_or(&[]), &params.pose, &cam, &problem.landmarks)?;
-        Ok(Self { params: *params, lm, prior: problem.prior.log_density(params), landmarks, image: None })
+        Ok(Self { params: params.clone(), lm, prior: problem.prior.log_density(params), landmarks, image: None })
     }
 
     /// The first stage's log density: prior plus landmarks.
@@ -161,7 +161,7 @@ pub fn filter_stage<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const
     if prior == f32::NEG_INFINITY {
         return Ok(None);
     }
-    let mut next = ChainState { params: *prop, lm: cur.lm, prior, landmarks: cur.landmarks, image: cur.image };
+    let mut next = ChainState { params: prop.clone(), lm: cur.lm, prior, landmarks: cur.landmarks, image: cur.image };
     if proposal.changes_shape() {
         problem.model.landmark_positions(prop.shape_coeffs(), &mut next.lm)?;
     }
@@ -330,9 +330,9 @@ where
     for (id, e) in problem.mixture.entries().iter().enumerate() {
         observer.component(id, e.proposal.name());
     }
-    let mut best = cur;
+    let mut best = cur.clone();
     let mut acc = Acceptance::new();
-    let mut prop = *init;
+    let mut prop = init.clone();
     for step in 0..steps {
         observer.progress(step);
         let id = pick(problem.mixture, rng)?;
@@ -342,20 +342,21 @@ where
         let h = proposal.propose(&cur.params, &ctx, rng, &mut prop);
         let outcome = decide(problem, stage, &mut cur, &prop, proposal, h, rng)?;
         if outcome.accepted() && cur.log_posterior() > best.log_posterior() {
-            best = cur;
+            best = cur.clone();
         }
         let report = ProposalStep { step, id, name: proposal.name(), outcome, log_posterior: cur.log_posterior() };
         acc.proposal(&report);
         observer.proposal(&report);
     }
     observer.progress(steps);
+    let (best_log_posterior, last_log_posterior) = (best.log_posterior(), cur.log_posterior());
     Ok(FitResult {
         best: best.params,
-        best_log_posterior: best.log_posterior(),
+        best_log_posterior,
         best_landmarks: best.landmarks,
         best_image: best.image,
         last: cur.params,
-        last_log_posterior: cur.log_posterior(),
+        last_log_posterior,
         acceptance: acc,
         steps,
     })

@@ -36,6 +36,7 @@ impl BackgroundLikelihood for BackgroundModel {
 /// The standard foreground term: an isotropic Gaussian on the colour difference,
 /// `log N(I | R, σ² I₃) = −3 log(σ √(2π)) − |I − R|² / (2σ²)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct GaussianPixel {
     inv_two_var: f32,
     log_norm: f32,

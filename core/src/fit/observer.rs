@@ -6,6 +6,7 @@ use super::proposal::MAX_PROPOSALS;
 
 /// What became of one proposal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StepOutcome {
     /// The proposal itself refused the move (Hastings term `−∞`, e.g. a distance behind the camera).
     Impossible,
@@ -31,6 +32,7 @@ impl StepOutcome {
 
 /// One proposal as the chain saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ProposalStep {
     /// The step's index in its chain (0-based).
     pub step: u32,
@@ -107,6 +109,7 @@ impl<A: ChainObserver, B: ChainObserver> ChainObserver for (A, B) {
 
 /// Per-component proposal counts (index = position in the [`super::Mixture`]); an observer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Acceptance {
     /// Times the component was drawn.
     pub proposed: [u32; MAX_PROPOSALS],

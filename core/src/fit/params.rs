@@ -4,9 +4,10 @@ use crate::{Camera, Pose, ShLight};
 
 /// Parameters of one sample, with capacities `KS` (shape) and `KC` (colour) in const generics.
 ///
-/// Only the first `shape_len` / `color_len` coefficients are active (the others stay zero and
-/// are never proposed); the principal point is the image centre and is not a parameter.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The coefficients are fixed-capacity vectors holding the active ones only (the leading
+/// components of the model; the others are never proposed); the principal point is the image
+/// centre and is not a parameter.
+#[derive(Debug, Clone, PartialEq)]
 pub struct FitParams<const KS: usize, const KC: usize> {
     /// Rigid pose (Euler angles in radians, translation in mm; see [`Pose`]).
     pub pose: Pose,
@@ -14,42 +15,60 @@ pub struct FitParams<const KS: usize, const KC: usize> {
     pub focal: f32,
     /// Spherical-harmonics light (camera space).
     pub light: ShLight,
-    /// Shape coefficients (N(0, 1) prior); entries from `shape_len` on are zero.
-    pub shape: [f32; KS],
-    /// Colour coefficients (N(0, 1) prior); entries from `color_len` on are zero.
-    pub color: [f32; KC],
-    /// Number of active shape coefficients (`<= KS`).
-    pub shape_len: usize,
-    /// Number of active colour coefficients (`<= KC`).
-    pub color_len: usize,
+    /// The active shape coefficients (N(0, 1) prior), at most `KS`.
+    pub shape: heapless::Vec<f32, KS>,
+    /// The active colour coefficients (N(0, 1) prior), at most `KC`.
+    pub color: heapless::Vec<f32, KC>,
 }
 
 impl<const KS: usize, const KC: usize> FitParams<KS, KC> {
-    /// Zero coefficients; `shape_len`/`color_len` are clamped to the capacities.
+    /// `shape_len` / `color_len` zero coefficients (clamped to the capacities).
     pub fn new(pose: Pose, focal: f32, light: ShLight, shape_len: usize, color_len: usize) -> Self {
-        Self { pose, focal, light, shape: [0.0; KS], color: [0.0; KC], shape_len: shape_len.min(KS), color_len: color_len.min(KC) }
+        let mut shape = heapless::Vec::new();
+        shape.resize(shape_len.min(KS), 0.0).unwrap_or_default();
+        let mut color = heapless::Vec::new();
+        color.resize(color_len.min(KC), 0.0).unwrap_or_default();
+        Self { pose, focal, light, shape, color }
+    }
+
+    /// Number of active shape coefficients (`<= KS`).
+    pub fn shape_len(&self) -> usize {
+        self.shape.len()
+    }
+
+    /// Number of active colour coefficients (`<= KC`).
+    pub fn color_len(&self) -> usize {
+        self.color.len()
     }
 
     /// The active shape coefficients.
     pub fn shape_coeffs(&self) -> &[f32] {
-        self.shape.get(..self.shape_len).unwrap_or(&self.shape)
+        &self.shape
     }
 
     /// The active colour coefficients.
     pub fn color_coeffs(&self) -> &[f32] {
-        self.color.get(..self.color_len).unwrap_or(&self.color)
+        &self.color
     }
 
     /// The active shape coefficients, mutable.
     pub fn shape_coeffs_mut(&mut self) -> &mut [f32] {
-        let n = self.shape_len.min(KS);
-        self.shape.get_mut(..n).unwrap_or(&mut [])
+        &mut self.shape
     }
 
     /// The active colour coefficients, mutable.
     pub fn color_coeffs_mut(&mut self) -> &mut [f32] {
-        let n = self.color_len.min(KC);
-        self.color.get_mut(..n).unwrap_or(&mut [])
+        &mut self.color
+    }
+
+    /// Appends a shape coefficient; hands it back if all `KS` are in use.
+    pub fn push_shape(&mut self, c: f32) -> Result<(), f32> {
+        self.shape.push(c)
+    }
+
+    /// Appends a colour coefficient; hands it back if all `KC` are in use.
+    pub fn push_color(&mut self, c: f32) -> Result<(), f32> {
+        self.color.push(c)
     }
 
     /// The camera for a `width × height` image: this focal length, principal point at the centre.
@@ -57,7 +76,7 @@ impl<const KS: usize, const KC: usize> FitParams<KS, KC> {
         Camera::centered(width, height, self.focal)
     }
 
-    /// Whether every value is finite, the focal length positive and the active counts within capacity.
+    /// Whether every value is finite and the focal length positive.
     pub fn is_valid(&self) -> bool {
         let p = &self.pose;
         let pose_ok = p.yaw.is_finite() && p.pitch.is_finite() && p.roll.is_finite() && p.translation.iter().all(|v| v.is_finite());
@@ -66,8 +85,6 @@ impl<const KS: usize, const KC: usize> FitParams<KS, KC> {
             && self.focal > 0.0
             && self.light.coeffs.iter().flatten().all(|v| v.is_finite())
             && self.shape.iter().chain(self.color.iter()).all(|v| v.is_finite())
-            && self.shape_len <= KS
-            && self.color_len <= KC
     }
 }
 
@@ -83,9 +100,12 @@ mod tests {
         assert_eq!(p.color_coeffs().len(), 1);
         p.shape_coeffs_mut()[1] = 0.5;
         assert!(p.is_valid());
-        p.color[1] = f32::NAN;
+        p.color_coeffs_mut()[0] = f32::NAN;
         assert!(!p.is_valid());
-        p.color[1] = 0.0;
+        p.color_coeffs_mut()[0] = 0.0;
+        // A full vector hands the coefficient back.
+        assert_eq!(p.push_color(1.0), Ok(()));
+        assert_eq!(p.push_color(2.0), Err(2.0));
         p.focal = 0.0;
         assert!(!p.is_valid());
     }

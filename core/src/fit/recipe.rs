@@ -96,7 +96,7 @@ impl<F: FnMut(Stage, u32, u32)> FitObserver for F {
 }
 
 /// Everything [`standard_fit`] found.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct StandardFit<const KS: usize, const KC: usize> {
     /// The start of the landmark chain.
     pub init: FitParams<KS, KC>,
@@ -161,7 +161,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         background: &background,
         light_solve: settings.light.solve_config(settings.light.solve_stride),
     };
-    let mut start = landmark.best;
+    let mut start = landmark.best.clone();
     instance.update(model, &start, w, h)?;
     let every_vertex = settings.light.solve_config(settings.light.start_stride);
     if let Ok(l) =

@@ -122,8 +122,8 @@ pub struct InstanceBuffers<'b> {
 #[derive(Debug)]
 pub struct Instance<'b, const KS: usize, const KC: usize> {
     bufs: InstanceBuffers<'b>,
-    shape_key: Option<[f32; KS]>,
-    color_key: Option<[f32; KC]>,
+    shape_key: Option<heapless::Vec<f32, KS>>,
+    color_key: Option<heapless::Vec<f32, KC>>,
     /// Shape instances computed so far (positions and normals).
     pub shape_updates: u32,
     /// Colour instances computed so far.
@@ -151,17 +151,17 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
         if self.bufs.positions.len() != model.vertices() {
             return Err(FitError::LengthMismatch);
         }
-        if self.shape_key != Some(params.shape) {
+        if self.shape_key.as_ref() != Some(&params.shape) {
             self.shape_key = None;
             model.shape_instance(params.shape_coeffs(), self.bufs.positions)?;
             vertex_normals(self.bufs.positions, model.triangles(), self.bufs.normals)?;
-            self.shape_key = Some(params.shape);
+            self.shape_key = Some(params.shape.clone());
             self.shape_updates = self.shape_updates.wrapping_add(1);
         }
-        if self.color_key != Some(params.color) {
+        if self.color_key.as_ref() != Some(&params.color) {
             self.color_key = None;
             model.color_instance(params.color_coeffs(), self.bufs.albedos)?;
-            self.color_key = Some(params.color);
+            self.color_key = Some(params.color.clone());
             self.color_updates = self.color_updates.wrapping_add(1);
         }
         shade_vertices(self.bufs.albedos, self.bufs.normals, &params.pose, &params.light, self.bufs.projected)?;

@@ -102,8 +102,8 @@ pub fn truth() -> FitParams<KS, KC> {
     let pose = Pose { yaw: 25f32.to_radians(), pitch: -6f32.to_radians(), roll: 4f32.to_radians(), translation: [6.0, -8.0, -600.0] };
     let light = ShLight::from_ambient_diffuse([0.65, 0.6, 0.55], [0.35, 0.35, 0.3], [0.4, 0.5, 0.8]);
     let mut p = FitParams::new(pose, 300.0, light, KS, KC);
-    p.shape = [0.8, -0.6, 0.5, 1.0, -0.3, 0.2, -0.7, 0.4];
-    p.color = [0.6, -0.8, 0.4, 0.3];
+    p.shape_coeffs_mut().copy_from_slice(&[0.8, -0.6, 0.5, 1.0, -0.3, 0.2, -0.7, 0.4]);
+    p.color_coeffs_mut().copy_from_slice(&[0.6, -0.8, 0.4, 0.3]);
     p
 }
 

@@ -448,7 +448,7 @@ pub fn report(
         model_kernel: model.metadata.kernel.clone(),
         model_vertices: model.vertices(),
         model_ranks: [model.shape.rank(), model.color.rank()],
-        fitted_ranks: [p.shape_len, p.color_len],
+        fitted_ranks: [p.shape_len(), p.color_len()],
         image: inputs.image_path.to_string(),
         landmarks_file: inputs.pts_path.to_string(),
         pts_one_based: inputs.pts_one_based,

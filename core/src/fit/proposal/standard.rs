@@ -32,6 +32,7 @@ use rand_core::Rng;
 
 /// Which block a proposal moves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ProposalKind {
     /// Yaw angle (pivot-compensated).
     Yaw,
@@ -88,6 +89,7 @@ impl ProposalKind {
 
 /// Step size class (for reports).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Scale {
     /// Large steps.
     Coarse,
@@ -111,6 +113,7 @@ impl Scale {
 /// One built-in proposal: a kind (the block it moves), a step class and a σ (units per
 /// [`ProposalKind`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StandardProposal {
     /// The block it moves.
     pub kind: ProposalKind,
@@ -261,7 +264,7 @@ impl Proposal for StandardProposal {
         rng: &mut R,
         out: &mut FitParams<KS, KC>,
     ) -> f32 {
-        *out = *current;
+        out.clone_from(current);
         let s = self.sigma;
         match self.kind {
             ProposalKind::Yaw | ProposalKind::Pitch | ProposalKind::Roll => {
@@ -358,7 +361,7 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
         let ctx = ProposalContext { pivot: [10.0, 20.0, 30.0], light_solution: None };
         let p = params();
-        let mut out = p;
+        let mut out = p.clone();
         for kind in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll] {
             let h = StandardProposal::new(kind, Scale::Coarse, 0.5).unwrap().propose(&p, &ctx, &mut rng, &mut out);
             assert_eq!(h, 0.0);
@@ -375,7 +378,7 @@ mod tests {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
         let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
         let p = params();
-        let mut out = p;
+        let mut out = p.clone();
         let h = StandardProposal::new(ProposalKind::Distance, Scale::Coarse, 50.0).unwrap().propose(&p, &ctx, &mut rng, &mut out);
         let (w, w2) = (-p.pose.translation[2], -out.pose.translation[2]);
         assert!((out.focal / w2 - p.focal / w).abs() < 1e-4);
@@ -398,12 +401,66 @@ mod tests {
         assert!((share / shape.total_weight() - 0.6 / 0.99).abs() < 1e-4, "{share}");
     }
 
+    /// The mixtures as they were written out before they became settings: same components,
+    /// same order, same σ's and weights bit for bit (the fits depend on every one).
+    #[test]
+    fn presets_from_settings_match_the_written_out_mixtures() {
+        fn push3(m: &mut Vec<(ProposalKind, Scale, f32, f32)>, kind: ProposalKind, sigmas: [f32; 3], weights: [f32; 3], share: f32) {
+            let sum: f32 = weights.iter().sum();
+            for ((s, w), scale) in sigmas.iter().zip(weights).zip([Scale::Coarse, Scale::Intermediate, Scale::Fine]) {
+                m.push((kind, scale, *s, share * w / sum));
+            }
+        }
+        fn pose(m: &mut Vec<(ProposalKind, Scale, f32, f32)>, px: f32, share: f32, yaw: bool, distance: bool) {
+            let (rot_w, rot_s) = ([0.1, 0.4, 0.5], [0.75, 0.10, 0.01]);
+            if yaw {
+                push3(m, ProposalKind::Yaw, rot_s, rot_w, 0.3 * share);
+            }
+            push3(m, ProposalKind::Pitch, rot_s, rot_w, 0.2 * share);
+            push3(m, ProposalKind::Roll, rot_s, rot_w, 0.1 * share);
+            if distance {
+                push3(m, ProposalKind::Distance, [200.0, 50.0, 5.0], [0.2, 0.6, 0.2], 0.05 * share);
+            }
+            push3(m, ProposalKind::Scaling, [0.15, 0.05, 0.01], [0.2, 0.6, 0.2], 0.15 * share);
+            let px = px.max(1.0);
+            push3(m, ProposalKind::Translation, [0.1 * px, 0.02 * px, 0.004 * px], [0.2, 0.2, 0.6], 0.2 * share);
+        }
+        let shape = |m: &mut Vec<_>, share| push3(m, ProposalKind::Shape, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], share);
+        let flat = |m: &Mixture| -> Vec<(ProposalKind, Scale, f32, f32)> {
+            m.entries().iter().map(|e| (e.proposal.kind, e.proposal.scale, e.proposal.sigma, e.weight)).collect()
+        };
+        for px in [128.0f32, 256.0, 97.0] {
+            let mut lm_pose = Vec::new();
+            pose(&mut lm_pose, px, 1.0, true, false);
+            assert_eq!(flat(&Mixture::landmark_pose(px)), lm_pose);
+            let mut lm_shape = Vec::new();
+            shape(&mut lm_shape, 0.6);
+            pose(&mut lm_shape, px, 0.6, false, false);
+            assert_eq!(flat(&Mixture::landmark_shape(px)), lm_shape);
+            let mut joint = Vec::new();
+            pose(&mut joint, px, 0.7, true, true);
+            shape(&mut joint, 0.3);
+            assert_eq!(flat(&Mixture::landmark_default(px)), joint);
+            let mut image = Vec::new();
+            pose(&mut image, px, 0.3, true, true);
+            shape(&mut image, 0.25);
+            push3(&mut image, ProposalKind::Color, [0.2, 0.1, 0.025], [0.1, 0.5, 0.2], 0.2);
+            push3(&mut image, ProposalKind::Light, [0.05, 0.01, 0.002], [0.2, 0.5, 0.3], 0.12);
+            image.push((ProposalKind::LightIntensity, Scale::Intermediate, 0.05, 0.08));
+            image.push((ProposalKind::LightSolve, Scale::Fine, 0.02, 0.05));
+            let m = Mixture::image_default(px);
+            assert_eq!(flat(&m), image);
+            let total: f32 = image.iter().map(|e| e.3).fold(0.0, |a, w| a + w);
+            assert_eq!(m.total_weight().to_bits(), total.to_bits());
+        }
+    }
+
     #[test]
     fn light_solve_without_solution_is_impossible_and_mixture_chooses_by_weight() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
         let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
         let p = params();
-        let mut out = p;
+        let mut out = p.clone();
         let pr = StandardProposal::new(ProposalKind::LightSolve, Scale::Fine, 0.1).unwrap();
         assert!(pr.needs_light_solution());
         assert_eq!(pr.propose(&p, &ctx, &mut rng, &mut out), f32::NEG_INFINITY);
