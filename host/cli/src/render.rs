@@ -253,7 +253,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     if let Some(dir) = &a.out_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    let mean = model.instance(&[], &[]).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mean = model.instance(&[], &[]).map_err(|e| anyhow::anyhow!("{e}"))?;
     if let Some(dir) = &a.out_dir {
         mesh_io::write_ply(&dir.join("mean.ply"), &mean)?;
     }
@@ -261,7 +261,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     let bar = ProgressBar::new(a.count as u64);
     let mut meshes = vec![mean];
     for i in 0..a.count {
-        let mesh = model.sample(&mut rng).map_err(|e| anyhow::anyhow!("{e:?}"))?;
+        let mesh = model.sample(&mut rng).map_err(|e| anyhow::anyhow!("{e}"))?;
         if let Some(dir) = &a.out_dir {
             mesh_io::write_ply(&dir.join(format!("sample_{i:03}.ply")), &mesh)?;
         }

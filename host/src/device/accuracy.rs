@@ -46,7 +46,7 @@ pub fn quantization_error(reference: &GpModel, blob: &ModelBlob<'_>, draws: usiz
             blob.rank_color()
         )));
     }
-    let model_err = |e: gpmm_core::ModelError| QuantizeError::Model(format!("{e:?}"));
+    let model_err = |e: gpmm_core::ModelError| QuantizeError::Model(e.to_string());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let (mut s2, mut smax, mut c2, mut cmax, mut count) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
     for _ in 0..draws {

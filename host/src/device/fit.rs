@@ -67,7 +67,7 @@ pub enum DeviceFitError {
     #[error("the fit input could not be written: {0}")]
     Input(FormatError),
     /// The core refused the fit on the host.
-    #[error("the core fitter refused the input on the host: {0:?}")]
+    #[error("the core fitter refused the input on the host: {0}")]
     Core(FitError),
     /// The blob was refused.
     #[error("the model blob was refused: {0}")]

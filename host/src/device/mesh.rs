@@ -41,7 +41,7 @@ pub enum DeviceMeshError {
     #[error("not a valid device mesh: {0}")]
     Format(String),
     /// The model could not produce its mean instance.
-    #[error("model instance: {0:?}")]
+    #[error("model instance: {0}")]
     Model(gpmm_core::ModelError),
     /// The renderer refused the mesh or scene.
     #[error("render: {0}")]
@@ -180,11 +180,11 @@ impl DeviceMesh {
         let mut normals = vec![[0.0f32; 3]; self.positions.len()];
         let mut projected = vec![ProjectedVertex::INVALID; self.positions.len()];
         vertex_stage(&self.positions, &self.albedo, &self.triangles, &s.pose, &s.camera, &s.light, &mut normals, &mut projected)
-            .map_err(|e| DeviceMeshError::Render(format!("{e:?}")))?;
+            .map_err(|e| DeviceMeshError::Render(e.to_string()))?;
         let mut sum = FrameChecksum::new();
         let stats = TileRasterizer::<32, 32, 4096>::new()
             .render(&projected, &self.triangles, s.width, s.height, Cull::Clockwise, &mut sum)
-            .map_err(|e| DeviceMeshError::Render(format!("{e:?}")))?;
+            .map_err(|e| DeviceMeshError::Render(e.to_string()))?;
         Ok((sum, stats))
     }
 }

@@ -57,7 +57,7 @@ pub enum FitRunError {
     #[error("the model cannot be fitted: {0}")]
     Model(String),
     /// The core fitter refused its input.
-    #[error("{stage}: the core fitter refused the input ({error:?})")]
+    #[error("{stage}: the core fitter refused the input: {error}")]
     Core {
         /// Which stage.
         stage: &'static str,
@@ -272,10 +272,10 @@ pub fn fit_prepared(
 
 /// The core's view of a model.
 pub fn morphable(model: &GpModel) -> Result<MorphableModel<'_>, FitRunError> {
-    let shape_basis = model.shape.core_basis().map_err(|e| FitRunError::Model(format!("shape basis: {e:?}")))?;
-    let color_basis = model.color.core_basis().map_err(|e| FitRunError::Model(format!("colour basis: {e:?}")))?;
+    let shape_basis = model.shape.core_basis().map_err(|e| FitRunError::Model(format!("shape basis: {e}")))?;
+    let color_basis = model.color.core_basis().map_err(|e| FitRunError::Model(format!("colour basis: {e}")))?;
     MorphableModel::new(&model.shape.mean, &model.color.mean, shape_basis, color_basis, &model.triangles, &model.landmarks)
-        .map_err(|e| FitRunError::Model(format!("{e:?}")))
+        .map_err(|e| FitRunError::Model(format!("{e}")))
 }
 
 /// [`project_landmarks`] for a [`GpModel`] and a square `size × size` image.
@@ -635,7 +635,7 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     let ply_path = dir.join("fit.ply");
     let mesh = model
         .instance(outcome.params.shape_coeffs(), outcome.params.color_coeffs())
-        .map_err(|e| FitRunError::Model(format!("instance: {e:?}")))?;
+        .map_err(|e| FitRunError::Model(format!("instance: {e}")))?;
     let attribution = model.metadata.template.attribution.clone().unwrap_or_default();
     let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
     crate::mesh::io::write_ply_with(&ply_path, &mesh, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)

@@ -56,13 +56,13 @@ pub enum RenderError {
         rank: usize,
     },
     /// The model's arrays are inconsistent.
-    #[error("the model's arrays are inconsistent: {0:?}")]
+    #[error("the model's arrays are inconsistent: {0}")]
     Model(ModelError),
     /// The per-vertex stage refused its input.
-    #[error("vertex stage: {0:?}")]
+    #[error("vertex stage: {0}")]
     Vertex(VertexError),
     /// The rasterizer refused the frame.
-    #[error("rasterizer: {0:?}")]
+    #[error("rasterizer: {0}")]
     Raster(RasterError),
 }
 

@@ -275,12 +275,12 @@ impl SynthWorld {
         let mut normals = vec![[0.0f32; 3]; n];
         let mut projected = vec![ProjectedVertex::INVALID; n];
         vertex_stage(&identity.positions, &identity.albedo, &self.triangles, &pose, &camera, &light, &mut normals, &mut projected)
-            .map_err(|e| SynthError::Render { message: format!("vertex stage: {e:?}") })?;
+            .map_err(|e| SynthError::Render { message: format!("vertex stage: {e}") })?;
         let mut raster: Box<TileRasterizer<TILE, TILE, BIN>> = Box::new(TileRasterizer::new());
         let mut sink = FrameSink::new(size, size);
         raster
             .render(&projected, &self.triangles, size, size, Cull::Clockwise, &mut sink)
-            .map_err(|e| SynthError::Render { message: format!("rasterizer: {e:?}") })?;
+            .map_err(|e| SynthError::Render { message: format!("rasterizer: {e}") })?;
 
         let sigma = o.background_noise;
         let mut image = RgbImage::new(size, size);
