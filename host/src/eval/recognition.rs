@@ -249,9 +249,12 @@ pub fn fit_set(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(FitSet, bool), EvalError> {
     settings.validate().map_err(|e| EvalError::Invalid(e.to_string()))?;
+    // The settings as text: JSON numbers read back from the cache need not be bit-equal to the
+    // f32 → f64 values written (serde_json's float parser is not exact), a string is.
+    let settings_text = serde_json::to_string(settings).map_err(|e| EvalError::Invalid(e.to_string()))?;
     let key = serde_json::json!({
         "model_sha256": super::file_sha256(model_path)?,
-        "settings": settings,
+        "settings": settings_text,
         "truth_sha256": set.truth_sha256,
         "images": set.images.iter().map(|t| t.image.as_str()).collect::<Vec<_>>(),
     });
