@@ -10,7 +10,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 pub mod checksum;
-mod error_text;
+pub mod error;
 pub mod fit;
 pub mod format;
 pub mod model;

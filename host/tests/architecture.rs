@@ -116,3 +116,21 @@ fn no_source_file_is_over_800_lines() {
 fn crate_references_are_found() {
     assert_eq!(crate_refs("use crate::mesh::Mesh; use crate::gp::{a}; crate::mesh::x"), ["gp", "mesh"].map(String::from).into());
 }
+
+#[test]
+fn the_core_depends_one_way() {
+    // format, model and render must not import the fit (the fit imports them).
+    let src = repo().join("core/src");
+    for (folder, forbidden) in [("format", "fit"), ("model", "fit"), ("render", "fit"), ("render", "format"), ("model", "format")] {
+        let mut files = Vec::new();
+        rust_files(&src.join(folder), &mut files);
+        assert!(!files.is_empty(), "core/src/{folder} has no sources");
+        for f in &files {
+            let text = std::fs::read_to_string(f).expect("read source");
+            let code = text.split("#[cfg(test)]").next().unwrap_or("");
+            let code: Vec<&str> = code.lines().filter(|l| !l.trim_start().starts_with("//")).collect();
+            let refs = crate_refs(&code.join("\n"));
+            assert!(!refs.contains(forbidden), "{} (core {folder}) imports crate::{forbidden}", f.display());
+        }
+    }
+}

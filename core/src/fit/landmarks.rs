@@ -4,7 +4,7 @@ use super::FitError;
 use crate::{Camera, Pose, Vec3};
 
 /// Largest number of landmarks a model may have (iBUG-68 needs 68).
-pub const MAX_LANDMARKS: usize = 128;
+pub use crate::model::MAX_LANDMARKS;
 
 /// Target landmarks in pixels (x right, y down, pixel centres at +0.5), a validity mask and σ.
 #[derive(Debug, Clone, Copy)]

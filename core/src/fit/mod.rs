@@ -18,6 +18,8 @@
 //! All log densities are `f32` and "up to an additive constant" unless stated otherwise; the
 //! chain only ever uses differences. Nothing allocates; every buffer is borrowed or fixed-size.
 
+/// The parameter vector, under its old path (`gpmm_core::fit::params`); it lives in [`crate::model`].
+pub use crate::model::params;
 pub mod chain;
 pub mod image;
 pub mod init;
@@ -26,7 +28,6 @@ pub mod light_fit;
 pub mod likelihood;
 pub mod normal;
 pub mod observer;
-pub mod params;
 pub mod prior;
 pub mod proposal;
 pub mod recipe;
@@ -51,52 +52,4 @@ pub use proposal::{Mixture, MixtureEntry, OneOf, Proposal, ProposalContext, Prop
 pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};
 pub use settings::{Drift, DriftSettings, FitSettings, LightSettings, MixtureShares, ProposalSettings};
 
-use crate::{ModelError, RasterError, VertexError};
-
-/// Why a fit (or one of its parts) was refused. Small and `Copy`; never a panic.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum FitError {
-    /// Slices that must agree in length do not (per-vertex buffers, landmark lists, image pixels).
-    LengthMismatch,
-    /// A triangle or landmark refers to a vertex that does not exist.
-    IndexOutOfRange,
-    /// A parameter, target landmark or model value is NaN or infinite.
-    NonFinite,
-    /// More landmarks than [`MAX_LANDMARKS`].
-    TooManyLandmarks,
-    /// No target landmark is marked valid.
-    NoValidLandmarks,
-    /// The target image has zero width or height.
-    EmptyImage,
-    /// A standard deviation, focal length or step count is out of range (zero, negative or NaN).
-    BadConfig,
-    /// The initial parameters have zero posterior density (e.g. landmarks behind the camera).
-    ImpossibleStart,
-    /// The least-squares light system is singular.
-    Singular,
-    /// The model's bases refused the coefficients.
-    Model(ModelError),
-    /// The per-vertex stage refused its input.
-    Vertex(VertexError),
-    /// The rasterizer refused the frame.
-    Raster(RasterError),
-}
-
-impl From<ModelError> for FitError {
-    fn from(e: ModelError) -> Self {
-        FitError::Model(e)
-    }
-}
-
-impl From<VertexError> for FitError {
-    fn from(e: VertexError) -> Self {
-        FitError::Vertex(e)
-    }
-}
-
-impl From<RasterError> for FitError {
-    fn from(e: RasterError) -> Self {
-        FitError::Raster(e)
-    }
-}
+pub use crate::error::FitError;

@@ -15,7 +15,8 @@
 //! aligned in memory, otherwise [`BlobError::Misaligned`] (copy it into an aligned buffer).
 
 use crate::checksum::crc32_update;
-use crate::fit::{FitError, MorphableModel};
+use crate::error::FitError;
+use crate::model::MorphableModel;
 use crate::model::{Basis, ModelError, QuantValues, QuantizedBasis, Vec3};
 use core::fmt;
 

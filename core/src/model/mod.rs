@@ -7,6 +7,8 @@
 
 pub mod basis;
 pub mod morphable;
+pub mod params;
 
 pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
-pub use morphable::{Instance, InstanceBuffers, MorphableModel};
+pub use morphable::{Instance, InstanceBuffers, MorphableModel, MAX_LANDMARKS};
+pub use params::FitParams;

@@ -1,9 +1,12 @@
 //! The borrowed model view used by the fitter, and the cached per-vertex instance.
 
-use crate::fit::params::FitParams;
-use crate::fit::FitError;
+use crate::error::FitError;
 use crate::model::basis::{Basis, Vec3};
+use crate::model::params::FitParams;
 use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, TriIndex};
+
+/// Most landmarks a model or a fit target has.
+pub const MAX_LANDMARKS: usize = 128;
 
 /// A morphable model, borrowed: means, bases, triangles and landmark vertex ids (iBUG-68 order).
 #[derive(Debug, Clone, Copy)]
@@ -30,7 +33,7 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         if color_mean.len() != n || shape.vertices() != n || color.vertices() != n {
             return Err(FitError::LengthMismatch);
         }
-        if landmarks.len() > crate::fit::MAX_LANDMARKS {
+        if landmarks.len() > MAX_LANDMARKS {
             return Err(FitError::TooManyLandmarks);
         }
         if landmarks.iter().any(|&l| l as usize >= n) || triangles.iter().flatten().any(|i| i.index() >= n) {

@@ -1,10 +1,58 @@
-//! The core's errors in words (`Display`), for messages on the host and the device.
+//! The fit's error type, shared by the model view, the formats and the fit (it lives here so
+//! that neither imports the fit), and the core's errors in words (`Display`).
 
-use crate::fit::FitError;
 use crate::model::ModelError;
 use crate::render::raster::RasterError;
 use crate::render::shading::VertexError;
 use core::fmt;
+
+/// Why a fit (or one of its parts) was refused. Small and `Copy`; never a panic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FitError {
+    /// Slices that must agree in length do not (per-vertex buffers, landmark lists, image pixels).
+    LengthMismatch,
+    /// A triangle or landmark refers to a vertex that does not exist.
+    IndexOutOfRange,
+    /// A parameter, target landmark or model value is NaN or infinite.
+    NonFinite,
+    /// More landmarks than [`crate::model::MAX_LANDMARKS`].
+    TooManyLandmarks,
+    /// No target landmark is marked valid.
+    NoValidLandmarks,
+    /// The target image has zero width or height.
+    EmptyImage,
+    /// A standard deviation, focal length or step count is out of range (zero, negative or NaN).
+    BadConfig,
+    /// The initial parameters have zero posterior density (e.g. landmarks behind the camera).
+    ImpossibleStart,
+    /// The least-squares light system is singular.
+    Singular,
+    /// The model's bases refused the coefficients.
+    Model(ModelError),
+    /// The per-vertex stage refused its input.
+    Vertex(VertexError),
+    /// The rasterizer refused the frame.
+    Raster(RasterError),
+}
+
+impl From<ModelError> for FitError {
+    fn from(e: ModelError) -> Self {
+        FitError::Model(e)
+    }
+}
+
+impl From<VertexError> for FitError {
+    fn from(e: VertexError) -> Self {
+        FitError::Vertex(e)
+    }
+}
+
+impl From<RasterError> for FitError {
+    fn from(e: RasterError) -> Self {
+        FitError::Raster(e)
+    }
+}
 
 impl fmt::Display for ModelError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -42,7 +90,7 @@ impl fmt::Display for FitError {
             FitError::LengthMismatch => f.write_str("lengths that must agree do not (per-vertex buffers, landmarks or image pixels)"),
             FitError::IndexOutOfRange => f.write_str("a triangle or landmark refers to a vertex that does not exist"),
             FitError::NonFinite => f.write_str("a parameter, target landmark or model value is NaN or infinite"),
-            FitError::TooManyLandmarks => write!(f, "more than {} landmarks", crate::fit::MAX_LANDMARKS),
+            FitError::TooManyLandmarks => write!(f, "more than {} landmarks", crate::model::MAX_LANDMARKS),
             FitError::NoValidLandmarks => f.write_str("no target landmark is usable"),
             FitError::EmptyImage => f.write_str("the target image has no pixels"),
             FitError::BadConfig => f.write_str("a fit setting is out of range (a σ, factor, share or step size is zero, negative or NaN)"),
