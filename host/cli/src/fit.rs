@@ -93,6 +93,10 @@ pub struct BenchFitArgs {
     /// Fit only the first N images.
     #[arg(long, value_name = "N")]
     pub limit: Option<usize>,
+    /// Read each image's landmarks from the file of the same name in DIR (e.g. a detector's)
+    /// instead of the set's exact `.pts`; the truth stays the set's.
+    #[arg(long, value_name = "DIR")]
+    pub landmarks_dir: Option<PathBuf>,
     /// Parallel fits (default: all cores); each fit runs on one thread.
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -159,7 +163,8 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         bar.set_length(t as u64);
         bar.set_position(d as u64);
     };
-    let (summary, images, errors) = gpmm_host::eval::bench_fit::bench(&model, &a.dir, &settings, a.limit, jobs, &progress)?;
+    let (summary, images, errors) =
+        gpmm_host::eval::bench_fit::bench(&model, &a.dir, &settings, a.landmarks_dir.as_deref(), a.limit, jobs, &progress)?;
     bar.finish_and_clear();
     for e in &errors {
         eprintln!("fit failed: {e}");
@@ -169,6 +174,19 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         let body = serde_json::json!({ "summary": summary, "images": images, "errors": errors });
         std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
+    }
+    eprintln!("landmarks: {}", summary.landmarks);
+    eprintln!("|yaw|  images  median |yaw err|  toward-profile bias  median |pitch err|  median |roll err|  (degrees)");
+    for r in &summary.per_yaw {
+        eprintln!(
+            "{:>4}  {:>6}  {:>16.2}  {:>19.2}  {:>18.2}  {:>17.2}",
+            r.abs_yaw_deg,
+            r.images,
+            r.yaw_error_deg.median,
+            r.mean_outward_yaw_error_deg,
+            r.pitch_error_deg.median,
+            r.roll_error_deg.median
+        );
     }
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())

@@ -220,6 +220,34 @@ fn bench_fit_prints_the_statistics() {
     assert!(j["yaw_error_deg"]["median"].as_f64().unwrap() < 10.0, "{j}");
     let per_image = read_json(&f.synth.join("bench.json"));
     assert_eq!(per_image["images"].as_array().unwrap().len(), 2);
+    assert_eq!(j["landmarks"], "exact");
+    let rows = j["per_yaw"].as_array().unwrap();
+    assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{j}");
+
+    // Landmarks from another directory (here: the exact ones shifted 3 px right): the fit follows them.
+    let other = f.synth.parent().unwrap().join("shifted-landmarks");
+    std::fs::create_dir_all(&other).unwrap();
+    for entry in std::fs::read_dir(&f.synth).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "pts") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let shifted: Vec<String> = text
+                .lines()
+                .map(|l| match l.split_whitespace().map(str::parse::<f32>).collect::<Result<Vec<_>, _>>() {
+                    Ok(v) if v.len() == 2 => format!("{:.3} {:.3}", v[0] + 3.0, v[1]),
+                    _ => l.to_string(),
+                })
+                .collect();
+            std::fs::write(other.join(path.file_name().unwrap()), shifted.join("\n") + "\n").unwrap();
+        }
+    }
+    let args = ["bench-fit", s(&f.synth), "--model", s(&f.model), "--landmark-steps", "2000", "--image-steps", "20", "--no-write"];
+    let shifted: serde_json::Value = serde_json::from_str(&ok(&gpmm(&[&args[..], &["--landmarks-dir", s(&other)]].concat()))).unwrap();
+    assert_eq!(shifted["landmarks"], s(&other));
+    let (a, b) = (j["landmark_error_iod_pct"]["median"].as_f64().unwrap(), shifted["landmark_error_iod_pct"]["median"].as_f64().unwrap());
+    assert!(b > a + 1.0, "shifted landmarks must move the fit away from the truth: {a} vs {b}");
+    let missing = fails(&gpmm(&[&args[..], &["--landmarks-dir", "/nonexistent-landmarks"]].concat()));
+    assert!(missing.contains("/nonexistent-landmarks"), "{missing}");
 }
 
 /// The landmark chain fits the pose before the shape, so yaw is not traded for shape: on 12

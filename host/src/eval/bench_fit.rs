@@ -12,6 +12,11 @@
 //! - pixel RMSE (per channel, covered pixels) of the landmark-only result (landmark chain plus
 //!   least-squares light) and of the image chain's result;
 //! - wall-clock seconds of the fit (crop and both chains).
+//!
+//! The landmarks are the set's exact ones (`NAME.pts` next to each image) or, with a landmark
+//! directory, the files of the same name there (e.g. a real detector's). The summary also has a
+//! row per true |yaw|: the median |yaw error| and the mean signed yaw error toward the profile
+//! (negative: the fit turns the face toward frontal), beside the median pitch and roll errors.
 
 use crate::eval::synth::{read_truth, ImageTruth};
 use crate::fit::{fit_prepared, load_photo, FitOptions};
@@ -51,6 +56,51 @@ pub struct Stat {
     pub p90: f64,
 }
 
+/// The figures of the images of one true |yaw| (rounded to whole degrees).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct YawRow {
+    /// True |yaw| (degrees, rounded).
+    pub abs_yaw_deg: i32,
+    /// Images in the row.
+    pub images: usize,
+    /// |yaw| error (degrees).
+    pub yaw_error_deg: Stat,
+    /// Mean of (fitted − true yaw) × sign(true yaw): negative when the fit turns toward frontal
+    /// (0 for frontal images, where it is the plain mean signed error).
+    pub mean_outward_yaw_error_deg: f64,
+    /// Mean signed yaw error (fitted − true).
+    pub mean_signed_yaw_error_deg: f64,
+    /// |pitch| error (degrees).
+    pub pitch_error_deg: Stat,
+    /// |roll| error (degrees).
+    pub roll_error_deg: Stat,
+}
+
+/// One row per true |yaw|, in increasing order.
+pub fn per_yaw(images: &[BenchImage]) -> Vec<YawRow> {
+    let mut keys: Vec<i32> = images.iter().map(|b| b.truth_deg[0].abs().round() as i32).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    keys.into_iter()
+        .map(|k| {
+            let row: Vec<&BenchImage> = images.iter().filter(|b| b.truth_deg[0].abs().round() as i32 == k).collect();
+            let n = row.len().max(1) as f64;
+            let err = |i: usize| row.iter().map(|b| f64::from((b.fit_deg[i] - b.truth_deg[i]).abs())).collect::<Vec<_>>();
+            let signed = |b: &&BenchImage| f64::from(b.fit_deg[0] - b.truth_deg[0]);
+            let sign = |b: &&BenchImage| if b.truth_deg[0].abs() < 0.5 { 1.0 } else { f64::from(b.truth_deg[0].signum()) };
+            YawRow {
+                abs_yaw_deg: k,
+                images: row.len(),
+                yaw_error_deg: stat(&err(0)),
+                mean_outward_yaw_error_deg: row.iter().map(|b| signed(b) * sign(b)).sum::<f64>() / n,
+                mean_signed_yaw_error_deg: row.iter().map(signed).sum::<f64>() / n,
+                pitch_error_deg: stat(&err(1)),
+                roll_error_deg: stat(&err(2)),
+            }
+        })
+        .collect()
+}
+
 /// The JSON `gpmm bench-fit` prints.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BenchSummary {
@@ -78,6 +128,10 @@ pub struct BenchSummary {
     pub pixel_rmse_after_image_chain: Stat,
     /// Fraction of images where the image chain lowered the pixel RMSE.
     pub image_chain_lowered_rmse_fraction: f64,
+    /// Per true |yaw|: yaw error, its bias toward frontal, pitch and roll errors.
+    pub per_yaw: Vec<YawRow>,
+    /// Where the landmarks came from: `exact` (the set's) or the landmark directory.
+    pub landmarks: String,
     /// Seconds per fit (each fit on one thread).
     pub seconds_per_fit: Stat,
     /// Wall-clock seconds of the whole benchmark.
@@ -128,11 +182,18 @@ fn iod_error(fit: &[[f32; 2]], truth: &[[f32; 2]]) -> f32 {
     100.0 * mean / iod
 }
 
-/// Fits one synthetic image (its `.pts` file, the `gpmm fit` path) and compares with its truth.
-pub fn bench_one(model: &GpModel, dir: &Path, truth: &ImageTruth, settings: &FitOptions) -> Result<BenchImage, String> {
+/// Fits one synthetic image (the `gpmm fit` path) and compares with its truth. Its landmarks are
+/// its `.pts` file in `dir`, or the file of the same name in `landmarks_dir`.
+pub fn bench_one(
+    model: &GpModel,
+    dir: &Path,
+    truth: &ImageTruth,
+    settings: &FitOptions,
+    landmarks_dir: Option<&Path>,
+) -> Result<BenchImage, String> {
     let t0 = Instant::now();
-    let prepared = load_photo(model, &dir.join(&truth.image), &dir.join(&truth.landmarks_file), false, settings.size)
-        .map_err(|e| format!("{}: {e}", truth.image))?;
+    let pts = landmarks_dir.unwrap_or(dir).join(&truth.landmarks_file);
+    let prepared = load_photo(model, &dir.join(&truth.image), &pts, false, settings.size).map_err(|e| format!("{}: {e}", truth.image))?;
     let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", truth.image))?;
     let seconds = t0.elapsed().as_secs_f64();
     let size = settings.size;
@@ -152,12 +213,15 @@ pub fn bench_one(model: &GpModel, dir: &Path, truth: &ImageTruth, settings: &Fit
     })
 }
 
-/// Runs the benchmark on `dir` (a `gpmm synth` output): the first `limit` images, `jobs` threads.
+/// Runs the benchmark on `dir` (a `gpmm synth` output): the first `limit` images, `jobs` threads,
+/// landmarks from `landmarks_dir` when given (else the set's exact ones).
 /// `progress(done, total)` is called after each image; failed fits are returned as messages.
+#[allow(clippy::too_many_arguments)]
 pub fn bench(
     model: &GpModel,
     dir: &Path,
     settings: &FitOptions,
+    landmarks_dir: Option<&Path>,
     limit: Option<usize>,
     jobs: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
@@ -180,7 +244,7 @@ pub fn bench(
         images
             .par_iter()
             .map(|t| {
-                let r = bench_one(model, dir, t, settings);
+                let r = bench_one(model, dir, t, settings, landmarks_dir);
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 progress(d, total);
                 r
@@ -216,6 +280,8 @@ pub fn bench(
         pixel_rmse_after_landmark_chain: stat(&col(&|b| f64::from(b.pixel_rmse_after_landmark_chain))),
         pixel_rmse_after_image_chain: stat(&col(&|b| f64::from(b.pixel_rmse))),
         image_chain_lowered_rmse_fraction: lowered,
+        per_yaw: per_yaw(&ok),
+        landmarks: landmarks_dir.map_or_else(|| "exact".to_string(), |d| d.display().to_string()),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
         jobs,
@@ -233,5 +299,27 @@ mod tests {
         assert_eq!(s.median, 3.0);
         assert!((s.p90 - 4.6).abs() < 1e-9);
         assert_eq!(stat(&[]).median, 0.0);
+    }
+
+    #[test]
+    fn per_yaw_rows_measure_the_pull_toward_frontal() {
+        let img = |t: f32, f: f32| BenchImage {
+            image: String::new(),
+            truth_deg: [t, 1.0, 0.0],
+            fit_deg: [f, 2.0, 0.5],
+            landmark_error_iod_pct: 0.0,
+            landmark_error_iod_pct_after_landmark_chain: 0.0,
+            pixel_rmse_after_landmark_chain: 0.0,
+            pixel_rmse: 0.0,
+            seconds: 0.0,
+        };
+        // ±45 fitted as ±41: 4° toward frontal on both sides, no plain signed mean.
+        let rows = per_yaw(&[img(45.0, 41.0), img(-45.0, -41.0), img(0.0, 0.5), img(15.0, 16.0)]);
+        assert_eq!(rows.iter().map(|r| r.abs_yaw_deg).collect::<Vec<_>>(), [0, 15, 45]);
+        let r45 = &rows[2];
+        assert_eq!(r45.images, 2);
+        assert!((r45.mean_outward_yaw_error_deg + 4.0).abs() < 1e-9 && r45.mean_signed_yaw_error_deg.abs() < 1e-9);
+        assert!((r45.yaw_error_deg.median - 4.0).abs() < 1e-9 && (r45.pitch_error_deg.median - 1.0).abs() < 1e-9);
+        assert!((rows[1].mean_outward_yaw_error_deg - 1.0).abs() < 1e-9);
     }
 }
