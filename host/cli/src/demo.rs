@@ -117,6 +117,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         seed: 1,
         yaws: vec![0.0, 15.0, 30.0, 45.0],
         size: 128,
+        detector_noise: false,
         sheet: Some(out.join("synth.png")),
         output: out.join("synth"),
     })?;

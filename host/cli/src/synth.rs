@@ -28,6 +28,11 @@ pub struct SynthArgs {
     /// Image width and height in pixels.
     #[arg(long, default_value_t = 128)]
     pub size: u32,
+    /// Also write detector-like landmarks (fixed per-point offsets, per-image jitter, jaw points
+    /// sliding along the contour; about 2 px RMSE at 128 px) to DIR/detector/, for
+    /// `gpmm bench-fit DIR --landmarks-dir DIR/detector`.
+    #[arg(long)]
+    pub detector_noise: bool,
     /// Also write a contact sheet of the images to this PNG.
     #[arg(long, value_name = "PNG")]
     pub sheet: Option<PathBuf>,
@@ -49,6 +54,9 @@ pub fn synth(a: SynthArgs) -> Result<()> {
     opts.seed = a.seed;
     opts.yaws_deg = a.yaws;
     opts.size = a.size;
+    if a.detector_noise {
+        opts.detector_noise = Some(gpmm_host::eval::synth::detector::DetectorNoise::DEFAULT);
+    }
     opts.validate()?;
     let t0 = Instant::now();
     let pb = counter(opts.count * opts.yaws_deg.len(), "images");

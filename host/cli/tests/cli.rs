@@ -230,6 +230,24 @@ fn synth_command_writes_images_landmarks_and_truth() {
     let pts = std::fs::read_dir(&out).unwrap().filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "pts")).count();
     assert_eq!((pngs, pts), (4, 4));
     assert!(out.join("truth.json").is_file());
+    assert!(!out.join("detector").exists() && !std::fs::read_to_string(out.join("truth.json")).unwrap().contains("detector_noise"));
+
+    // Detector-like landmarks: the same images, plus DIR/detector/*.pts a few pixels off the truth.
+    let noisy = dir.path().join("n");
+    let args = ["synth", "--ict", ict.to_str().unwrap(), "--count", "2", "--seed", "3", "--yaws", "0,-30", "--size", "128"];
+    ok(&gpmm(&[&args[..], &["--detector-noise", "-o", noisy.to_str().unwrap()]].concat()));
+    let read_pts = |p: &std::path::Path| -> Vec<[f32; 2]> {
+        let t = std::fs::read_to_string(p).unwrap();
+        t.lines().filter_map(|l| l.split_once(' ').and_then(|(a, b)| Some([a.parse().ok()?, b.parse().ok()?]))).collect()
+    };
+    let mut sq = Vec::new();
+    for name in ["0000_yaw00.pts", "0001_yaw-30.pts"] {
+        let (truth, det) = (read_pts(&noisy.join(name)), read_pts(&noisy.join("detector").join(name)));
+        assert_eq!((truth.len(), det.len()), (68, 68), "{name}");
+        sq.extend(truth.iter().zip(&det).map(|(p, q)| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)));
+    }
+    let rmse = (sq.iter().sum::<f32>() / sq.len() as f32).sqrt();
+    assert!((0.8..4.0).contains(&rmse), "detector-like landmarks {rmse} px from the truth at 128 px");
     let o = gpmm(&["synth", "--ict", "/nonexistent/ict", "--count", "1", "-o", out.to_str().unwrap()]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("/nonexistent/ict"));
 }

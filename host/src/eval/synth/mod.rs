@@ -78,6 +78,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::{Deserialize, Serialize};
 
 mod albedo;
+pub mod detector;
 mod render;
 mod shape;
 mod world;
@@ -134,6 +135,9 @@ pub struct SynthOptions {
     pub face_fill: [f32; 2],
     /// Standard deviation of the per-pixel background noise (colours in \[0, 1\]).
     pub background_noise: f32,
+    /// Also write detector-like landmarks to `DIR/detector/` ([`detector::detector_landmarks`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detector_noise: Option<detector::DetectorNoise>,
 }
 
 impl Default for SynthOptions {
@@ -159,6 +163,7 @@ impl SynthOptions {
             fov_deg: [30.0, 40.0],
             face_fill: [0.6, 0.7],
             background_noise: 0.02,
+            detector_noise: None,
         }
     }
 
@@ -489,6 +494,13 @@ pub fn write_synth_dir(opts: &SynthOptions, out_dir: &Path, mut progress: impl F
             std::fs::write(&png, bytes).map_err(io_err(&png, "cannot write"))?;
             let pts = out_dir.join(&face.truth.landmarks_file);
             std::fs::write(&pts, pts_string(&face.truth.landmarks)).map_err(io_err(&pts, "cannot write"))?;
+            if let Some(noise) = &opts.detector_noise {
+                let dir = out_dir.join("detector");
+                std::fs::create_dir_all(&dir).map_err(io_err(&dir, "cannot create"))?;
+                let noisy = detector::detector_landmarks(&face.truth.landmarks, noise, opts.seed, id as u64, k as u64);
+                let path = dir.join(&face.truth.landmarks_file);
+                std::fs::write(&path, pts_string(&noisy)).map_err(io_err(&path, "cannot write"))?;
+            }
             images.push(face.truth);
             progress(images.len(), total);
         }
