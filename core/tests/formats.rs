@@ -2,7 +2,7 @@
 //! corruption (any single flipped bit, any truncation) is refused with an error, never a panic.
 #![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
-use gpmm_core::fit::FitSettings;
+use gpmm_core::fit::{FitSettings, ImageSettings, LandmarkSettings, StartSettings};
 use gpmm_core::format::device_mesh::{self, DeviceMeshView, DeviceScene};
 use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
 use gpmm_core::format::{fit_input, FormatError};
@@ -71,8 +71,13 @@ fn device_mesh_round_trip_and_corruption() {
 
 #[test]
 fn fit_input_carries_every_setting() {
-    let settings =
-        FitSettings { landmark_steps: 123, image_steps: 45, pixel_sigma: 0.07, nominal_distance_mm: 800.0, ..FitSettings::DEFAULT };
+    let d = FitSettings::DEFAULT;
+    let settings = FitSettings {
+        landmarks: LandmarkSettings { steps: 123, ..d.landmarks },
+        image: ImageSettings { steps: 45, pixel_sigma: 0.07, ..d.image },
+        start: StartSettings { nominal_distance_mm: 800.0 },
+        ..d
+    };
     let (w, h) = (5u32, 3u32);
     let pixels: Vec<[u8; 3]> = (0..w * h).map(|i| [i as u8, 2 * i as u8, 255 - i as u8]).collect();
     let landmarks = [[1.5f32, 2.5], [3.25, 0.5]];

@@ -128,8 +128,12 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         instructions_landmark_chain: landmark,
         instructions_light_and_start: marks.image_start.saturating_sub(marks.landmark_end),
         instructions_image_chain: image_chain,
-        instructions_per_landmark_step: if input.settings.landmark_steps > 0 { landmark / steps(input.settings.landmark_steps) } else { 0 },
-        instructions_per_image_step: if input.settings.image_steps > 0 { image_chain / steps(input.settings.image_steps) } else { 0 },
+        instructions_per_landmark_step: if input.settings.landmarks.steps > 0 {
+            landmark / steps(input.settings.landmarks.steps)
+        } else {
+            0
+        },
+        instructions_per_image_step: if input.settings.image.steps > 0 { image_chain / steps(input.settings.image.steps) } else { 0 },
         instructions_fit: t_end - t_fit,
         instructions_total: t_end - t_start,
         shape_updates: instance.shape_updates,

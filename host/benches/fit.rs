@@ -6,7 +6,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use gpmm_host::eval::synth::{synthesize, SynthOptions};
-use gpmm_host::fit::{fit_prepared, prepare, FitOptions, FitSettings};
+use gpmm_host::fit::{fit_prepared, prepare, FitOptions};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions};
@@ -44,7 +44,7 @@ fn bench(c: &mut Criterion) {
     g.bench_function("default_fit_128", |b| {
         b.iter(|| black_box(fit_prepared(&model, &prepared, &settings, &mut |_, _, _| {}).map(|o| o.pixel_rmse).unwrap_or(f32::NAN)))
     });
-    let lm_only = FitOptions { fit: FitSettings { image_steps: 0, ..settings.fit }, ..settings };
+    let lm_only = FitOptions { fit: settings.fit.with_steps(settings.fit.landmarks.steps, 0), ..settings };
     g.bench_function("landmark_chain_5000_steps", |b| {
         b.iter(|| black_box(fit_prepared(&model, &prepared, &lm_only, &mut |_, _, _| {}).map(|o| o.landmark_rmse_px).unwrap_or(f32::NAN)))
     });

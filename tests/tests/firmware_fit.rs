@@ -15,7 +15,9 @@
 //! never skip. Data from `$GPMM_DATA` (default `../shared/data`).
 
 use gpmm_core::fit::FitSettings as CoreSettings;
-use gpmm_core::fit::{Drift, DriftSettings, LightSettings, MixtureShares, ProposalSettings};
+use gpmm_core::fit::{
+    Drift, DriftSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, ProposalSettings, RankSettings, StartSettings,
+};
 use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
@@ -71,10 +73,7 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let (q, blob) = models();
     let face = &faces(1, 11)[1];
     let prep = prepared(face);
-    let settings = FitOptions {
-        fit: CoreSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..CoreSettings::DEFAULT },
-        ..FitOptions::DEFAULT
-    };
+    let settings = FitOptions { fit: CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), ..FitOptions::DEFAULT };
 
     let device = device_settings(&settings.core(), &M4F);
     let (host, host_lm) = host_fit(blob, &prep, &device, settings.seed).expect("host fit");
@@ -121,10 +120,7 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
 #[test]
 fn float_model_and_blob_fit_the_same_landmarks() {
     let (q, blob) = models();
-    let settings = FitOptions {
-        fit: CoreSettings { shape_rank: q.shape.rank(), color_rank: q.color.rank(), ..CoreSettings::DEFAULT },
-        ..FitOptions::DEFAULT
-    };
+    let settings = FitOptions { fit: CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), ..FitOptions::DEFAULT };
     let (mut worst, mut same, mut worst_quality) = (0.0f32, 0, 0.0f32);
     let faces = faces(3, 5);
     for face in &faces {
@@ -148,7 +144,7 @@ fn firmware_rejects_a_corrupted_blob() {
     let (_, blob) = models();
     let face = &faces(1, 11)[0];
     let prep = prepared(face);
-    let settings = FitOptions { fit: CoreSettings { landmark_steps: 10, image_steps: 2, ..CoreSettings::DEFAULT }, ..FitOptions::DEFAULT };
+    let settings = FitOptions { fit: CoreSettings::DEFAULT.with_steps(10, 2), ..FitOptions::DEFAULT };
     let mut part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings.core(), settings.seed).expect("fit input"));
     part[5000] ^= 0x10;
     let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-corrupt.partition");
@@ -167,17 +163,10 @@ fn firmware_fit_uses_every_setting() {
     let prep = prepared(face);
     let defaults = CoreSettings::DEFAULT;
     let settings = CoreSettings {
-        landmark_steps: 1500,
-        pose_share: 0.5,
-        contour_landmarks: 12,
-        contour_sigma_factor: 2.0,
-        image_steps: 40,
-        shape_rank: 30,
-        color_rank: 20,
-        landmark_sigma: 0.008,
-        pixel_sigma: 0.05,
-        background_floor: 0.02,
-        nominal_distance_mm: 600.0,
+        landmarks: LandmarkSettings { steps: 1500, pose_share: 0.5, contour_landmarks: 12, contour_sigma_factor: 2.0, sigma: 0.008 },
+        image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02 },
+        ranks: RankSettings { shape: 30, color: 20 },
+        start: StartSettings { nominal_distance_mm: 600.0 },
         proposals: ProposalSettings {
             landmark_pose: MixtureShares { pose: 0.9, ..defaults.proposals.landmark_pose },
             landmark_shape: MixtureShares { shape: 0.5, ..defaults.proposals.landmark_shape },
@@ -190,9 +179,9 @@ fn firmware_fit_uses_every_setting() {
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
     // Every top-level field and group differs from the default (a new field must be added here;
-    // 74 fields counting the groups' own).
+    // 78 fields counting the groups' own).
     let fields = format!("{settings:?}");
-    assert_eq!(fields.matches(": ").count(), 74, "update this test for the new settings: {fields}");
+    assert_eq!(fields.matches(": ").count(), 78, "update this test for the new settings: {fields}");
     let seed = 99;
     let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;
@@ -207,6 +196,6 @@ fn firmware_fit_uses_every_setting() {
     assert!(d <= 1e-3, "fitted landmarks differ by {d} px between host and firmware");
     assert!(rel <= 1e-5, "log-likelihood differs by {rel}");
     assert_eq!((dev.shape.len(), dev.color.len()), (30, 20), "the ranks reached the device");
-    let (default_fit, _) = host_fit(blob, &prep, &CoreSettings { shape_rank: 30, color_rank: 20, ..defaults }, seed).expect("default fit");
+    let (default_fit, _) = host_fit(blob, &prep, &defaults.with_ranks(30, 20), seed).expect("default fit");
     assert_ne!(default_fit.params().pose.yaw, host.params().pose.yaw, "the settings changed nothing");
 }

@@ -50,6 +50,9 @@ pub use params::FitParams;
 pub use prior::Prior;
 pub use proposal::{Mixture, MixtureEntry, OneOf, Proposal, ProposalContext, ProposalKind, Scale, StandardProposal, MAX_PROPOSALS};
 pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};
-pub use settings::{Drift, DriftSettings, FitSettings, LightSettings, MixtureShares, ProposalSettings};
+pub use settings::{
+    Drift, DriftSettings, FitSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, ProposalSettings, RankSettings,
+    StartSettings,
+};
 
 pub use crate::error::FitError;

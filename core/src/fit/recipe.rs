@@ -138,15 +138,15 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     settings.validate()?;
     let (w, h) = (image.width(), image.height());
     let side = w.max(h) as f32;
-    let lm = LandmarkTarget::new(landmarks, valid, settings.landmark_sigma * side)?;
-    let (shape_len, color_len) = (settings.shape_rank, settings.color_rank);
+    let lm = LandmarkTarget::new(landmarks, valid, settings.landmarks.sigma * side)?;
+    let (shape_len, color_len) = (settings.ranks.shape, settings.ranks.color);
 
     // 1. The start and the prior.
     let ambient = settings.light.start_light();
     let probe: FitParams<KS, KC> = initial_guess(model, &lm, w as f32, w, h, ambient, shape_len, color_len)?;
     let pivot = landmark_pivot(model, Some(&lm))?;
     let depth = -(probe.pose.translation[2] + pivot[2]);
-    let focal = if depth > 0.0 && depth.is_finite() { w as f32 * settings.nominal_distance_mm / depth } else { w as f32 };
+    let focal = if depth > 0.0 && depth.is_finite() { w as f32 * settings.start.nominal_distance_mm / depth } else { w as f32 };
     let init: FitParams<KS, KC> = initial_guess(model, &lm, focal, w, h, ambient, shape_len, color_len)?;
     let prior = Prior::around(&init);
 
@@ -154,10 +154,10 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let (pose_acceptance, landmark) = landmark_phases(model, lm, &prior, &init, settings, w, h, rng, observer)?;
 
     // 3. The least-squares light of its best sample (kept only if the solve succeeds).
-    let background = BackgroundModel::from_image(&image, settings.background_floor)?;
+    let background = BackgroundModel::from_image(&image, settings.image.background_floor)?;
     let ip = ImageProblem {
         image,
-        pixel: GaussianPixel::new(settings.pixel_sigma)?,
+        pixel: GaussianPixel::new(settings.image.pixel_sigma)?,
         background: &background,
         light_solve: settings.light.solve_config(settings.light.solve_stride),
     };
@@ -176,7 +176,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
-    let img_steps = settings.image_steps;
+    let img_steps = settings.image.steps;
     let phase = PhaseObserver { observer, stage: Stage::ImageChain, offset: 0, total: img_steps, steps: img_steps, report_end: true };
     let image = image_chain_with(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
     Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
@@ -201,16 +201,16 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     let n = lm.len();
     let mut factors = [1.0f32; super::MAX_LANDMARKS];
     if n == IBUG68 {
-        for f in factors.iter_mut().take(settings.contour_landmarks) {
-            *f = settings.contour_sigma_factor;
+        for f in factors.iter_mut().take(settings.landmarks.contour_landmarks) {
+            *f = settings.landmarks.contour_sigma_factor;
         }
     }
     let pose_lm = lm.with_sigma_factors(factors.get(..n).ok_or(FitError::TooManyLandmarks)?)?;
     let pose_mix = Mixture::from_shares(&settings.proposals.landmark_pose, &settings.proposals.drift, w.max(h) as f32)?;
     let pose_problem = Problem { model: *model, landmarks: pose_lm, prior, mixture: &pose_mix, width: w, height: h };
-    let total = settings.landmark_steps;
+    let total = settings.landmarks.steps;
     // The pose phase's share, rounded down (f32 → u32 saturates; the share is checked to be ≤ 1).
-    let pose_steps = ((total as f32 * settings.pose_share) as u32).min(total);
+    let pose_steps = ((total as f32 * settings.landmarks.pose_share) as u32).min(total);
     let phase =
         PhaseObserver { observer: &mut *observer, stage: Stage::LandmarkChain, offset: 0, total, steps: pose_steps, report_end: false };
     let pose = landmark_chain_with(&pose_problem, init, pose_steps, rng, phase)?;

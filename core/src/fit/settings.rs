@@ -8,16 +8,35 @@ use super::light_fit::LightSolveConfig;
 use super::FitError;
 use crate::{ShLight, Vec3};
 
-/// Settings of [`super::standard_fit`] (defaults: the documented default fit): the step counts,
-/// ranks and likelihood σ's (flat, as the fit input and the host read them), and the proposal
-/// mixtures and light solves in their groups ([`Self::proposals`], [`Self::light`]).
+/// Settings of [`super::standard_fit`] (defaults: the documented default fit), in groups: the
+/// landmark chain, the image chain, the ranks fitted, the start, the proposal mixtures and the
+/// light solves.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FitSettings {
+    /// The landmark chain and the landmark term.
+    pub landmarks: LandmarkSettings,
+    /// The image chain and the image likelihood.
+    pub image: ImageSettings,
+    /// How many components are fitted.
+    pub ranks: RankSettings,
+    /// The start of the landmark chain.
+    pub start: StartSettings,
+    /// The proposal mixtures of the landmark chain's two phases and of the image chain.
+    pub proposals: ProposalSettings,
+    /// The start light and the least-squares light solves.
+    pub light: LightSettings,
+}
+
+/// The landmark chain and the landmark term.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LandmarkSettings {
     /// Landmark-chain steps, both phases: the first [`Self::pose_share`] of them move the pose, the
     /// rest the shape.
-    pub landmark_steps: u32,
+    pub steps: u32,
     /// Fraction of the landmark steps spent on the pose phase (0 to 1; the rest fit the shape
     /// with yaw and distance held).
     pub pose_share: f32,
@@ -27,29 +46,46 @@ pub struct FitSettings {
     /// σ factor of the contour landmarks in the pose phase (their 3-D definition is view
     /// dependent, so they say less about the pose than the inner points).
     pub contour_sigma_factor: f32,
-    /// Image-chain steps (each renders the model at most once).
-    pub image_steps: u32,
-    /// Shape components fitted (the leading ones; capped by the model's rank and `KS`). All of a
-    /// default model's 200: on synthetic ICT faces (three seeds, 52 faces each) 50 components left
-    /// 3.5 % inter-ocular landmark error and compressed yaw (the template's jaw-corner landmarks sit
-    /// up to 20 mm deeper than ICT's mean face); 200 gave 2.8 % and a median yaw error of 2°, for
-    /// about 15 % more time per fit.
-    pub shape_rank: usize,
-    /// Colour components fitted (capped by the model's rank and `KC`).
-    pub color_rank: usize,
     /// Landmark σ as a fraction of the larger image side (0.005: 0.64 px at 128; 1.5 % left 5 %
     /// inter-ocular landmark error on synthetic faces).
-    pub landmark_sigma: f32,
+    pub sigma: f32,
+}
+
+/// The image chain and the image likelihood.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ImageSettings {
+    /// Image-chain steps (each renders the model at most once).
+    pub steps: u32,
     /// Foreground σ of the image likelihood on [0, 1] colours.
     pub pixel_sigma: f32,
     /// Uniform floor mixed into the background colour histogram.
     pub background_floor: f32,
+}
+
+/// How many of the model's components are fitted (the leading ones; capped by the model's rank
+/// and the coefficient capacities `KS`, `KC`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RankSettings {
+    /// Shape components. All of a default model's 200: on synthetic ICT faces (three seeds, 52
+    /// faces each) 50 components left 3.5 % inter-ocular landmark error and compressed yaw (the
+    /// template's jaw-corner landmarks sit up to 20 mm deeper than ICT's mean face); 200 gave
+    /// 2.8 % and a median yaw error of 2°, for about 15 % more time per fit.
+    pub shape: usize,
+    /// Colour components.
+    pub color: usize,
+}
+
+/// The start of the landmark chain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StartSettings {
     /// Distance of the start pose (mm); the start focal length is chosen to match it.
     pub nominal_distance_mm: f32,
-    /// The proposal mixtures of the landmark chain's two phases and of the image chain.
-    pub proposals: ProposalSettings,
-    /// The start light and the least-squares light solves.
-    pub light: LightSettings,
 }
 
 impl FitSettings {
@@ -57,31 +93,40 @@ impl FitSettings {
     /// 600 image steps, 200 shape and 50 colour components, landmark σ 0.5 % of the image side,
     /// pixel σ 0.043, background floor 0.01, start at 500 mm; the default mixtures and light.
     pub const DEFAULT: Self = Self {
-        landmark_steps: 5000,
-        pose_share: 0.4,
-        contour_landmarks: 17,
-        contour_sigma_factor: 3.0,
-        image_steps: 600,
-        shape_rank: 200,
-        color_rank: 50,
-        landmark_sigma: 0.005,
-        pixel_sigma: DEFAULT_PIXEL_SIGMA,
-        background_floor: 0.01,
-        nominal_distance_mm: 500.0,
+        landmarks: LandmarkSettings { steps: 5000, pose_share: 0.4, contour_landmarks: 17, contour_sigma_factor: 3.0, sigma: 0.005 },
+        image: ImageSettings { steps: 600, pixel_sigma: DEFAULT_PIXEL_SIGMA, background_floor: 0.01 },
+        ranks: RankSettings { shape: 200, color: 50 },
+        start: StartSettings { nominal_distance_mm: 500.0 },
         proposals: ProposalSettings::DEFAULT,
         light: LightSettings::DEFAULT,
     };
 
-    /// Checks ranges (σ and factors > 0 and finite, distance > 0, pose share in [0, 1], and the
-    /// groups' own checks); `BadConfig` otherwise.
+    /// These settings with other step counts (landmark chain, image chain).
+    pub const fn with_steps(self, landmark_steps: u32, image_steps: u32) -> Self {
+        let mut s = self;
+        s.landmarks.steps = landmark_steps;
+        s.image.steps = image_steps;
+        s
+    }
+
+    /// These settings with other ranks (shape and colour components fitted).
+    pub const fn with_ranks(self, shape: usize, color: usize) -> Self {
+        let mut s = self;
+        s.ranks = RankSettings { shape, color };
+        s
+    }
+
+    /// Checks every group (σ's and factors > 0 and finite, distance > 0, pose share in [0, 1],
+    /// mixtures and light); `BadConfig` otherwise.
     pub fn validate(&self) -> Result<(), FitError> {
         let positive = |v: f32| v > 0.0 && v.is_finite();
-        if positive(self.landmark_sigma)
-            && positive(self.pixel_sigma)
-            && positive(self.nominal_distance_mm)
-            && positive(self.contour_sigma_factor)
-            && self.background_floor >= 0.0
-            && (0.0..=1.0).contains(&self.pose_share)
+        let (l, i) = (&self.landmarks, &self.image);
+        if positive(l.sigma)
+            && positive(i.pixel_sigma)
+            && positive(self.start.nominal_distance_mm)
+            && positive(l.contour_sigma_factor)
+            && i.background_floor >= 0.0
+            && (0.0..=1.0).contains(&l.pose_share)
         {
             self.proposals.validate()?;
             self.light.validate()
@@ -355,13 +400,14 @@ mod tests {
         assert_eq!(FitSettings::DEFAULT.validate(), Ok(()));
         let d = FitSettings::DEFAULT;
         let bad = [
-            FitSettings { pose_share: 1.5, ..d },
-            FitSettings { pose_share: -0.1, ..d },
-            FitSettings { pose_share: f32::NAN, ..d },
-            FitSettings { contour_sigma_factor: 0.0, ..d },
-            FitSettings { contour_sigma_factor: f32::INFINITY, ..d },
-            FitSettings { landmark_sigma: -1.0, ..d },
-            FitSettings { background_floor: -0.5, ..d },
+            FitSettings { landmarks: LandmarkSettings { pose_share: 1.5, ..d.landmarks }, ..d },
+            FitSettings { landmarks: LandmarkSettings { pose_share: -0.1, ..d.landmarks }, ..d },
+            FitSettings { landmarks: LandmarkSettings { pose_share: f32::NAN, ..d.landmarks }, ..d },
+            FitSettings { landmarks: LandmarkSettings { contour_sigma_factor: 0.0, ..d.landmarks }, ..d },
+            FitSettings { landmarks: LandmarkSettings { contour_sigma_factor: f32::INFINITY, ..d.landmarks }, ..d },
+            FitSettings { landmarks: LandmarkSettings { sigma: -1.0, ..d.landmarks }, ..d },
+            FitSettings { image: ImageSettings { background_floor: -0.5, ..d.image }, ..d },
+            FitSettings { start: StartSettings { nominal_distance_mm: 0.0 }, ..d },
             FitSettings { light: LightSettings { solve_stride: 0, ..d.light }, ..d },
             FitSettings { light: LightSettings { lambda: f32::NAN, ..d.light }, ..d },
             FitSettings { proposals: ProposalSettings { image: MixtureShares::NONE, ..d.proposals }, ..d },
@@ -381,8 +427,8 @@ mod tests {
             assert_eq!(s.validate(), Err(FitError::BadConfig), "{s:?}");
         }
         // The extremes of the pose share are allowed: all pose or all shape.
-        assert_eq!(FitSettings { pose_share: 0.0, ..d }.validate(), Ok(()));
-        assert_eq!(FitSettings { pose_share: 1.0, ..d }.validate(), Ok(()));
+        assert_eq!(FitSettings { landmarks: LandmarkSettings { pose_share: 0.0, ..d.landmarks }, ..d }.validate(), Ok(()));
+        assert_eq!(FitSettings { landmarks: LandmarkSettings { pose_share: 1.0, ..d.landmarks }, ..d }.validate(), Ok(()));
     }
 
     #[test]

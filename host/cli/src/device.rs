@@ -29,10 +29,10 @@ pub struct DeviceFitArgs {
     #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
     /// Landmark-chain steps.
-    #[arg(long, default_value_t = FitSettings::DEFAULT.landmark_steps, value_name = "N")]
+    #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N")]
     pub landmark_steps: u32,
     /// Image-chain steps.
-    #[arg(long, default_value_t = FitSettings::DEFAULT.image_steps, value_name = "N")]
+    #[arg(long, default_value_t = FitSettings::DEFAULT.image.steps, value_name = "N")]
     pub image_steps: u32,
     /// Also run the same fit on the host (the core on the same blob) and report the differences.
     #[arg(long)]
@@ -166,13 +166,7 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     let settings = FitOptions {
         size,
         seed: a.seed,
-        fit: FitSettings {
-            landmark_steps: a.landmark_steps,
-            image_steps: a.image_steps,
-            shape_rank: view.rank_shape(),
-            color_rank: view.rank_color(),
-            ..FitSettings::DEFAULT
-        },
+        fit: FitSettings::DEFAULT.with_steps(a.landmark_steps, a.image_steps).with_ranks(view.rank_shape(), view.rank_color()),
     };
     settings.validate()?;
     let device = device_settings(&settings.core(), &profile);

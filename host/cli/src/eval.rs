@@ -117,7 +117,7 @@ pub struct RecognitionArgs {
     #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted.
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.color_rank, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K")]
     pub color_rank: usize,
     /// Seed of the fitting chains.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
@@ -236,17 +236,16 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     let settings = gpmm_host::fit::FitOptions {
         size: a.size,
         seed: a.fit_seed,
-        fit: gpmm_host::fit::FitSettings {
-            landmark_steps: a.landmark_steps.unwrap_or(if q { 1500 } else { defaults.landmark_steps }),
-            image_steps: a.image_steps.unwrap_or(if q { 40 } else { defaults.image_steps }),
-            shape_rank: a.shape_rank,
-            color_rank: a.color_rank,
-            ..defaults
-        },
+        fit: defaults
+            .with_steps(
+                a.landmark_steps.unwrap_or(if q { 1500 } else { defaults.landmarks.steps }),
+                a.image_steps.unwrap_or(if q { 40 } else { defaults.image.steps }),
+            )
+            .with_ranks(a.shape_rank, a.color_rank),
     };
     settings.validate()?;
     let kde_settings = gpmm_host::fit::FitOptions {
-        fit: gpmm_host::fit::FitSettings { image_steps: a.kde_image_steps.unwrap_or(settings.fit.image_steps), ..settings.fit },
+        fit: settings.fit.with_steps(settings.fit.landmarks.steps, a.kde_image_steps.unwrap_or(settings.fit.image.steps)),
         ..settings
     };
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);

@@ -2,6 +2,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
+use gpmm_core::fit::LandmarkSettings;
 use gpmm_host::fit::FitJob;
 use gpmm_host::gp::model_io;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -39,27 +40,27 @@ pub struct FitSettingsArgs {
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.size, value_parser = clap::value_parser!(u32).range(16..=1024))]
     pub size: u32,
     /// Landmark-chain steps: 40 % on the pose, then the shape (no rendering; about 20 us each).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmark_steps, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps, value_name = "N")]
     pub landmark_steps: u32,
     /// Image-chain steps (one render each).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.image_steps, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.image.steps, value_name = "N")]
     pub image_steps: u32,
     /// Seed of the chains.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
     pub seed: u64,
     /// Shape components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.shape_rank, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.shape, value_name = "K")]
     pub shape_rank: usize,
     /// Colour components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.color_rank, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K")]
     pub color_rank: usize,
     /// Landmark standard deviation as a fraction of the working image side.
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmark_sigma, value_name = "FRACTION")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.sigma, value_name = "FRACTION")]
     pub landmark_sigma: f32,
     /// Factor on the landmark σ of the 17 jaw-contour points (iBUG-68) while the landmark chain
     /// fits the pose: where a detector puts them depends on the view, so they say less about the
     /// pose than the inner points (1 treats them like the others).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.contour_sigma_factor, value_name = "FACTOR")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.contour_sigma_factor, value_name = "FACTOR")]
     pub contour_sigma: f32,
 }
 
@@ -69,14 +70,12 @@ impl FitSettingsArgs {
         gpmm_host::fit::FitOptions {
             size: self.size,
             seed: self.seed,
-            fit: gpmm_host::fit::FitSettings {
-                landmark_steps: self.landmark_steps,
-                image_steps: self.image_steps,
-                shape_rank: self.shape_rank,
-                color_rank: self.color_rank,
-                landmark_sigma: self.landmark_sigma,
-                contour_sigma_factor: self.contour_sigma,
-                ..gpmm_host::fit::FitSettings::DEFAULT
+            fit: {
+                let d = gpmm_host::fit::FitSettings::DEFAULT
+                    .with_steps(self.landmark_steps, self.image_steps)
+                    .with_ranks(self.shape_rank, self.color_rank);
+                let landmarks = LandmarkSettings { sigma: self.landmark_sigma, contour_sigma_factor: self.contour_sigma, ..d.landmarks };
+                gpmm_host::fit::FitSettings { landmarks, ..d }
             },
         }
     }
@@ -123,11 +122,11 @@ pub fn fit(a: FitArgs) -> Result<()> {
 
 /// Fits one photo with a progress bar and prints a summary (`gpmm fit`, the demo).
 pub fn run_fit(job: &FitJob) -> Result<()> {
-    let bar = ProgressBar::new(u64::from(job.settings.fit.landmark_steps) + u64::from(job.settings.fit.image_steps));
+    let bar = ProgressBar::new(u64::from(job.settings.fit.landmarks.steps) + u64::from(job.settings.fit.image.steps));
     bar.set_style(
         ProgressStyle::with_template("{bar:30} {pos}/{len} steps ({msg}) [{elapsed}]").unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let lm_total = u64::from(job.settings.fit.landmark_steps);
+    let lm_total = u64::from(job.settings.fit.landmarks.steps);
     let t0 = Instant::now();
     let rep = gpmm_host::fit::fit_files(job, &mut |phase, done, _| {
         bar.set_message(phase.to_string());

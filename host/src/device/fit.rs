@@ -10,7 +10,9 @@
 
 use crate::device::quantize::BlobBuf;
 use crate::fit::Prepared;
-use gpmm_core::fit::{project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, StandardFit, TargetImage};
+use gpmm_core::fit::{
+    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, RankSettings, StandardFit, TargetImage,
+};
 use gpmm_core::format::{fit_input, fit_record, FormatError};
 use gpmm_core::profile::{DeviceProfile, M4F};
 use gpmm_core::ProjectedVertex;
@@ -77,11 +79,11 @@ pub enum DeviceFitError {
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
 /// of both the device and the host's run of it.
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
-    FitSettings {
-        shape_rank: settings.shape_rank.min(profile.shape_capacity).min(DEVICE_KS),
-        color_rank: settings.color_rank.min(profile.color_capacity).min(DEVICE_KC),
-        ..*settings
-    }
+    let ranks = RankSettings {
+        shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),
+        color: settings.ranks.color.min(profile.color_capacity).min(DEVICE_KC),
+    };
+    FitSettings { ranks, ..*settings }
 }
 
 /// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and

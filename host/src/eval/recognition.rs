@@ -442,15 +442,15 @@ fit: {} landmark + {} image steps at {}x{} px, {} shape + {} colour components",
         report.gallery,
         pct(report.chance),
         report.synth_seed,
-        report.settings.fit.landmark_steps,
-        report.settings.fit.image_steps,
+        report.settings.fit.landmarks.steps,
+        report.settings.fit.image.steps,
         report.settings.size,
         report.settings.size,
-        report.settings.fit.shape_rank,
-        report.settings.fit.color_rank
+        report.settings.fit.ranks.shape,
+        report.settings.fit.ranks.color
     ));
     if let Some(k) = &report.kde_settings {
-        s.push_str(&format!(" (KDE components: {} image steps)", k.fit.image_steps));
+        s.push_str(&format!(" (KDE components: {} image steps)", k.fit.image.steps));
     }
     s.push_str(".\n\n| model |");
     for y in &yaws {

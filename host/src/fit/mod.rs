@@ -23,7 +23,9 @@ use crate::gp::model::GpModel;
 use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, HostRasterizer, ImageSink};
-use gpmm_core::fit::{standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, TargetImage, MAX_LANDMARKS};
+use gpmm_core::fit::{
+    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, TargetImage, MAX_LANDMARKS,
+};
 use gpmm_core::{Cull, ProjectedVertex};
 use image::{RgbImage, Rgba, RgbaImage};
 use rand::SeedableRng;
@@ -89,20 +91,20 @@ impl FitOptions {
 
     /// The core's settings for this fit (ranks capped at [`KS`] / [`KC`]).
     pub fn core(&self) -> FitSettings {
-        FitSettings { shape_rank: self.fit.shape_rank.min(KS), color_rank: self.fit.color_rank.min(KC), ..self.fit }
+        FitSettings { ranks: RankSettings { shape: self.fit.ranks.shape.min(KS), color: self.fit.ranks.color.min(KC) }, ..self.fit }
     }
 
     /// Checks the ranges (the host's limits, then the core's own check).
     pub fn validate(&self) -> Result<(), FitRunError> {
         let f = &self.fit;
-        if !(f.contour_sigma_factor > 0.0 && f.contour_sigma_factor <= 100.0) {
+        if !(f.landmarks.contour_sigma_factor > 0.0 && f.landmarks.contour_sigma_factor <= 100.0) {
             return Err(FitRunError::Settings(format!(
                 "contour sigma factor {} is invalid: it must be in (0, 100]",
-                f.contour_sigma_factor
+                f.landmarks.contour_sigma_factor
             )));
         }
-        if !(f.landmark_sigma > 0.0 && f.landmark_sigma <= 0.5) {
-            return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", f.landmark_sigma)));
+        if !(f.landmarks.sigma > 0.0 && f.landmarks.sigma <= 0.5) {
+            return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", f.landmarks.sigma)));
         }
         if !(16..=1024).contains(&self.size) {
             return Err(FitRunError::Settings(format!("working size {} is invalid: it must be 16 to 1024 pixels", self.size)));
@@ -438,8 +440,8 @@ pub fn report(
     let timing = seconds.map(|_| Timing {
         landmark_chain_seconds: o.landmark_seconds,
         image_chain_seconds: o.image_seconds,
-        landmark_step_us: o.landmark_seconds * 1e6 / f64::from(settings.fit.landmark_steps.max(1)),
-        image_step_ms: o.image_seconds * 1e3 / f64::from(settings.fit.image_steps.max(1)),
+        landmark_step_us: o.landmark_seconds * 1e6 / f64::from(settings.fit.landmarks.steps.max(1)),
+        image_step_ms: o.image_seconds * 1e3 / f64::from(settings.fit.image.steps.max(1)),
     });
     FitReport {
         format: "gpmm-fit".into(),
@@ -456,8 +458,8 @@ pub fn report(
         crop: prepared.crop,
         working_size: size,
         seed: settings.seed,
-        landmark_steps: settings.fit.landmark_steps,
-        image_steps: settings.fit.image_steps,
+        landmark_steps: settings.fit.landmarks.steps,
+        image_steps: settings.fit.image.steps,
         yaw_deg: p.pose.yaw.to_degrees(),
         pitch_deg: p.pose.pitch.to_degrees(),
         roll_deg: p.pose.roll.to_degrees(),
