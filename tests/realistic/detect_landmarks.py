@@ -1,0 +1,94 @@
+#!/usr/bin/env python3
+"""Landmarks from a real detector (MediaPipe face mesh, 468 points) as iBUG-68 `.pts` files.
+
+MediaPipe's points are not iBUG's, so a 468 -> 68 correspondence is needed. It is learned, not
+hand-written: on a *calibration* set (made with another seed than any set it is used on), each
+iBUG point takes the MediaPipe point closest to it on average over the frontal images. Then:
+
+    python detect_landmarks.py calibrate CALIB_DIR -o mapping.json
+    python detect_landmarks.py detect SET_DIR --mapping mapping.json -o SET_DIR/detector
+
+`detect` writes NAME.pts (iBUG-68, 0-based pixel coordinates, centres at +0.5) for every image
+of SET_DIR/truth.json where a face is found, and prints the RMSE to the exact landmarks and the
+images with no detection (they are left out: gpmm bench-fit reports them as failed fits).
+"""
+import argparse, json, os, sys
+import numpy as np
+from PIL import Image
+
+UPSCALE = 4  # MediaPipe wants faces larger than 128 px
+
+
+def mesh_points(path):
+    import mediapipe as mp
+    img = Image.open(path).convert("RGB")
+    w, h = img.size
+    big = np.asarray(img.resize((w * UPSCALE, h * UPSCALE), Image.BICUBIC))
+    with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=False) as fm:
+        r = fm.process(big)
+    if not r.multi_face_landmarks:
+        return None
+    # Normalized [0, 1] image coordinates -> 0-based continuous pixels of the original image.
+    return np.array([[p.x * w, p.y * h] for p in r.multi_face_landmarks[0].landmark])
+
+
+def read_pts(path):
+    lines = open(path).read().split("{")[1].split("}")[0].split()
+    return np.array(lines, dtype=np.float64).reshape(-1, 2)
+
+
+def write_pts(path, pts):
+    with open(path, "w") as f:
+        f.write(f"version: 1\nn_points:  {len(pts)}\n{{\n")
+        for x, y in pts:
+            f.write(f"{x:.3f} {y:.3f}\n")
+        f.write("}\n")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    c = sub.add_parser("calibrate")
+    c.add_argument("dir")
+    c.add_argument("-o", "--output", required=True)
+    d = sub.add_parser("detect")
+    d.add_argument("dir")
+    d.add_argument("--mapping", required=True)
+    d.add_argument("-o", "--output", required=True)
+    a = ap.parse_args()
+    truth = json.load(open(os.path.join(a.dir, "truth.json")))
+    if a.cmd == "calibrate":
+        acc, n = np.zeros((68, 468)), 0
+        for im in truth["images"]:
+            if abs(im["yaw_deg"]) > 1:
+                continue
+            mp_pts = mesh_points(os.path.join(a.dir, im["image"]))
+            if mp_pts is None:
+                continue
+            exact = np.array(im["landmarks"])
+            acc += np.linalg.norm(exact[:, None, :] - mp_pts[None, :, :], axis=2)
+            n += 1
+        if n == 0:
+            sys.exit("no frontal image with a detection in the calibration set")
+        mapping = acc.argmin(axis=1).tolist()
+        json.dump({"detector": "mediapipe face_mesh 468", "frontal_images": n, "ibug68_from_mediapipe": mapping}, open(a.output, "w"), indent=1)
+        print(f"mapping from {n} frontal images written to {a.output}", file=sys.stderr)
+        return
+    mapping = json.load(open(a.mapping))["ibug68_from_mediapipe"]
+    os.makedirs(a.output, exist_ok=True)
+    sq, missed = [], []
+    for im in truth["images"]:
+        mp_pts = mesh_points(os.path.join(a.dir, im["image"]))
+        if mp_pts is None:
+            missed.append(im["image"])
+            continue
+        pts = mp_pts[mapping]
+        write_pts(os.path.join(a.output, im["landmarks_file"]), pts)
+        sq.extend(((pts - np.array(im["landmarks"])) ** 2).sum(axis=1))
+    rmse = float(np.sqrt(np.mean(sq))) if sq else float("nan")
+    print(json.dumps({"images": len(truth["images"]), "detected": len(truth["images"]) - len(missed), "missed": missed,
+                      "rmse_px_to_exact": rmse}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
