@@ -136,6 +136,15 @@ impl FitSettings {
     }
 }
 
+/// `Ok` when a group's checks hold, else [`FitError::BadConfig`].
+fn config_ok(ok: bool) -> Result<(), FitError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(FitError::BadConfig)
+    }
+}
+
 impl Default for FitSettings {
     fn default() -> Self {
         Self::DEFAULT
@@ -160,11 +169,7 @@ impl Drift {
             && self.weights.iter().all(|w| *w >= 0.0 && w.is_finite())
             && sum > 0.0
             && sum.is_finite();
-        if ok {
-            Ok(())
-        } else {
-            Err(FitError::BadConfig)
-        }
+        config_ok(ok)
     }
 }
 
@@ -215,14 +220,11 @@ impl DriftSettings {
             d.validate()?;
         }
         let positive = |v: f32| v > 0.0 && v.is_finite();
-        if positive(self.light_intensity_sigma)
-            && positive(self.light_solve_sigma)
-            && self.pose_fractions.iter().all(|f| *f >= 0.0 && f.is_finite())
-        {
-            Ok(())
-        } else {
-            Err(FitError::BadConfig)
-        }
+        config_ok(
+            positive(self.light_intensity_sigma)
+                && positive(self.light_solve_sigma)
+                && self.pose_fractions.iter().all(|f| *f >= 0.0 && f.is_finite()),
+        )
     }
 }
 
@@ -290,11 +292,7 @@ impl MixtureShares {
 
     fn validate(&self) -> Result<(), FitError> {
         let shares = [self.pose, self.shape, self.color, self.light, self.light_intensity, self.light_solve];
-        if shares.iter().all(|s| *s >= 0.0 && s.is_finite()) && shares.iter().any(|s| *s > 0.0) {
-            Ok(())
-        } else {
-            Err(FitError::BadConfig)
-        }
+        config_ok(shares.iter().all(|s| *s >= 0.0 && s.is_finite()) && shares.iter().any(|s| *s > 0.0))
     }
 }
 
@@ -360,18 +358,15 @@ impl LightSettings {
     /// Checks strides ≥ 1, a finite cosine, a finite ridge ≥ 0 and finite ambient colours.
     pub fn validate(&self) -> Result<(), FitError> {
         let finite3 = |v: &Vec3| v.iter().all(|c| c.is_finite());
-        if self.start_stride >= 1
-            && self.solve_stride >= 1
-            && self.min_cos.is_finite()
-            && self.lambda >= 0.0
-            && self.lambda.is_finite()
-            && finite3(&self.start_ambient)
-            && finite3(&self.ridge_ambient)
-        {
-            Ok(())
-        } else {
-            Err(FitError::BadConfig)
-        }
+        config_ok(
+            self.start_stride >= 1
+                && self.solve_stride >= 1
+                && self.min_cos.is_finite()
+                && self.lambda >= 0.0
+                && self.lambda.is_finite()
+                && finite3(&self.start_ambient)
+                && finite3(&self.ridge_ambient),
+        )
     }
 
     /// The start light: ambient [`Self::start_ambient`].
