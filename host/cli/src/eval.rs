@@ -87,6 +87,10 @@ pub struct RecognitionArgs {
     /// A `gpmm synth` directory rendered with yaw 0 among its yaws (e.g. --yaws 0,15,30,45).
     #[arg(long, value_name = "DIR")]
     pub synth: PathBuf,
+    /// Fit with the landmark files of DIR (same names as the set's `.pts`, e.g. a detector's)
+    /// instead of the exact ones; the identities and yaws stay the set's.
+    #[arg(long, value_name = "DIR")]
+    pub landmarks_dir: Option<PathBuf>,
     /// Models.
     #[command(flatten)]
     pub models: EvalModelArgs,
@@ -215,7 +219,7 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     if !a.synth.is_dir() {
         bail!("synth directory {} not found (make one with `gpmm synth --count 50 --seed 1 -o DIR`)", a.synth.display());
     }
-    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?;
+    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?.with_landmarks_dir(a.landmarks_dir.clone());
     let mut sel = eval_selection(&a.models)?;
     sel.kde = a.kde.map(|n| n as usize);
     if a.all {

@@ -115,6 +115,22 @@ fn recognition_quick_writes_a_consistent_table_and_reuses_its_fits() {
         rows.iter().map(|r| r[..8].to_vec()).collect::<Vec<_>>()
     );
     assert_eq!(again.matches(", cached").count(), 4, "{again}");
+
+    // The same landmarks read from another directory: fitted anew (the cache knows where the
+    // landmarks came from), and the same table.
+    let lm_dir = f.dir.path().join("copied-landmarks");
+    std::fs::create_dir_all(&lm_dir).unwrap();
+    for e in std::fs::read_dir(&f.synth).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "pts") {
+            std::fs::copy(&p, lm_dir.join(p.file_name().unwrap())).unwrap();
+        }
+    }
+    let tiny = ["eval", "recognition", "--synth", s(&f.synth), "--quick", "--data", s(&f.data), "--model", s(&f.model)];
+    let with_dir = ok(&gpmm(&[&tiny[..], &["--image-steps", "20", "--landmarks-dir", s(&lm_dir), "-o", s(&out)]].concat()));
+    assert_eq!(with_dir.matches(", cached").count(), 0, "{with_dir}");
+    let tiny_row = |rows: &[Vec<String>]| rows.iter().find(|r| r[0] == "tiny").map(|r| r[..8].to_vec());
+    assert_eq!(tiny_row(&csv_rows(&out.join("recognition.csv"))), tiny_row(&rows));
 }
 
 #[test]

@@ -184,6 +184,9 @@ pub struct SynthSet {
     pub identities: Vec<usize>,
     /// The world options used to render them.
     pub options: crate::eval::synth::SynthOptions,
+    /// Where the landmarks are read from: `None` for the set's exact `.pts`, else a directory
+    /// with files of the same names (e.g. a detector's).
+    pub landmarks_dir: Option<PathBuf>,
 }
 
 impl SynthSet {
@@ -211,7 +214,13 @@ impl SynthSet {
             images,
             identities,
             options: truth.options,
+            landmarks_dir: None,
         })
+    }
+
+    /// The same set, fitted with the landmark files of `dir` instead of the exact ones.
+    pub fn with_landmarks_dir(self, dir: Option<PathBuf>) -> Self {
+        Self { landmarks_dir: dir, ..self }
     }
 
     /// The probe yaws (all but 0, ascending).
@@ -223,10 +232,10 @@ impl SynthSet {
     }
 }
 
-fn fit_one(model: &crate::gp::model::GpModel, dir: &Path, t: &ImageTruth, settings: &FitOptions) -> Result<ImageFit, String> {
+fn fit_one(model: &crate::gp::model::GpModel, set: &SynthSet, t: &ImageTruth, settings: &FitOptions) -> Result<ImageFit, String> {
     let t0 = Instant::now();
-    let prepared = load_photo(model, &dir.join(&t.image), &dir.join(&t.landmarks_file), false, settings.size)
-        .map_err(|e| format!("{}: {e}", t.image))?;
+    let pts = set.landmarks_dir.as_deref().unwrap_or(&set.dir).join(&t.landmarks_file);
+    let prepared = load_photo(model, &set.dir.join(&t.image), &pts, false, settings.size).map_err(|e| format!("{}: {e}", t.image))?;
     let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", t.image))?;
     Ok(ImageFit {
         image: t.image.clone(),
@@ -258,6 +267,10 @@ pub fn fit_set(
         "truth_sha256": set.truth_sha256,
         "images": set.images.iter().map(|t| t.image.as_str()).collect::<Vec<_>>(),
     });
+    let mut key = key;
+    if let Some(d) = &set.landmarks_dir {
+        key["landmarks_dir"] = serde_json::Value::String(d.display().to_string());
+    }
     if let Ok(text) = std::fs::read_to_string(cache) {
         if let Ok(cached) = serde_json::from_str::<FitSet>(&text) {
             if cached.key == key {
@@ -286,7 +299,7 @@ pub fn fit_set(
         set.images
             .par_iter()
             .map(|t| {
-                let r = fit_one(&model, &set.dir, t, settings);
+                let r = fit_one(&model, set, t, settings);
                 progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
                 r
             })
