@@ -125,7 +125,7 @@ fn a_user_pixel_likelihood_and_user_proposals_run_in_the_image_chain() {
     let lm = target(&points, &valid);
     let prior = Prior::around(&truth);
     let mix = mixture();
-    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mix, width: W, height: H };
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mix, width: W, height: H, silhouette: None };
     let image = TargetImage::new(&pixels, W, H).unwrap();
     let calls = Cell::new(0u64);
     let laplace = CountingLaplace { scale: 0.05, calls: &calls };
@@ -189,7 +189,8 @@ fn user_proposals_run_in_the_landmark_chain() {
     let mut mix = Mixture::new();
     mix.push(Custom::Never, 1.0).unwrap();
     mix.push(Custom::Stay, 3.0).unwrap();
-    let problem = Problem { model, landmarks: target(&points, &valid), prior: &prior, mixture: &mix, width: W, height: H };
+    let problem =
+        Problem { model, landmarks: target(&points, &valid), prior: &prior, mixture: &mix, width: W, height: H, silhouette: None };
     let mut obs = ByName::default();
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
     let fit = landmark_chain_with(&problem, &truth, 200, &mut rng, &mut obs).unwrap();

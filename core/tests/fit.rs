@@ -40,7 +40,7 @@ fn start_pose_and_landmark_chain_recover_the_pose() {
     assert!((init.pose.roll.to_degrees() - 4.0).abs() < 3.0);
     let prior = Prior::around(&init);
     let mixture = Mixture::landmark_default(W as f32);
-    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H };
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
     let steps = 4000;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(42);
     let t0 = Instant::now();
@@ -94,7 +94,7 @@ fn image_likelihood_is_highest_at_the_truth() {
     let truth = truth();
     let prior = Prior::around(&truth);
     let mixture = Mixture::image_default(W as f32);
-    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H };
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
     let image = TargetImage::new(&scene.pixels, W, H).unwrap();
     let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
     let ip = ImageProblem {
@@ -191,7 +191,7 @@ fn run_both(
     let init = init_for(&model, &lm);
     let prior = Prior::around(&init);
     let lm_mix = Mixture::landmark_default(W as f32);
-    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H };
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H, silhouette: None };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let t0 = Instant::now();
     let lm_fit = landmark_chain(&problem, &init, lm_steps, &mut rng).unwrap();
@@ -297,7 +297,7 @@ fn bad_input_is_an_error_not_a_panic() {
     let prior = Prior::around(&init);
     let mixture = Mixture::landmark_default(W as f32);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
-    let problem = Problem { model, landmarks: lm_short, prior: &prior, mixture: &mixture, width: W, height: H };
+    let problem = Problem { model, landmarks: lm_short, prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
     assert_eq!(landmark_chain(&problem, &init, 10, &mut rng).err(), Some(FitError::LengthMismatch));
     assert_eq!(
         initial_guess::<u32, KS, KC>(&model, &lm_short, 300.0, W, H, ShLight::frontal(), KS, KC).err(),
@@ -382,7 +382,7 @@ fn timing_breakdown_of_an_image_evaluation() {
     let truth = truth();
     let prior = Prior::around(&truth);
     let mixture = Mixture::image_default(W as f32);
-    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H };
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
     let image = TargetImage::new(&scene.pixels, W, H).unwrap();
     let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
     let ip = ImageProblem {

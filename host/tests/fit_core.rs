@@ -96,7 +96,7 @@ fn fits_a_rendered_face_with_known_pose() {
     let init: FitParams<KS, KC> = initial_guess(&model, &lm, 360.0, W, H, ShLight::ambient([0.8; 3]), KS, KC).unwrap();
     let prior = Prior::around(&init);
     let lm_mix = Mixture::landmark_default(W as f32);
-    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H };
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H, silhouette: None };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
     let lm_steps = 5000;
     let t0 = Instant::now();

@@ -163,7 +163,15 @@ fn firmware_fit_uses_every_setting() {
     let prep = prepared(face);
     let defaults = CoreSettings::DEFAULT;
     let settings = CoreSettings {
-        landmarks: LandmarkSettings { steps: 1500, pose_share: 0.5, contour_landmarks: 12, contour_sigma_factor: 2.0, sigma: 0.008 },
+        landmarks: LandmarkSettings {
+            steps: 1500,
+            pose_share: 0.5,
+            contour_landmarks: 12,
+            contour_sigma_factor: 2.0,
+            sigma: 0.008,
+            student_t: 5.0,
+            silhouette: true,
+        },
         image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02 },
         ranks: RankSettings { shape: 30, color: 20 },
         start: StartSettings { nominal_distance_mm: 600.0 },

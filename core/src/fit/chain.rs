@@ -17,6 +17,7 @@
 //! (highest log posterior seen) and the last sample are returned. Everything is a deterministic
 //! function of the inputs and the generator's state.
 
+use super::contour::{Silhouette, MAX_CONTOUR, NO_VERTEX};
 use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::landmark_pivot;
 use super::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
@@ -48,6 +49,9 @@ pub struct Problem<'a, I: TriIndex = u32, P = StandardProposal> {
     pub width: u32,
     /// Working image height.
     pub height: u32,
+    /// The jaw contour as a silhouette (its landmarks' outward directions must be the target's):
+    /// `None` keeps every landmark on its fixed vertex.
+    pub silhouette: Option<&'a Silhouette<'a>>,
 }
 
 /// What the image chain needs on top of a [`Problem`]: the target and the likelihood's terms.
@@ -91,6 +95,7 @@ pub struct ChainState<const KS: usize, const KC: usize> {
     /// The parameters.
     pub params: FitParams<KS, KC>,
     lm: [Vec3; MAX_LANDMARKS],
+    contour: [u32; MAX_CONTOUR],
     /// Log prior.
     pub prior: f32,
     /// The landmark term.
@@ -104,9 +109,11 @@ impl<const KS: usize, const KC: usize> ChainState<KS, KC> {
     pub fn new<I: TriIndex, P>(problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<Self, FitError> {
         let mut lm = [[0.0f32; 3]; MAX_LANDMARKS];
         let n = problem.model.landmark_positions(params.shape_coeffs(), &mut lm)?;
+        let mut contour = [NO_VERTEX; MAX_CONTOUR];
+        silhouette_positions(problem, params, &mut lm, &mut contour, true, true)?;
         let cam = params.camera(problem.width, problem.height);
         let landmarks = evaluate_landmarks(lm.get(..n).unwrap_or(&[]), &params.pose, &cam, &problem.landmarks)?;
-        Ok(Self { params: params.clone(), lm, prior: problem.prior.log_density(params), landmarks, image: None })
+        Ok(Self { params: params.clone(), lm, contour, prior: problem.prior.log_density(params), landmarks, image: None })
     }
 
     /// The first stage's log density: prior plus landmarks.
@@ -119,10 +126,46 @@ impl<const KS: usize, const KC: usize> ChainState<KS, KC> {
         self.filter_term() + self.image.map_or(0.0, |e| e.log_likelihood)
     }
 
-    /// The model's landmark vertices (model space) of this state's shape.
+    /// The model's landmark vertices (model space) of this state's shape (the contour's on the
+    /// silhouette, if the problem has one).
     pub fn landmark_vertices(&self) -> &[Vec3] {
         &self.lm
     }
+
+    /// The silhouette vertex of each contour landmark ([`NO_VERTEX`]: its fixed vertex).
+    pub fn contour_vertices(&self) -> &[u32; MAX_CONTOUR] {
+        &self.contour
+    }
+}
+
+/// With a silhouette: selects the contour landmarks' outline vertices for `params`' pose (when
+/// `reselect`) and puts their positions under `params`' shape into `lm` (those whose vertex
+/// changed, or all after a shape change).
+fn silhouette_positions<I: TriIndex, P, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    params: &FitParams<KS, KC>,
+    lm: &mut [Vec3; MAX_LANDMARKS],
+    ids: &mut [u32; MAX_CONTOUR],
+    reselect: bool,
+    shape_changed: bool,
+) -> Result<(), FitError> {
+    let Some(sil) = problem.silhouette else {
+        return Ok(());
+    };
+    let mut next = *ids;
+    if reselect {
+        let cam = params.camera(problem.width, problem.height);
+        sil.select(&params.pose, &cam, &problem.landmarks, &mut next);
+    }
+    let fixed = problem.model.landmarks();
+    for (i, (&id, old)) in next.iter().zip(ids.iter()).enumerate().take(sil.count()) {
+        if id != *old || shape_changed {
+            let v = if id == NO_VERTEX { *fixed.get(i).ok_or(FitError::IndexOutOfRange)? } else { id };
+            *lm.get_mut(i).ok_or(FitError::LengthMismatch)? = problem.model.vertex_position(params.shape_coeffs(), v)?;
+        }
+    }
+    *ids = next;
+    Ok(())
 }
 
 fn check<I: TriIndex, P, const KS: usize, const KC: usize>(problem: &Problem<'_, I, P>, init: &FitParams<KS, KC>) -> Result<(), FitError> {
@@ -161,9 +204,13 @@ pub fn filter_stage<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const
     if prior == f32::NEG_INFINITY {
         return Ok(None);
     }
-    let mut next = ChainState { params: prop.clone(), lm: cur.lm, prior, landmarks: cur.landmarks, image: cur.image };
+    let mut next = ChainState { params: prop.clone(), lm: cur.lm, contour: cur.contour, prior, landmarks: cur.landmarks, image: cur.image };
     if proposal.changes_shape() {
         problem.model.landmark_positions(prop.shape_coeffs(), &mut next.lm)?;
+    }
+    if problem.silhouette.is_some() && proposal.changes_geometry() {
+        let moved = prop.pose != cur.params.pose || prop.focal != cur.params.focal;
+        silhouette_positions(problem, prop, &mut next.lm, &mut next.contour, moved, proposal.changes_shape())?;
     }
     if proposal.changes_geometry() {
         let n = problem.model.landmarks().len();

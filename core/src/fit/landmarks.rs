@@ -13,6 +13,8 @@ pub struct LandmarkTarget<'a> {
     valid: &'a [bool],
     sigma: f32,
     factors: &'a [f32],
+    outward: &'a [[f32; 2]],
+    nu: f32,
 }
 
 impl<'a> LandmarkTarget<'a> {
@@ -34,7 +36,7 @@ impl<'a> LandmarkTarget<'a> {
         if !valid.iter().any(|&v| v) {
             return Err(FitError::NoValidLandmarks);
         }
-        Ok(Self { points, valid, sigma, factors: &[] })
+        Ok(Self { points, valid, sigma, factors: &[], outward: &[], nu: 0.0 })
     }
 
     /// The same target with landmark `i`'s σ multiplied by `factors[i]` (one finite factor > 0
@@ -47,6 +49,30 @@ impl<'a> LandmarkTarget<'a> {
             return Err(FitError::BadConfig);
         }
         Ok(Self { factors, ..self })
+    }
+
+    /// The same target with a Student-t term of `nu` degrees of freedom instead of the Gaussian
+    /// (`0`: Gaussian): a point `k` σ off costs `(ν + 2)/2 · ln(1 + k²/ν)` instead of `k²/2`, so a
+    /// few wrong points of a detector do not pull the fit. `nu` must be 0 or finite and > 0.
+    pub fn with_student_t(self, nu: f32) -> Result<Self, FitError> {
+        if !(nu == 0.0 || (nu > 0.0 && nu.is_finite())) {
+            return Err(FitError::BadConfig);
+        }
+        Ok(Self { nu, ..self })
+    }
+
+    /// The same target with its first `outward.len()` landmarks measured only along the given unit
+    /// image directions (silhouette points: see [`super::contour`]).
+    pub fn with_outward(self, outward: &'a [[f32; 2]]) -> Result<Self, FitError> {
+        if outward.len() > self.points.len() {
+            return Err(FitError::LengthMismatch);
+        }
+        Ok(Self { outward, ..self })
+    }
+
+    /// Degrees of freedom of the Student-t term (0: Gaussian).
+    pub fn student_t(&self) -> f32 {
+        self.nu
     }
 
     /// The σ factor of landmark `i` (1 unless set by [`Self::with_sigma_factors`]).
@@ -105,10 +131,12 @@ impl<'a> LandmarkTarget<'a> {
 /// The landmark term of one sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LandmarkEval {
-    /// `−½ Σ_valid |x_i − t_i|² / (σ f_i)²` with the per-landmark factors `f_i` (no normalization
-    /// constant; `−∞` if a valid landmark cannot be projected).
+    /// `−½ Σ_valid |x_i − t_i|² / (σ f_i)²` with the per-landmark factors `f_i`, or the Student-t
+    /// `−Σ (ν+2)/2 · ln(1 + |x_i − t_i|² / (ν σ² f_i²))` (no normalization constant; `−∞` if a valid
+    /// landmark cannot be projected). Silhouette landmarks count only their outward distance.
     pub log_likelihood: f32,
-    /// `Σ_valid |x_i − t_i|²` in px² (`∞` if a landmark cannot be projected).
+    /// `Σ_valid |x_i − t_i|²` in px² (silhouette landmarks: the outward distance squared; `∞` if a
+    /// landmark cannot be projected).
     pub sq_err: f32,
     /// Number of valid landmarks.
     pub count: u32,
@@ -132,22 +160,37 @@ pub fn evaluate_landmarks(positions: &[Vec3], pose: &Pose, camera: &Camera, targ
     let mut sq = 0.0f32;
     let mut weighted = 0.0f32;
     let mut count = 0u32;
+    let nu = target.nu;
+    let nu_s2 = nu * target.sigma * target.sigma;
     for (i, ((p, tp), _)) in positions.iter().zip(target.points).zip(target.valid).enumerate().filter(|(_, (_, &v))| v) {
         let q = crate::render::pose::mat_vec(&r, *p);
         let Some(s) = camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) else {
             return Ok(LandmarkEval { log_likelihood: f32::NEG_INFINITY, sq_err: f32::INFINITY, count: count + 1 });
         };
         let (dx, dy) = (s.x - tp[0], s.y - tp[1]);
-        let d2 = dx * dx + dy * dy;
+        let d2 = match target.outward.get(i) {
+            Some(n) => {
+                let a = dx * n[0] + dy * n[1];
+                a * a
+            }
+            None => dx * dx + dy * dy,
+        };
         sq += d2;
-        if let Some(f) = target.factors.get(i) {
+        if nu > 0.0 {
+            let f = target.sigma_factor(i);
+            weighted += libm::log1pf(d2 / (nu_s2 * f * f));
+        } else if let Some(f) = target.factors.get(i) {
             weighted += d2 / (f * f);
         }
         count += 1;
     }
-    // Without factors (every chain but the pose phase) no per-landmark division is needed.
-    let weighted = if target.factors.is_empty() { sq } else { weighted };
-    let ll = -0.5 * weighted / (target.sigma * target.sigma);
+    let ll = if nu > 0.0 {
+        -0.5 * (nu + 2.0) * weighted
+    } else {
+        // Without factors (every chain but the pose phase) no per-landmark division is needed.
+        let weighted = if target.factors.is_empty() { sq } else { weighted };
+        -0.5 * weighted / (target.sigma * target.sigma)
+    };
     let ll = if ll.is_nan() { f32::NEG_INFINITY } else { ll };
     Ok(LandmarkEval { log_likelihood: ll, sq_err: sq, count })
 }
@@ -182,6 +225,32 @@ mod tests {
         assert_eq!(t.with_sigma_factors(&[1.0]).err(), Some(FitError::LengthMismatch));
         assert_eq!(t.with_sigma_factors(&[1.0, 0.0]).err(), Some(FitError::BadConfig));
         assert_eq!(t.with_sigma_factors(&[1.0, f32::NAN]).err(), Some(FitError::BadConfig));
+    }
+
+    #[test]
+    fn student_t_and_outward_terms() {
+        let cam = Camera::centered(100, 100, 200.0);
+        let pose = Pose::frontal(500.0);
+        let pts = [[0.0, 0.0, 0.0], [50.0, 0.0, 0.0]];
+        // Point 0 is 10 px off in x, 3 px in y; σ = 1 px.
+        let target = [[60.0, 53.0], [70.0, 50.0]];
+        let valid = [true, true];
+        let g = LandmarkTarget::new(&target, &valid, 1.0).unwrap();
+        let gauss = evaluate_landmarks(&pts, &pose, &cam, &g).unwrap();
+        assert!((gauss.log_likelihood + 0.5 * 109.0).abs() < 1e-3, "{gauss:?}");
+        // Student-t with ν = 4: (ν + 2)/2 · ln(1 + d²/ν) = 3 ln(1 + 109/4), far less than 54.5.
+        let t = evaluate_landmarks(&pts, &pose, &cam, &g.with_student_t(4.0).unwrap()).unwrap();
+        assert!((t.log_likelihood + 3.0 * libm::log1pf(109.0 / 4.0)).abs() < 1e-3, "{t:?}");
+        assert_eq!(t.sq_err, gauss.sq_err);
+        // A large ν comes back to the Gaussian (up to the factor (ν + 2)/ν).
+        let big = evaluate_landmarks(&pts, &pose, &cam, &g.with_student_t(1e5).unwrap()).unwrap();
+        assert!((big.log_likelihood - gauss.log_likelihood).abs() < 0.1, "{big:?}");
+        assert_eq!(g.with_student_t(-1.0).err(), Some(FitError::BadConfig));
+        assert_eq!(g.with_student_t(f32::INFINITY).err(), Some(FitError::BadConfig));
+        // Measured along (0, 1) only, point 0 is 3 px off.
+        let o = evaluate_landmarks(&pts, &pose, &cam, &g.with_outward(&[[0.0, 1.0]]).unwrap()).unwrap();
+        assert!((o.log_likelihood + 4.5).abs() < 1e-3 && (o.sq_err - 9.0).abs() < 1e-3, "{o:?}");
+        assert_eq!(g.with_outward(&[[0.0, 1.0]; 3]).err(), Some(FitError::LengthMismatch));
     }
 
     #[test]

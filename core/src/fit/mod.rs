@@ -3,7 +3,7 @@
 //! The pieces, one module each:
 //! - [`params`]: the parameter vector ([`FitParams`]: pose, focal length, SH light, coefficients).
 //! - [`crate::model::morphable`] (re-exported as `morph`): the borrowed [`MorphableModel`] view and the cached per-vertex [`Instance`].
-//! - [`prior`], [`landmarks`]: log prior and landmark log likelihood.
+//! - [`prior`], [`landmarks`]: log prior and landmark log likelihood; [`contour`]: the jaw contour as a silhouette.
 //! - [`image`], [`likelihood`]: the target image and background model; the image likelihood
 //!   composed from a [`PixelLikelihood`] and a [`BackgroundLikelihood`].
 //! - [`proposal`]: the [`Proposal`] trait, weighted mixtures, and the built-in coarse-to-fine
@@ -21,6 +21,7 @@
 /// The parameter vector, under its old path (`gpmm_core::fit::params`); it lives in [`crate::model`].
 pub use crate::model::params;
 pub mod chain;
+pub mod contour;
 pub mod image;
 pub mod init;
 pub mod landmarks;
@@ -40,6 +41,7 @@ pub use chain::{
     filter_stage, image_chain, image_chain_observed, image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_observed,
     landmark_chain_with, run_chain, ChainState, FitResult, ImageProblem, LandmarksOnly, Problem, RenderedImage, SecondStage,
 };
+pub use contour::{Silhouette, CONTOUR_POOL, MAX_CONTOUR, NO_VERTEX};
 pub use image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use init::{initial_guess, landmark_pivot};
 pub use landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};

@@ -19,6 +19,7 @@
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
 use super::chain::{image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, FitResult, ImageProblem, Problem};
+use super::contour::Silhouette;
 use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
@@ -138,7 +139,13 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     settings.validate()?;
     let (w, h) = (image.width(), image.height());
     let side = w.max(h) as f32;
-    let lm = LandmarkTarget::new(landmarks, valid, settings.landmarks.sigma * side)?;
+    let lm = LandmarkTarget::new(landmarks, valid, settings.landmarks.sigma * side)?.with_student_t(settings.landmarks.student_t)?;
+    let contour = settings.landmarks.contour_landmarks.min(super::MAX_CONTOUR);
+    let silhouette = if settings.landmarks.silhouette && lm.len() == IBUG68 { Some(Silhouette::new(model, &lm, contour)?) } else { None };
+    let lm = match &silhouette {
+        Some(s) => lm.with_outward(s.outward())?,
+        None => lm,
+    };
     let (shape_len, color_len) = (settings.ranks.shape, settings.ranks.color);
 
     // 1. The start and the prior.
@@ -151,7 +158,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let prior = Prior::around(&init);
 
     // 2. The landmark chain: the pose (contour σ scaled), then the shape with yaw and distance held.
-    let (pose_acceptance, landmark) = landmark_phases(model, lm, &prior, &init, settings, w, h, rng, observer)?;
+    let (pose_acceptance, landmark) = landmark_phases(model, lm, silhouette.as_ref(), &prior, &init, settings, w, h, rng, observer)?;
 
     // 3. The least-squares light of its best sample (kept only if the solve succeeds).
     let background = BackgroundModel::from_image(&image, settings.image.background_floor)?;
@@ -172,7 +179,8 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
 
     // 4. The image chain.
     let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
-    let problem = Problem { model: *model, landmarks: lm, prior: &prior, mixture: &img_mix, width: w, height: h };
+    let problem =
+        Problem { model: *model, landmarks: lm, prior: &prior, mixture: &img_mix, width: w, height: h, silhouette: silhouette.as_ref() };
     let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
@@ -190,6 +198,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
 fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize>(
     model: &MorphableModel<'_, I>,
     lm: LandmarkTarget<'_>,
+    silhouette: Option<&Silhouette<'_>>,
     prior: &Prior,
     init: &FitParams<KS, KC>,
     settings: &FitSettings,
@@ -207,7 +216,7 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     }
     let pose_lm = lm.with_sigma_factors(factors.get(..n).ok_or(FitError::TooManyLandmarks)?)?;
     let pose_mix = Mixture::from_shares(&settings.proposals.landmark_pose, &settings.proposals.drift, w.max(h) as f32)?;
-    let pose_problem = Problem { model: *model, landmarks: pose_lm, prior, mixture: &pose_mix, width: w, height: h };
+    let pose_problem = Problem { model: *model, landmarks: pose_lm, prior, mixture: &pose_mix, width: w, height: h, silhouette };
     let total = settings.landmarks.steps;
     // The pose phase's share, rounded down (f32 → u32 saturates; the share is checked to be ≤ 1).
     let pose_steps = ((total as f32 * settings.landmarks.pose_share) as u32).min(total);

@@ -49,6 +49,12 @@ pub struct LandmarkSettings {
     /// Landmark σ as a fraction of the larger image side (0.005: 0.64 px at 128; 1.5 % left 5 %
     /// inter-ocular landmark error on synthetic faces).
     pub sigma: f32,
+    /// Degrees of freedom of a Student-t landmark term (0: Gaussian); small values let a few
+    /// wrong detector points go.
+    pub student_t: f32,
+    /// Whether the contour landmarks follow the model's silhouette ([`super::contour`]) instead
+    /// of fixed vertices.
+    pub silhouette: bool,
 }
 
 /// The image chain and the image likelihood.
@@ -93,7 +99,15 @@ impl FitSettings {
     /// 600 image steps, 200 shape and 50 colour components, landmark σ 0.5 % of the image side,
     /// pixel σ 0.043, background floor 0.01, start at 500 mm; the default mixtures and light.
     pub const DEFAULT: Self = Self {
-        landmarks: LandmarkSettings { steps: 5000, pose_share: 0.4, contour_landmarks: 17, contour_sigma_factor: 3.0, sigma: 0.005 },
+        landmarks: LandmarkSettings {
+            steps: 5000,
+            pose_share: 0.4,
+            contour_landmarks: 17,
+            contour_sigma_factor: 3.0,
+            sigma: 0.005,
+            student_t: 0.0,
+            silhouette: false,
+        },
         image: ImageSettings { steps: 600, pixel_sigma: DEFAULT_PIXEL_SIGMA, background_floor: 0.01 },
         ranks: RankSettings { shape: 200, color: 50 },
         start: StartSettings { nominal_distance_mm: 500.0 },
@@ -127,6 +141,7 @@ impl FitSettings {
             && positive(l.contour_sigma_factor)
             && i.background_floor >= 0.0
             && (0.0..=1.0).contains(&l.pose_share)
+            && (l.student_t == 0.0 || positive(l.student_t))
         {
             self.proposals.validate()?;
             self.light.validate()

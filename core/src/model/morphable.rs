@@ -93,6 +93,13 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         Ok(self.color.add_instance(coeffs, out)?)
     }
 
+    /// Instance position of one vertex (`rank` multiply-adds per coordinate).
+    pub fn vertex_position(&self, coeffs: &[f32], vertex: u32) -> Result<Vec3, FitError> {
+        let mut p = self.shape_mean.get(vertex as usize).copied().ok_or(FitError::IndexOutOfRange)?;
+        self.shape.add_vertex(coeffs, vertex as usize, &mut p)?;
+        Ok(p)
+    }
+
     /// Instance positions of the landmark vertices only (`rank × landmarks` multiply-adds) into
     /// `out[..landmarks]`; returns the number written.
     pub fn landmark_positions(&self, coeffs: &[f32], out: &mut [Vec3]) -> Result<usize, FitError> {

@@ -62,11 +62,22 @@ pub struct FitSettingsArgs {
     /// pose than the inner points (1 treats them like the others).
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.contour_sigma_factor, value_name = "FACTOR")]
     pub contour_sigma: f32,
+    /// Any other setting of the fit, by its path in fit.json's `settings` (repeatable), e.g.
+    /// `--set landmarks.student_t=4 --set image.pixel_sigma=0.05 --set proposals.image.shape=0.3`.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub overrides: Vec<String>,
 }
 
 impl FitSettingsArgs {
-    /// The flags mapped into the one settings type (everything not on the command line: defaults).
-    pub fn settings(&self) -> gpmm_host::fit::FitOptions {
+    /// The flags mapped into the one settings type (everything not on the command line: defaults;
+    /// `--set` overrides last).
+    pub fn settings(&self) -> Result<gpmm_host::fit::FitOptions> {
+        let mut options = self.flag_settings();
+        options.fit = gpmm_host::fit::override_settings(&options.fit, &self.overrides)?;
+        Ok(options)
+    }
+
+    fn flag_settings(&self) -> gpmm_host::fit::FitOptions {
         gpmm_host::fit::FitOptions {
             size: self.size,
             seed: self.seed,
@@ -114,7 +125,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
         image: a.image,
         landmarks: a.landmarks,
         pts_one_based: a.pts_one_based,
-        settings: a.settings.settings(),
+        settings: a.settings.settings()?,
         out_dir: a.output,
         timing: !a.no_timing,
     })
@@ -152,7 +163,7 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
 /// Runs `gpmm bench-fit`.
 pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
     let model = model_io::load(&a.model)?;
-    let settings = a.settings.settings();
+    let settings = a.settings.settings()?;
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let bar = ProgressBar::new(0);
     bar.set_style(
@@ -175,7 +186,9 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     eprintln!("landmarks: {}", summary.landmarks);
-    eprintln!("|yaw|  images  median |yaw err|  toward-profile bias  median |pitch err|  median |roll err|  (degrees)");
+    let off = summary.median_signed_error_deg;
+    eprintln!("median offsets removed below: pitch {:+.2}, roll {:+.2} deg", off[1], off[2]);
+    eprintln!("|yaw|  images  median |yaw err|  toward-profile bias  median |pitch err|  median |roll err|  (degrees, offsets removed)");
     for r in &summary.per_yaw {
         eprintln!(
             "{:>4}  {:>6}  {:>16.2}  {:>19.2}  {:>18.2}  {:>17.2}",
@@ -183,8 +196,8 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
             r.images,
             r.yaw_error_deg.median,
             r.mean_outward_yaw_error_deg,
-            r.pitch_error_deg.median,
-            r.roll_error_deg.median
+            r.pitch_error_centred_deg.median,
+            r.roll_error_centred_deg.median
         );
     }
     println!("{}", serde_json::to_string_pretty(&summary)?);

@@ -74,6 +74,17 @@ pub struct YawRow {
     pub pitch_error_deg: Stat,
     /// |roll| error (degrees).
     pub roll_error_deg: Stat,
+    /// |pitch − offset| (degrees), the offset being the median signed pitch error of the whole set
+    /// (a constant offset is a frame convention between the face models, not a fitting error).
+    pub pitch_error_centred_deg: Stat,
+    /// |roll − offset| (degrees), the offset being the set's median signed roll error.
+    pub roll_error_centred_deg: Stat,
+}
+
+/// Median signed (fitted − true) yaw, pitch and roll errors of `images` (degrees).
+pub fn median_offsets(images: &[BenchImage]) -> [f64; 3] {
+    let signed = |k: usize| images.iter().map(|b| f64::from(b.fit_deg[k] - b.truth_deg[k])).collect::<Vec<_>>();
+    [stat(&signed(0)).median, stat(&signed(1)).median, stat(&signed(2)).median]
 }
 
 /// One row per true |yaw|, in increasing order.
@@ -81,11 +92,13 @@ pub fn per_yaw(images: &[BenchImage]) -> Vec<YawRow> {
     let mut keys: Vec<i32> = images.iter().map(|b| b.truth_deg[0].abs().round() as i32).collect();
     keys.sort_unstable();
     keys.dedup();
+    let offset = median_offsets(images);
     keys.into_iter()
         .map(|k| {
             let row: Vec<&BenchImage> = images.iter().filter(|b| b.truth_deg[0].abs().round() as i32 == k).collect();
             let n = row.len().max(1) as f64;
             let err = |i: usize| row.iter().map(|b| f64::from((b.fit_deg[i] - b.truth_deg[i]).abs())).collect::<Vec<_>>();
+            let centred = |i: usize| row.iter().map(|b| (f64::from(b.fit_deg[i] - b.truth_deg[i]) - offset[i]).abs()).collect::<Vec<_>>();
             let signed = |b: &&BenchImage| f64::from(b.fit_deg[0] - b.truth_deg[0]);
             let sign = |b: &&BenchImage| if b.truth_deg[0].abs() < 0.5 { 1.0 } else { f64::from(b.truth_deg[0].signum()) };
             YawRow {
@@ -96,6 +109,8 @@ pub fn per_yaw(images: &[BenchImage]) -> Vec<YawRow> {
                 mean_signed_yaw_error_deg: row.iter().map(signed).sum::<f64>() / n,
                 pitch_error_deg: stat(&err(1)),
                 roll_error_deg: stat(&err(2)),
+                pitch_error_centred_deg: stat(&centred(1)),
+                roll_error_centred_deg: stat(&centred(2)),
             }
         })
         .collect()
@@ -118,6 +133,9 @@ pub struct BenchSummary {
     pub roll_error_deg: Stat,
     /// Mean signed yaw, pitch and roll error (degrees): a systematic offset between the frames.
     pub mean_signed_error_deg: [f64; 3],
+    /// Median signed yaw, pitch and roll error (degrees): the offsets removed in the per-yaw
+    /// `*_centred_deg` figures.
+    pub median_signed_error_deg: [f64; 3],
     /// Landmark error after the image chain, % of the inter-ocular distance.
     pub landmark_error_iod_pct: Stat,
     /// Landmark error of the landmark-only result, % of the inter-ocular distance.
@@ -275,6 +293,7 @@ pub fn bench(
         pitch_error_deg: stat(&err(1)),
         roll_error_deg: stat(&err(2)),
         mean_signed_error_deg: [signed(0), signed(1), signed(2)],
+        median_signed_error_deg: median_offsets(&ok),
         landmark_error_iod_pct: stat(&col(&|b| f64::from(b.landmark_error_iod_pct))),
         landmark_error_iod_pct_after_landmark_chain: stat(&col(&|b| f64::from(b.landmark_error_iod_pct_after_landmark_chain))),
         pixel_rmse_after_landmark_chain: stat(&col(&|b| f64::from(b.pixel_rmse_after_landmark_chain))),

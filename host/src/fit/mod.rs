@@ -17,6 +17,7 @@
 //! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
 
 mod observe;
+mod overrides;
 pub mod register;
 
 use crate::gp::model::GpModel;
@@ -35,6 +36,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 pub use gpmm_core::fit::FitSettings;
+pub use overrides::override_settings;
 
 /// Shape coefficient capacity of a fit (a model of higher rank is fitted in its first `KS` components).
 pub const KS: usize = 200;
