@@ -30,6 +30,7 @@ pub enum EvalCommand {
     /// OUT/fits (reused when model, settings and images are unchanged).
     ///
     /// Models: --model FILE (any model file), --kernels (built from the template scan like `gpmm build`),
+    /// --mean-face-kernels (the same kernels built around the world's mean face: the paper's setting),
     /// --upper-bound (the world that generated the faces), --pca N (PCA of N training identities of the
     /// world), --kde N (N single-scan symmetric-full models around the same identities); --all selects
     /// the nine kernels, the upper bound, --pca 10 and --kde 10. Training identities never coincide with
@@ -55,6 +56,10 @@ pub struct EvalModelArgs {
     /// Build these kernels from the template: `all` or a comma-separated list (e.g. symmetric-full,standard-rgb).
     #[arg(long, value_name = "LIST")]
     pub kernels: Option<String>,
+    /// Build these kernels around the world's mean face (ICT neutral with the transferred template
+    /// albedo; the paper's setting, which builds around the BFM mean): `all` or a comma-separated list.
+    #[arg(long, value_name = "LIST")]
+    pub mean_face_kernels: Option<String>,
     /// Include the generating world itself as a model (an upper bound).
     #[arg(long)]
     pub upper_bound: bool,
@@ -129,6 +134,10 @@ pub struct RecognitionArgs {
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
+    /// Any other fit setting by its path in fit.json's `settings` (repeatable), as on `gpmm fit`,
+    /// e.g. `--set landmarks.student_t=4` (part of the fit cache's key).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub overrides: Vec<String>,
     /// Output directory.
     #[arg(short, long, value_name = "OUT")]
     pub output: PathBuf,
@@ -186,15 +195,19 @@ fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::eval::synth::Sy
     f
 }
 
-fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSelection> {
-    let kernels = match m.kernels.as_deref().map(str::trim) {
+fn kernel_list(list: Option<&str>) -> Result<Vec<ModelKernel>> {
+    Ok(match list.map(str::trim) {
         None => Vec::new(),
         Some(s) if s.eq_ignore_ascii_case("all") => ModelKernel::ALL.to_vec(),
         Some(s) => s.split(',').map(|k| k.trim().parse::<ModelKernel>()).collect::<Result<Vec<_>, _>>()?,
-    };
+    })
+}
+
+fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSelection> {
     Ok(gpmm_host::eval::models::ModelSelection {
         files: m.models.clone(),
-        kernels,
+        kernels: kernel_list(m.kernels.as_deref())?,
+        mean_face_kernels: kernel_list(m.mean_face_kernels.as_deref())?,
         upper_bound: m.upper_bound,
         pca: m.pca.map(|n| n as usize),
         kde: None,
@@ -237,16 +250,14 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     })?;
     pb.finish_and_clear();
     let defaults = gpmm_host::fit::FitSettings::DEFAULT;
-    let settings = gpmm_host::fit::FitOptions {
-        size: a.size,
-        seed: a.fit_seed,
-        fit: defaults
-            .with_steps(
-                a.landmark_steps.unwrap_or(if q { 1500 } else { defaults.landmarks.steps }),
-                a.image_steps.unwrap_or(if q { 40 } else { defaults.image.steps }),
-            )
-            .with_ranks(a.shape_rank, a.color_rank),
-    };
+    let fit = defaults
+        .with_steps(
+            a.landmark_steps.unwrap_or(if q { 1500 } else { defaults.landmarks.steps }),
+            a.image_steps.unwrap_or(if q { 40 } else { defaults.image.steps }),
+        )
+        .with_ranks(a.shape_rank, a.color_rank);
+    let fit = gpmm_host::fit::override_settings(&fit, &a.overrides)?;
+    let settings = gpmm_host::fit::FitOptions { size: a.size, seed: a.fit_seed, fit };
     settings.validate()?;
     let kde_settings = gpmm_host::fit::FitOptions {
         fit: settings.fit.with_steps(settings.fit.landmarks.steps, a.kde_image_steps.unwrap_or(settings.fit.image.steps)),

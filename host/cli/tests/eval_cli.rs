@@ -72,6 +72,8 @@ fn recognition_quick_writes_a_consistent_table_and_reuses_its_fits() {
         s(&f.data),
         "--model",
         s(&f.model),
+        "--mean-face-kernels",
+        "symmetric-full",
         "--upper-bound",
         "--pca",
         "3",
@@ -83,15 +85,22 @@ fn recognition_quick_writes_a_consistent_table_and_reuses_its_fits() {
         s(&out),
     ];
     let table = ok(&gpmm(&args));
-    for name in
-        ["recognition.md", "recognition.csv", "recognition.json", "recognition.png", "models/upper-bound-seed5.gpmm", "fits/tiny.json"]
-    {
+    for name in [
+        "recognition.md",
+        "recognition.csv",
+        "recognition.json",
+        "recognition.png",
+        "models/upper-bound-seed5.gpmm",
+        "models/mean-face-symmetric-full-seed5.gpmm",
+        "models/scans/mean-face.ply",
+        "fits/tiny.json",
+    ] {
         assert!(out.join(name).is_file(), "{name} missing");
     }
     let rows = csv_rows(&out.join("recognition.csv"));
-    // Four rows (tiny, upper-bound, pca-3, kde-2), one probe yaw (30).
+    // Five rows (tiny, the mean-face model, upper-bound, pca-3, kde-2), one probe yaw (30).
     let labels: Vec<&str> = rows.iter().map(|r| r[0].as_str()).collect();
-    assert_eq!(labels, ["tiny", "upper-bound", "pca-3", "kde-2"]);
+    assert_eq!(labels, ["tiny", "mean-face-symmetric-full", "upper-bound", "pca-3", "kde-2"]);
     for r in &rows {
         assert_eq!(r[1], "30");
         let (correct, total): (usize, usize) = (r[2].parse().unwrap(), r[3].parse().unwrap());
@@ -114,7 +123,7 @@ fn recognition_quick_writes_a_consistent_table_and_reuses_its_fits() {
         csv_rows(&out.join("recognition.csv")).iter().map(|r| r[..8].to_vec()).collect::<Vec<_>>(),
         rows.iter().map(|r| r[..8].to_vec()).collect::<Vec<_>>()
     );
-    assert_eq!(again.matches(", cached").count(), 4, "{again}");
+    assert_eq!(again.matches(", cached").count(), 5, "{again}");
 
     // The same landmarks read from another directory: fitted anew (the cache knows where the
     // landmarks came from), and the same table.

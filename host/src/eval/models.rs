@@ -65,6 +65,16 @@ pub enum ModelRecipe {
         /// Build settings.
         build: GpBuild,
     },
+    /// One of the nine kernels built around the world's mean face (ICT neutral with the
+    /// transferred template albedo), as the paper builds its models around the BFM mean.
+    MeanFace {
+        /// Kernel name.
+        kernel: String,
+        /// Vertex budget of the cropped scan (the template models' vertex count).
+        vertices: usize,
+        /// Build settings.
+        build: GpBuild,
+    },
     /// PCA of `count` training identities.
     Pca {
         /// Number of training identities.
@@ -141,25 +151,32 @@ impl ModelFactory {
 
     /// The recipe of KDE component `index`: simplified to the vertex count of the template models (same budget).
     pub fn kde_recipe(&mut self, index: usize) -> Result<ModelRecipe, EvalError> {
-        let vertices = match self.template_vertices {
-            Some(v) => v,
-            None => {
-                let (ply, lm) = self.template_paths();
-                let v = load_template(&ply, &lm, &TemplateOptions { vertices: self.build.vertices, ..Default::default() })?
-                    .mesh
-                    .positions
-                    .len();
-                self.template_vertices = Some(v);
-                v
-            }
-        };
+        let vertices = self.template_vertex_count()?;
         let o = &self.world_options;
         Ok(ModelRecipe::KdeScan { index, vertices, seed: o.seed, identity_scale: o.identity_scale, build: self.build })
+    }
+
+    /// The recipe of a kernel model around the world's mean face, simplified to the template
+    /// models' vertex count.
+    pub fn mean_face_recipe(&mut self, kernel: ModelKernel) -> Result<ModelRecipe, EvalError> {
+        let vertices = self.template_vertex_count()?;
+        Ok(ModelRecipe::MeanFace { kernel: kernel.name().into(), vertices, build: self.build })
     }
 
     /// The recipe of the PCA baseline of `count` scans.
     pub fn pca_recipe(&self, count: usize) -> ModelRecipe {
         ModelRecipe::Pca { count, seed: self.world_options.seed, identity_scale: self.world_options.identity_scale }
+    }
+
+    /// Vertices of the cropped (and simplified) template: the budget of models built from world scans.
+    fn template_vertex_count(&mut self) -> Result<usize, EvalError> {
+        if let Some(v) = self.template_vertices {
+            return Ok(v);
+        }
+        let (ply, lm) = self.template_paths();
+        let v = load_template(&ply, &lm, &TemplateOptions { vertices: self.build.vertices, ..Default::default() })?.mesh.positions.len();
+        self.template_vertices = Some(v);
+        Ok(v)
     }
 
     /// The recipe of the upper bound.
@@ -216,6 +233,17 @@ impl ModelFactory {
                 model.metadata.template.attribution = Some(super::world::ICT_ATTRIBUTION.into());
                 Ok(model)
             }
+            ModelRecipe::MeanFace { kernel, vertices, .. } => {
+                let kernel: ModelKernel =
+                    kernel.parse().map_err(|e: crate::gp::kernel::UnknownKernel| EvalError::Invalid(e.to_string()))?;
+                let scan = self.world()?.mean_scan();
+                let (ply, lm) = self.write_scan_files(&scan, "mean-face")?;
+                let topts = TemplateOptions { vertices: Some(*vertices), scale: Some(1.0), ..Default::default() };
+                let template = load_template(&ply, &lm, &topts)?;
+                let mut model = build_model(&template, &self.gp_options(kernel), |_, _, _| {});
+                model.metadata.template.attribution = Some(super::world::ICT_ATTRIBUTION.into());
+                Ok(model)
+            }
             ModelRecipe::Pca { count, .. } => self.world()?.pca_model(*count),
             ModelRecipe::UpperBound { color_samples, color_rank, .. } => self.world()?.upper_bound_model(*color_samples, *color_rank),
         }
@@ -223,12 +251,17 @@ impl ModelFactory {
 
     /// Writes training identity `index` as a coloured PLY scan with its landmark file (`DIR/scans/seedS-scanNN.*`).
     pub fn write_scan(&mut self, index: usize) -> Result<(PathBuf, PathBuf), EvalError> {
-        let scans = self.dir.join("scans");
-        create_dir(&scans)?;
         let scan = self.world()?.full_scan(TRAIN_ID_BASE + index)?;
         let seed = self.world_options.seed;
-        let ply = scans.join(format!("seed{seed}-scan{index:02}.ply"));
-        let lm = scans.join(format!("seed{seed}-scan{index:02}.landmarks.json"));
+        self.write_scan_files(&scan, &format!("seed{seed}-scan{index:02}"))
+    }
+
+    /// Writes `scan` as `DIR/scans/STEM.ply` with its landmark file `STEM.landmarks.json`.
+    fn write_scan_files(&self, scan: &super::world::Scan, stem: &str) -> Result<(PathBuf, PathBuf), EvalError> {
+        let scans = self.dir.join("scans");
+        create_dir(&scans)?;
+        let ply = scans.join(format!("{stem}.ply"));
+        let lm = scans.join(format!("{stem}.landmarks.json"));
         crate::mesh::io::write_ply_with(
             &ply,
             &scan.mesh,
@@ -248,6 +281,8 @@ pub struct ModelSelection {
     pub files: Vec<PathBuf>,
     /// Kernels to build from the template.
     pub kernels: Vec<ModelKernel>,
+    /// Kernels to build around the world's mean face (the paper's setting).
+    pub mean_face_kernels: Vec<ModelKernel>,
     /// The generating world as a model.
     pub upper_bound: bool,
     /// PCA of this many training scans.
@@ -259,7 +294,12 @@ pub struct ModelSelection {
 impl ModelSelection {
     /// Whether nothing is selected.
     pub fn is_empty(&self) -> bool {
-        self.files.is_empty() && self.kernels.is_empty() && !self.upper_bound && self.pca.is_none() && self.kde.is_none()
+        self.files.is_empty()
+            && self.kernels.is_empty()
+            && self.mean_face_kernels.is_empty()
+            && !self.upper_bound
+            && self.pca.is_none()
+            && self.kde.is_none()
     }
 }
 
@@ -268,7 +308,7 @@ pub type BuildProgress<'a> = dyn FnMut(&str, bool) + 'a;
 
 impl ModelFactory {
     /// The selected models as table rows (building or reusing their files), in the order
-    /// files, kernels, upper bound, PCA, KDE. `progress(label, built)` after each model file.
+    /// files, kernels, mean-face kernels, upper bound, PCA, KDE. `progress(label, built)` after each model file.
     pub fn rows(&mut self, sel: &ModelSelection, progress: &mut BuildProgress<'_>) -> Result<Vec<super::recognition::Row>, EvalError> {
         use super::recognition::Row;
         let mut rows: Vec<Row> = Vec::new();
@@ -306,6 +346,17 @@ impl ModelFactory {
             let (path, new) = self.get(&label, &recipe)?;
             progress(&label, new);
             let description = built(&format!("built from the template scan (Lee Perry-Smith) with the {label} kernel"));
+            rows.push(Row { label: label.clone(), description, components: vec![(label, path)] });
+        }
+        for &k in &sel.mean_face_kernels {
+            let recipe = self.mean_face_recipe(k)?;
+            let label = format!("mean-face-{}", k.name());
+            let (path, new) = self.get(&label, &recipe)?;
+            progress(&label, new);
+            let description = built(&format!(
+                "built with the {} kernel around the world's mean face (ICT neutral, transferred template albedo; the paper builds around the BFM mean)",
+                k.name()
+            ));
             rows.push(Row { label: label.clone(), description, components: vec![(label, path)] });
         }
         if sel.upper_bound {
@@ -347,7 +398,9 @@ rank {}, {} Nystrom points",
             rows.push(Row { label, description, components });
         }
         if rows.is_empty() {
-            return Err(EvalError::Invalid("no models selected: give --model FILE, --kernels, --upper-bound, --pca N or --kde N".into()));
+            return Err(EvalError::Invalid(
+                "no models selected: give --model FILE, --kernels, --mean-face-kernels, --upper-bound, --pca N or --kde N".into(),
+            ));
         }
         Ok(rows)
     }

@@ -140,6 +140,19 @@ impl EvalWorld {
         Ok(Scan { id, mesh, landmarks: self.world.landmarks().to_vec() })
     }
 
+    /// The world's mean face (ICT neutral, transferred template albedo) on the whole topology,
+    /// as a scan like [`Self::full_scan`]'s (`id` is `usize::MAX`): what the paper's models are
+    /// built around (it uses the BFM mean).
+    pub fn mean_scan(&self) -> Scan {
+        let (positions, albedo) = self.world.mean_face();
+        let mesh = Mesh {
+            positions: positions.iter().map(|p| p.map(f64::from)).collect(),
+            colors: albedo.iter().map(|c| c.map(f64::from)).collect(),
+            triangles: self.world.triangles().to_vec(),
+        };
+        Scan { id: usize::MAX, mesh, landmarks: self.world.landmarks().to_vec() }
+    }
+
     /// Identity `id` cut to the face region (the topology of the upper-bound and PCA models).
     pub fn cropped_scan(&self, id: usize) -> Result<Scan, EvalError> {
         let full = self.full_scan(id)?;

@@ -153,6 +153,17 @@ impl SynthWorld {
         &self.base_albedo
     }
 
+    /// The world's mean face: the ICT neutral in its face frame (fan centres included, as
+    /// [`Self::identity`] places them) with the transferred template albedo, no variation.
+    pub fn mean_face(&self) -> (Vec<Vec3>, Vec<Vec3>) {
+        let mut positions: Vec<Vec3> = self.neutral_face.iter().map(|p| p.map(|v| v as f32)).collect();
+        for fan in &self.fans {
+            let c = centroid(fan.ring.iter().map(|&i| self.neutral_face[i as usize]));
+            positions.push(c.map(|v| v as f32));
+        }
+        (positions, self.base_albedo.clone())
+    }
+
     /// Identity `id`: random coefficients, shape in its face frame, varied albedo (deterministic for (seed, id)).
     pub fn identity(&self, id: usize) -> Result<Identity, SynthError> {
         let mut rng = stream(self.options.seed, id as u64, 0);
