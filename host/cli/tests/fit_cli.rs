@@ -89,6 +89,7 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
         "yaw_deg",
         "pitch_deg",
         "roll_deg",
+        "photo_pose_deg",
         "shape",
         "color",
         "landmark_rmse_px",
@@ -108,6 +109,8 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     }
     let yaw = j["yaw_deg"].as_f64().unwrap();
     assert!((yaw - 30.0).abs() < 6.0, "yaw {yaw} (truth 30)");
+    let photo_yaw = j["photo_pose_deg"][0].as_f64().unwrap();
+    assert!((photo_yaw - 30.0).abs() < 6.0 && (photo_yaw - yaw).abs() < 10.0, "photo-frame yaw {photo_yaw} (crop-frame {yaw})");
     assert!(j["landmark_rmse_px"].as_f64().unwrap() < 3.0, "{}", j["landmark_rmse_px"]);
     assert_eq!(j["shape"].as_array().unwrap().len(), 20);
     let acc = &j["acceptance"]["image_chain"]["yaw"];

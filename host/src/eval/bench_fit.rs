@@ -222,7 +222,16 @@ pub fn bench_one(
     Ok(BenchImage {
         image: truth.image.clone(),
         truth_deg: [truth.yaw_deg, truth.pitch_deg, truth.roll_deg],
-        fit_deg: [p.yaw, p.pitch, p.roll].map(f32::to_degrees),
+        // The fit's pose is relative to the crop's centre as optical axis; the truth is the photo camera's.
+        fit_deg: crate::photo::pose_in_photo_frame(
+            [p.yaw, p.pitch, p.roll],
+            o.params.focal,
+            &prepared.crop,
+            size,
+            prepared.original_size[0],
+            prepared.original_size[1],
+        )
+        .map(f32::to_degrees),
         landmark_error_iod_pct: iod_error(&fitted, &truth.landmarks),
         landmark_error_iod_pct_after_landmark_chain: iod_error(&lm_only, &truth.landmarks),
         pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,

@@ -376,6 +376,10 @@ pub struct FitReport {
     pub pitch_deg: f32,
     /// Roll (degrees; positive is counter-clockwise in the image).
     pub roll_deg: f32,
+    /// Yaw, pitch and roll (degrees) in the photo's camera frame, its principal point at the photo's
+    /// centre (`yaw_deg` etc. take the crop's centre as the optical axis; they differ by the angle
+    /// at which the camera sees the face off its axis: [`crate::photo::pose_in_photo_frame`]).
+    pub photo_pose_deg: [f32; 3],
     /// Translation (mm, camera space of the working image).
     pub translation_mm: [f32; 3],
     /// Focal length (working-image pixels).
@@ -465,6 +469,15 @@ pub fn report(
         yaw_deg: p.pose.yaw.to_degrees(),
         pitch_deg: p.pose.pitch.to_degrees(),
         roll_deg: p.pose.roll.to_degrees(),
+        photo_pose_deg: crate::photo::pose_in_photo_frame(
+            [p.pose.yaw, p.pose.pitch, p.pose.roll],
+            p.focal,
+            &prepared.crop,
+            size,
+            prepared.original_size[0],
+            prepared.original_size[1],
+        )
+        .map(f32::to_degrees),
         translation_mm: p.pose.translation,
         focal_px: p.focal,
         light: p.light.coeffs,

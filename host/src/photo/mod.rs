@@ -165,3 +165,64 @@ mod tests {
         assert!(crop_box(&[[3.0, 3.0], [3.0, 3.0]], 10, 10).is_err());
     }
 }
+
+/// Yaw, pitch and roll (radians) of a fitted rotation `(yaw, pitch, roll)`, found on the crop
+/// `crop` resampled to `size × size` with the principal point at the crop's centre and focal
+/// length `focal` (working pixels), expressed in the photo's camera frame (principal point at
+/// the photo's centre, `width × height`). The fit takes the crop's centre as the optical axis: a
+/// face off the photo's axis by an angle `α` is fitted as turned by `α` (2.6° for a face 26 mm
+/// below the axis at 570 mm). Rotating the fit's camera onto the photo's axis removes that.
+pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u32, width: u32, height: u32) -> [f32; 3] {
+    let c = crop.to_original([size as f32 * 0.5, size as f32 * 0.5], size);
+    let f = f64::from(focal * crop.scale(size));
+    let d = [f64::from(c[0] - width as f32 * 0.5) / f, -f64::from(c[1] - height as f32 * 0.5) / f, -1.0];
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let d = [d[0] / n, d[1] / n, d[2] / n];
+    // Q: the smallest rotation taking the fit's axis (0, 0, −1) onto d (Rodrigues).
+    let axis = [d[1], -d[0], 0.0]; // (0, 0, −1) × d
+    let s = (axis[0] * axis[0] + axis[1] * axis[1]).sqrt();
+    let cos = -d[2];
+    let q = if s < 1e-12 {
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    } else {
+        let k = [axis[0] / s, axis[1] / s, 0.0];
+        let v = 1.0 - cos;
+        [
+            [cos + k[0] * k[0] * v, k[0] * k[1] * v - k[2] * s, k[0] * k[2] * v + k[1] * s],
+            [k[1] * k[0] * v + k[2] * s, cos + k[1] * k[1] * v, k[1] * k[2] * v - k[0] * s],
+            [k[2] * k[0] * v - k[1] * s, k[2] * k[1] * v + k[0] * s, cos + k[2] * k[2] * v],
+        ]
+    };
+    let pose = gpmm_core::Pose { yaw: angles[0], pitch: angles[1], roll: angles[2], translation: [0.0; 3] };
+    let r = pose.rotation().map(|row| row.map(f64::from));
+    let mut m = [[0.0f64; 3]; 3];
+    for (i, row) in m.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = (0..3).map(|k| q[i][k] * r[k][j]).sum();
+        }
+    }
+    // R = Rz(roll) · Ry(yaw) · Rx(pitch): R[2][0] = −sin(yaw), R[2][1..] = cos(yaw) (sin, cos)(pitch).
+    let yaw = (-m[2][0]).clamp(-1.0, 1.0).asin();
+    let pitch = m[2][1].atan2(m[2][2]);
+    let roll = m[1][0].atan2(m[0][0]);
+    [yaw as f32, pitch as f32, roll as f32]
+}
+
+#[cfg(test)]
+mod frame_tests {
+    use super::*;
+
+    #[test]
+    fn a_centred_crop_keeps_the_pose_and_an_off_axis_one_turns_it() {
+        let a = [0.3f32, -0.1, 0.05];
+        // Crop centred on the photo's centre: nothing changes.
+        let crop = CropBox { x: 0, y: 0, side: 128 };
+        let b = pose_in_photo_frame(a, 200.0, &crop, 128, 128, 128);
+        assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5), "{b:?}");
+        // The crop's centre 20 px right of the axis at f = 200: the ray is turned by atan(0.1)
+        // about the vertical axis, which adds to the yaw (a frontal face there is seen from the side).
+        let crop = CropBox { x: 20, y: 0, side: 128 };
+        let b = pose_in_photo_frame([0.0; 3], 200.0, &crop, 128, 128, 128);
+        assert!((b[0] - (-(0.1f32).atan())).abs() < 1e-4 && b[1].abs() < 1e-5 && b[2].abs() < 1e-5, "{b:?}");
+    }
+}
