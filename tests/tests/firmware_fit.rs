@@ -181,15 +181,17 @@ fn firmware_fit_uses_every_setting() {
             image: MixtureShares { light_solve: 0.08, ..defaults.proposals.image },
             drift: DriftSettings {
                 shape: Drift { sigmas: [0.25, 0.1, 0.03], ..defaults.proposals.drift.shape },
+                shape_leading: [8, 30, 0],
+                color_leading: [5, 20, 0],
                 ..defaults.proposals.drift
             },
         },
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
     // Every top-level field and group differs from the default (a new field must be added here;
-    // 80 fields counting the groups' own).
+    // 82 fields counting the groups' own).
     let fields = format!("{settings:?}");
-    assert_eq!(fields.matches(": ").count(), 80, "update this test for the new settings: {fields}");
+    assert_eq!(fields.matches(": ").count(), 82, "update this test for the new settings: {fields}");
     let seed = 99;
     let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;

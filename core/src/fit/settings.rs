@@ -213,6 +213,10 @@ pub struct DriftSettings {
     pub light_solve_sigma: f32,
     /// Fractions of a mixture's pose share: yaw, pitch, roll, distance, scaling, translation.
     pub pose_fractions: [f32; 6],
+    /// How many leading shape coefficients the coarse, intermediate and fine shape steps move (0: all).
+    pub shape_leading: [u16; 3],
+    /// How many leading colour coefficients the coarse, intermediate and fine colour steps move (0: all).
+    pub color_leading: [u16; 3],
 }
 
 impl DriftSettings {
@@ -228,6 +232,8 @@ impl DriftSettings {
         light_intensity_sigma: 0.05,
         light_solve_sigma: 0.02,
         pose_fractions: [0.3, 0.2, 0.1, 0.05, 0.15, 0.2],
+        shape_leading: [0; 3],
+        color_leading: [0; 3],
     };
 
     fn validate(&self) -> Result<(), FitError> {
