@@ -23,7 +23,8 @@ def mesh_points(path):
     import mediapipe as mp
     img = Image.open(path).convert("RGB")
     w, h = img.size
-    big = np.asarray(img.resize((w * UPSCALE, h * UPSCALE), Image.BICUBIC))
+    up = UPSCALE if max(w, h) < 400 else 1  # photos are large enough as they are
+    big = np.asarray(img.resize((w * up, h * up), Image.BICUBIC))
     with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=False) as fm:
         r = fm.process(big)
     if not r.multi_face_landmarks:
@@ -55,7 +56,35 @@ def main():
     d.add_argument("dir")
     d.add_argument("--mapping", required=True)
     d.add_argument("-o", "--output", required=True)
+    p = sub.add_parser("photos", help="every .png/.jpg of DIR: NAME.pts in OUTPUT (RMSE to DIR/NAME.pts when present)")
+    p.add_argument("dir")
+    p.add_argument("--mapping", required=True)
+    p.add_argument("-o", "--output", required=True)
     a = ap.parse_args()
+    if a.cmd == "photos":
+        mapping = json.load(open(a.mapping))["ibug68_from_mediapipe"]
+        os.makedirs(a.output, exist_ok=True)
+        report = {}
+        for name in sorted(os.listdir(a.dir)):
+            stem, ext = os.path.splitext(name)
+            if ext.lower() not in (".png", ".jpg", ".jpeg"):
+                continue
+            mp_pts = mesh_points(os.path.join(a.dir, name))
+            if mp_pts is None:
+                report[name] = "no face found"
+                continue
+            pts = mp_pts[mapping]
+            write_pts(os.path.join(a.output, stem + ".pts"), pts)
+            given = os.path.join(a.dir, stem + ".pts")
+            if os.path.exists(given):
+                ref = read_pts(given)
+                iod = np.linalg.norm(ref[36] - ref[45])
+                report[name] = {"mean_error_px": float(np.linalg.norm(pts - ref, axis=1).mean()),
+                                "mean_error_iod_pct": float(100 * np.linalg.norm(pts - ref, axis=1).mean() / iod)}
+            else:
+                report[name] = "detected"
+        print(json.dumps(report, indent=1))
+        return
     truth = json.load(open(os.path.join(a.dir, "truth.json")))
     if a.cmd == "calibrate":
         acc, n = np.zeros((68, 468)), 0
