@@ -18,7 +18,7 @@ pub mod profile;
 pub mod render;
 
 // The render modules under their old crate-root paths (`gpmm_core::camera::Camera`, ...).
-pub use render::{camera, light, pose, raster, shading, tile};
+pub use render::{camera, frame_cache, light, pose, raster, shading, tile};
 
 pub use camera::{Camera, ScreenPoint};
 pub use checksum::{crc32, FrameChecksum};

@@ -29,7 +29,8 @@ use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::{Mixture, Proposal, ProposalContext, StandardProposal};
 use super::FitError;
-use crate::model::morphable::{Instance, MorphableModel};
+use crate::model::instance::Instance;
+use crate::model::morphable::MorphableModel;
 use crate::render::shading::TriIndex;
 use crate::{Cull, ShLight, TileRasterizer, Vec3};
 use rand_core::Rng;
@@ -233,8 +234,14 @@ pub trait SecondStage<I: TriIndex, P, const KS: usize, const KC: usize> {
     /// The least-squares light of `cur` for a proposal that needs one (`None` if unavailable).
     fn light_solution<R: Rng + ?Sized>(&mut self, problem: &Problem<'_, I, P>, cur: &ChainState<KS, KC>, rng: &mut R) -> Option<ShLight>;
 
-    /// The second stage's term of a proposal that passed the filter (an error rejects it).
-    fn evaluate(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<ImageEval, FitError>;
+    /// The second stage's term of a proposal that passed the filter (an error rejects it);
+    /// `current` is the chain's state (caches keep what it needs).
+    fn evaluate(
+        &mut self,
+        problem: &Problem<'_, I, P>,
+        params: &FitParams<KS, KC>,
+        current: &FitParams<KS, KC>,
+    ) -> Result<ImageEval, FitError>;
 }
 
 /// No second stage: the landmark chain.
@@ -254,7 +261,7 @@ impl<I: TriIndex, P, const KS: usize, const KC: usize> SecondStage<I, P, KS, KC>
         None
     }
 
-    fn evaluate(&mut self, _: &Problem<'_, I, P>, _: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
+    fn evaluate(&mut self, _: &Problem<'_, I, P>, _: &FitParams<KS, KC>, _: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
         Err(FitError::BadConfig)
     }
 }
@@ -281,7 +288,7 @@ where
     }
 
     fn start(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<Option<ImageEval>, FitError> {
-        render_eval(problem, self.image, params, self.instance, self.raster).map(Some)
+        render_eval(problem, self.image, params, None, self.instance, self.raster).map(Some)
     }
 
     fn light_solution<R: Rng + ?Sized>(&mut self, problem: &Problem<'_, I, P>, cur: &ChainState<KS, KC>, rng: &mut R) -> Option<ShLight> {
@@ -294,8 +301,13 @@ where
         solve_light(inst.positions(), inst.normals(), inst.albedos(), &cur.params.pose, &cam, &self.image.image, &cfg).ok()
     }
 
-    fn evaluate(&mut self, problem: &Problem<'_, I, P>, params: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
-        render_eval(problem, self.image, params, self.instance, self.raster)
+    fn evaluate(
+        &mut self,
+        problem: &Problem<'_, I, P>,
+        params: &FitParams<KS, KC>,
+        current: &FitParams<KS, KC>,
+    ) -> Result<ImageEval, FitError> {
+        render_eval(problem, self.image, params, Some(current), self.instance, self.raster)
     }
 }
 
@@ -334,7 +346,7 @@ fn decide<R: Rng + ?Sized, I: TriIndex, P: Proposal, S: SecondStage<I, P, KS, KC
     let u = libm::logf(uniform_open0(rng));
     // A proposal the renderer refuses (e.g. non-finite positions) is rejected, not an error:
     // the start was rendered, so the inputs themselves are sound.
-    let accepted = match stage.evaluate(problem, &next.params) {
+    let accepted = match stage.evaluate(problem, &next.params, &cur.params) {
         Ok(e) => {
             let old = cur.image.map_or(0.0, |c| c.log_likelihood);
             next.image = Some(e);
@@ -447,6 +459,7 @@ fn render_eval<I: TriIndex, P, L, B, const KS: usize, const KC: usize, const TW:
     problem: &Problem<'_, I, P>,
     image: &ImageProblem<'_, L, B>,
     params: &FitParams<KS, KC>,
+    keep: Option<&FitParams<KS, KC>>,
     instance: &mut Instance<'_, KS, KC>,
     raster: &mut TileRasterizer<TW, TH, BIN>,
 ) -> Result<ImageEval, FitError>
@@ -454,9 +467,27 @@ where
     L: PixelLikelihood + Copy,
     B: BackgroundLikelihood,
 {
-    instance.update(&problem.model, params, problem.width, problem.height)?;
+    let (w, h) = (problem.width, problem.height);
+    instance.update_keeping(&problem.model, params, keep, w, h)?;
+    let keep = keep.and_then(|k| instance.geometry_of(k, w, h));
+    let key = instance.geometry().ok_or(FitError::BadConfig)?;
+    let triangles = problem.model.triangles();
+    let (projected, frames) = instance.projected_and_frames();
     let mut sink = ImageLikelihood::with_terms(image.image, image.pixel, image.background);
-    raster.render(instance.projected(), problem.model.triangles(), problem.width, problem.height, Cull::Clockwise, &mut sink)?;
+    let Some(frames) = frames else {
+        raster.render(projected, triangles, w, h, Cull::Clockwise, &mut sink)?;
+        return Ok(sink.eval());
+    };
+    // The same geometry as a kept frame (a colour or light change): re-shade it, same bits.
+    if frames.contains(&key) {
+        if frames.reshade(&key, projected, triangles, &mut sink) {
+            return Ok(sink.eval());
+        }
+        sink.reset();
+    }
+    let mut recorder = frames.recorder(key, keep, &mut sink);
+    raster.render(projected, triangles, w, h, Cull::Clockwise, &mut recorder)?;
+    recorder.finish();
     Ok(sink.eval())
 }
 
@@ -475,7 +506,7 @@ where
     if image.image.width() != problem.width || image.image.height() != problem.height {
         return Err(FitError::LengthMismatch);
     }
-    render_eval(problem, image, params, instance, raster)
+    render_eval(problem, image, params, None, instance, raster)
 }
 
 /// Runs `steps` delayed-acceptance steps on `prior × landmarks × image` from `init`, rendering

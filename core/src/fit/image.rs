@@ -63,6 +63,11 @@ impl<'a> TargetImage<'a> {
         Some(to_linear(p))
     }
 
+    /// The pixel at row-major index `index`, if inside.
+    pub fn pixel_at(&self, index: u32) -> Option<[u8; 3]> {
+        self.pixels.get(index as usize).copied()
+    }
+
     /// Row `y` (`width` pixels).
     pub fn row(&self, y: u32) -> Option<&'a [[u8; 3]]> {
         let w = self.width as usize;

@@ -11,6 +11,7 @@
 
 use super::image::{to_linear, BackgroundModel, ImageEval, TargetImage};
 use super::FitError;
+use crate::render::frame_cache::FragmentSink;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 use crate::Vec3;
 
@@ -70,6 +71,8 @@ pub struct ImageLikelihood<'a, 'b, P = GaussianPixel, B: ?Sized = BackgroundMode
     sum: f64,
     sq: f64,
     covered: u32,
+    /// The open tile's sums while a re-shaded frame arrives (log-likelihood, squared error, pixels).
+    tile: (f32, f32, u32),
 }
 
 impl<'a, 'b> ImageLikelihood<'a, 'b> {
@@ -82,7 +85,7 @@ impl<'a, 'b> ImageLikelihood<'a, 'b> {
 impl<'a, 'b, P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'a, 'b, P, B> {
     /// A sink comparing renders with `image` through the given pixel and background terms.
     pub fn with_terms(image: TargetImage<'a>, pixel: P, background: &'b B) -> Self {
-        Self { image, pixel, background, sum: 0.0, sq: 0.0, covered: 0 }
+        Self { image, pixel, background, sum: 0.0, sq: 0.0, covered: 0, tile: (0.0, 0.0, 0) }
     }
 
     /// Clears the sums before the next frame.
@@ -90,6 +93,7 @@ impl<'a, 'b, P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikeliho
         self.sum = 0.0;
         self.sq = 0.0;
         self.covered = 0;
+        self.tile = (0.0, 0.0, 0);
     }
 
     /// The sums of the frame(s) consumed since the last reset.
@@ -113,16 +117,53 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
                 if *t == NO_TRIANGLE {
                     continue;
                 }
-                let i = to_linear(*p);
-                let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
-                let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+                let (term, d2sum) = self.pixel_terms(*p, *c);
                 sq += d2sum;
-                sum += self.pixel.log_likelihood(i, *c, d2sum) - self.background.log_density(*p);
+                sum += term;
                 covered += 1;
             }
         }
+        self.add_tile(sum, sq, covered);
+    }
+}
+
+impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'_, '_, P, B> {
+    /// One covered pixel's `log p(I | R) − log b(I)` and `|I − R|²` (target `p`, rendered `c`).
+    #[inline(always)]
+    fn pixel_terms(&self, p: [u8; 3], c: Vec3) -> (f32, f32) {
+        let i = to_linear(p);
+        let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
+        let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+        (self.pixel.log_likelihood(i, c, d2sum) - self.background.log_density(p), d2sum)
+    }
+
+    /// Adds one tile's sums (accumulated in `f32` within the tile, in `f64` across tiles).
+    #[inline(always)]
+    fn add_tile(&mut self, sum: f32, sq: f32, covered: u32) {
         self.sum += f64::from(sum);
         self.sq += f64::from(sq);
         self.covered = self.covered.saturating_add(covered);
+    }
+}
+
+/// Re-shaded frames ([`crate::render::frame_cache::FrameCache::reshade`]) give the same sums as
+/// rendered ones: the same per-pixel terms, accumulated tile by tile in the same order.
+impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> FragmentSink for ImageLikelihood<'_, '_, P, B> {
+    fn fragment(&mut self, pixel: u32, color: Vec3) {
+        let Some(p) = self.image.pixel_at(pixel) else {
+            // Not a pixel of this image: the frame is not this image's (never for a matching key).
+            self.tile.0 = f32::NAN;
+            return;
+        };
+        let (term, d2sum) = self.pixel_terms(p, color);
+        self.tile.1 += d2sum;
+        self.tile.0 += term;
+        self.tile.2 += 1;
+    }
+
+    fn end_tile(&mut self) {
+        let (sum, sq, covered) = self.tile;
+        self.tile = (0.0, 0.0, 0);
+        self.add_tile(sum, sq, covered);
     }
 }

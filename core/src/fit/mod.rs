@@ -34,9 +34,10 @@ pub mod proposal;
 pub mod recipe;
 pub mod settings;
 
+pub use crate::model::instance::{Instance, InstanceBuffers, SpareBuffers};
 /// The morphable-model view under its old path (`gpmm_core::fit::morph`); it lives in [`crate::model`].
 pub use crate::model::morphable as morph;
-pub use crate::model::morphable::{Instance, InstanceBuffers, MorphableModel};
+pub use crate::model::morphable::MorphableModel;
 pub use chain::{
     filter_stage, image_chain, image_chain_observed, image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_observed,
     landmark_chain_with, run_chain, ChainState, FitResult, ImageProblem, LandmarksOnly, Problem, RenderedImage, SecondStage,

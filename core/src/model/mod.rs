@@ -1,14 +1,16 @@
 //! The model: low-rank linear bases ([`basis`]) and the borrowed morphable-model view with its
-//! cached per-vertex instance ([`morphable`]).
+//! cached per-vertex instance ([`morphable`], [`instance`]).
 //!
 //! The rest of the crate reads a model only through these types: the blob format builds a
 //! [`MorphableModel`] over its sections, the renderer draws an [`Instance`], the fitter moves
 //! its coefficients.
 
 pub mod basis;
+pub mod instance;
 pub mod morphable;
 pub mod params;
 
 pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
-pub use morphable::{Instance, InstanceBuffers, MorphableModel, MAX_LANDMARKS};
+pub use instance::{Instance, InstanceBuffers, SpareBuffers};
+pub use morphable::{MorphableModel, MAX_LANDMARKS};
 pub use params::FitParams;

@@ -1,9 +1,8 @@
-//! The borrowed model view used by the fitter, and the cached per-vertex instance.
+//! The borrowed model view used by the fitter (its cached per-vertex instance is in [`super::instance`]).
 
 use crate::error::FitError;
 use crate::model::basis::{Basis, Vec3};
-use crate::model::params::FitParams;
-use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, TriIndex};
+use crate::render::shading::TriIndex;
 
 /// Most landmarks a model or a fit target has.
 pub const MAX_LANDMARKS: usize = 128;
@@ -110,98 +109,5 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         }
         self.shape.add_vertices(coeffs, self.landmarks, out)?;
         Ok(n)
-    }
-}
-
-/// Caller-provided per-vertex buffers (each exactly one entry per model vertex).
-#[derive(Debug)]
-pub struct InstanceBuffers<'b> {
-    /// Model-space positions (mm).
-    pub positions: &'b mut [Vec3],
-    /// Albedos (linear RGB).
-    pub albedos: &'b mut [Vec3],
-    /// Model-space unit normals.
-    pub normals: &'b mut [Vec3],
-    /// Shaded and projected vertices, ready for the rasterizer.
-    pub projected: &'b mut [ProjectedVertex],
-}
-
-/// The per-vertex stage of a parameter vector, cached: a change of pose, focal length or light
-/// re-shades and re-projects only; shape and colour instances are recomputed only when their
-/// coefficients change.
-#[derive(Debug)]
-pub struct Instance<'b, const KS: usize, const KC: usize> {
-    bufs: InstanceBuffers<'b>,
-    shape_key: Option<heapless::Vec<f32, KS>>,
-    color_key: Option<heapless::Vec<f32, KC>>,
-    /// Shape instances computed so far (positions and normals).
-    pub shape_updates: u32,
-    /// Colour instances computed so far.
-    pub color_updates: u32,
-}
-
-impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
-    /// Wraps the buffers, checking that all have `vertices` entries.
-    pub fn new(bufs: InstanceBuffers<'b>, vertices: usize) -> Result<Self, FitError> {
-        let n = vertices;
-        if bufs.positions.len() != n || bufs.albedos.len() != n || bufs.normals.len() != n || bufs.projected.len() != n {
-            return Err(FitError::LengthMismatch);
-        }
-        Ok(Self { bufs, shape_key: None, color_key: None, shape_updates: 0, color_updates: 0 })
-    }
-
-    /// Brings the buffers up to date with `params` for a `width × height` image.
-    pub fn update<I: TriIndex>(
-        &mut self,
-        model: &MorphableModel<'_, I>,
-        params: &FitParams<KS, KC>,
-        width: u32,
-        height: u32,
-    ) -> Result<(), FitError> {
-        if self.bufs.positions.len() != model.vertices() {
-            return Err(FitError::LengthMismatch);
-        }
-        if self.shape_key.as_ref() != Some(&params.shape) {
-            self.shape_key = None;
-            model.shape_instance(params.shape_coeffs(), self.bufs.positions)?;
-            vertex_normals(self.bufs.positions, model.triangles(), self.bufs.normals)?;
-            self.shape_key = Some(params.shape.clone());
-            self.shape_updates = self.shape_updates.wrapping_add(1);
-        }
-        if self.color_key.as_ref() != Some(&params.color) {
-            self.color_key = None;
-            model.color_instance(params.color_coeffs(), self.bufs.albedos)?;
-            self.color_key = Some(params.color.clone());
-            self.color_updates = self.color_updates.wrapping_add(1);
-        }
-        shade_vertices(self.bufs.albedos, self.bufs.normals, &params.pose, &params.light, self.bufs.projected)?;
-        project_vertices(self.bufs.positions, &params.pose, &params.camera(width, height), self.bufs.projected)?;
-        Ok(())
-    }
-
-    /// Shaded, projected vertices of the last [`Instance::update`].
-    pub fn projected(&self) -> &[ProjectedVertex] {
-        self.bufs.projected
-    }
-
-    /// Model-space positions of the last update.
-    pub fn positions(&self) -> &[Vec3] {
-        self.bufs.positions
-    }
-
-    /// Model-space normals of the last update.
-    pub fn normals(&self) -> &[Vec3] {
-        self.bufs.normals
-    }
-
-    /// Albedos of the last update.
-    pub fn albedos(&self) -> &[Vec3] {
-        self.bufs.albedos
-    }
-
-    /// Forgets the cache (the next update recomputes everything).
-    pub fn invalidate(&mut self) {
-        self.shape_key = None;
-        self.color_key = None;
     }
 }

@@ -1,8 +1,10 @@
 //! Rendering: the pinhole [`camera`], the rigid [`pose`], spherical-harmonics [`light`], the
 //! per-vertex [`shading`] stage, the tiled [`raster`]izer and the [`tile`] buffers it hands to a
-//! [`tile::TileSink`] (an image, or a likelihood that never stores the frame).
+//! [`tile::TileSink`] (an image, or a likelihood that never stores the frame), and the
+//! [`frame_cache`] that re-shades a frame whose geometry did not change.
 
 pub mod camera;
+pub mod frame_cache;
 pub mod light;
 pub mod pose;
 pub mod raster;

@@ -326,7 +326,6 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
         *sx = E::ZERO - E::from_i32(dy) * E::from_i32(ONE);
         *sy = E::from_i32(dx) * E::from_i32(ONE);
     }
-    let [iw0, iw1, iw2] = a.inv_w;
     let [c0, c1, c2] = a.color;
     let inv_area = a.inv_area;
     let (lx0, lx1) = (clip[0] as usize, clip[1] as usize);
@@ -343,14 +342,12 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
         let mut e = e_row;
         for (((c, d), t), b) in crow.iter_mut().zip(drow.iter_mut()).zip(trow.iter_mut()).zip(brow.iter_mut()) {
             if (e[0] | e[1] | e[2]) >= E::ZERO {
-                let (l0, l1, l2) =
-                    ((e[0] + bias[0]).to_f32() * inv_area, (e[1] + bias[1]).to_f32() * inv_area, (e[2] + bias[2]).to_f32() * inv_area);
-                let iw = l0 * iw0 + l1 * iw1 + l2 * iw2;
+                let l = [(e[0] + bias[0]).to_f32() * inv_area, (e[1] + bias[1]).to_f32() * inv_area, (e[2] + bias[2]).to_f32() * inv_area];
+                let iw = interpolated_inv_w(l, a.inv_w);
                 if iw > *d {
-                    let r = 1.0 / iw;
-                    let (p0, p1, p2) = (l0 * iw0 * r, l1 * iw1 * r, l2 * iw2 * r);
+                    let [p0, p1, p2] = perspective_weights(l, a.inv_w, iw);
                     *d = iw;
-                    *c = [p0 * c0[0] + p1 * c1[0] + p2 * c2[0], p0 * c0[1] + p1 * c1[1] + p2 * c2[1], p0 * c0[2] + p1 * c1[2] + p2 * c2[2]];
+                    *c = blend([p0, p1, p2], [c0, c1, c2]);
                     if *t == NO_TRIANGLE {
                         newly += 1;
                     }
@@ -367,6 +364,64 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
         e_row[2] += step_y[2];
     }
     newly
+}
+
+/// `1 / w` at a pixel with screen-space barycentrics `l` of vertices with reciprocal depths `inv_w`.
+#[inline(always)]
+fn interpolated_inv_w(l: [f32; 3], inv_w: [f32; 3]) -> f32 {
+    l[0] * inv_w[0] + l[1] * inv_w[1] + l[2] * inv_w[2]
+}
+
+/// Perspective-correct weights from screen-space barycentrics `l` (`iw`: [`interpolated_inv_w`]).
+#[inline(always)]
+fn perspective_weights(l: [f32; 3], inv_w: [f32; 3], iw: f32) -> [f32; 3] {
+    let r = 1.0 / iw;
+    [l[0] * inv_w[0] * r, l[1] * inv_w[1] * r, l[2] * inv_w[2] * r]
+}
+
+/// The colour of a pixel: the vertex colours `c` blended with weights `p` (in the set-up's vertex
+/// order). The rasterizer and re-shading from a [`crate::render::frame_cache::FrameCache`] both
+/// use it, so both give the same bits.
+#[inline(always)]
+pub fn blend(p: [f32; 3], c: [Vec3; 3]) -> Vec3 {
+    let [p0, p1, p2] = p;
+    let [c0, c1, c2] = c;
+    [p0 * c0[0] + p1 * c1[0] + p2 * c2[0], p0 * c0[1] + p1 * c1[1] + p2 * c2[1], p0 * c0[2] + p1 * c1[2] + p2 * c2[2]]
+}
+
+/// The vertex ids (in the rasterizer's set-up order) and perspective-correct weights with which
+/// triangle `tri` colours pixel `(x, y)` of a `width × height` frame, exactly as
+/// [`TileRasterizer::render`] computes them (edge functions evaluated directly instead of
+/// stepped: the same integers, so the same bits). `None` if the triangle would not be drawn.
+pub fn fragment_weights<I: TriIndex>(
+    vertices: &[ProjectedVertex],
+    tri: &[I; 3],
+    x: u32,
+    y: u32,
+    width: u32,
+    height: u32,
+) -> Option<([u32; 3], [f32; 3])> {
+    let v = fetch(vertices, tri)?;
+    let s = setup(v, Cull::None, width, height).ok()?;
+    let [va, vb, vc] = v;
+    let [ia, ib, ic] = tri.map(|i| i.index() as u32);
+    let (ids, inv_w) =
+        if s.swapped { ([ia, ic, ib], [va.inv_w, vc.inv_w, vb.inv_w]) } else { ([ia, ib, ic], [va.inv_w, vb.inv_w, vc.inv_w]) };
+    let area = if s.small { s.area as i32 as f32 } else { s.area as f32 };
+    let inv_area = 1.0 / area;
+    let (cx, cy) = (i64::from(x as i32) * i64::from(ONE) + i64::from(HALF), i64::from(y as i32) * i64::from(ONE) + i64::from(HALF));
+    let mut l = [0.0f32; 3];
+    for (k, lk) in l.iter_mut().enumerate() {
+        let (pa, pb) = (s.p.get((k + 1) % 3)?, s.p.get((k + 2) % 3)?);
+        let (dx, dy) = (i64::from(pb[0] - pa[0]), i64::from(pb[1] - pa[1]));
+        let e = dx * (cy - i64::from(pa[1])) - dy * (cx - i64::from(pa[0]));
+        if e < 0 {
+            return None;
+        }
+        *lk = e.to_f32() * inv_area;
+    }
+    let iw = interpolated_inv_w(l, inv_w);
+    Some((ids, perspective_weights(l, inv_w, iw)))
 }
 
 /// The tile rasterizer: one `TW × TH` tile of buffers and a per-tile-row bin of `BIN` triangles.

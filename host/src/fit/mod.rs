@@ -23,9 +23,9 @@ pub mod register;
 use crate::gp::model::GpModel;
 use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
-use crate::render::{Background, HostRasterizer, ImageSink};
+use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
-    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, TargetImage, MAX_LANDMARKS,
+    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SpareBuffers, TargetImage, MAX_LANDMARKS,
 };
 use gpmm_core::{Cull, ProjectedVertex};
 use image::{RgbImage, Rgba, RgbaImage};
@@ -228,9 +228,13 @@ pub fn fit_prepared(
     let nv = mm.vertices();
     let (mut pos, mut alb, mut nor, mut proj) =
         (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![ProjectedVertex::INVALID; nv]);
+    let (mut pos2, mut alb2, mut nor2) = (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv]);
+    let mut frame_memory = FrameMemory::new(w, h);
     let mut inst =
         Instance::<KS, KC>::new(InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj }, nv)
-            .map_err(core("instance"))?;
+            .and_then(|i| i.with_spare(SpareBuffers { positions: &mut pos2, normals: &mut nor2, albedos: &mut alb2 }))
+            .map_err(core("instance"))?
+            .with_frame_cache(frame_memory.cache());
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 

@@ -11,6 +11,7 @@ pub mod figure;
 
 use crate::gp::model::GpModel;
 use crate::mesh::Mesh;
+use gpmm_core::frame_cache::{CachedFragment, FrameBuffers, FrameCache};
 use gpmm_core::{
     vertex_stage, Camera, Cull, FrameStats, ModelError, Pose, ProjectedVertex, RasterError, ShLight, Tile, TileRasterizer, TileSink, Vec3,
     VertexError,
@@ -478,5 +479,32 @@ mod tests {
         assert_eq!(to_u8(2.0), 255);
         assert_eq!(to_u8(0.5), 128);
         assert_eq!(to_u8(f32::NAN), 0);
+    }
+}
+
+/// Memory for the core's [`FrameCache`]: two frames of a `width × height` image (every pixel may
+/// be covered), allocated once per fit.
+#[derive(Debug)]
+pub struct FrameMemory {
+    fragments: [Vec<CachedFragment>; 2],
+    tile_ends: [Vec<u32>; 2],
+}
+
+impl FrameMemory {
+    /// Memory for frames of `width × height` pixels.
+    pub fn new(width: u32, height: u32) -> Self {
+        let pixels = width as usize * height as usize;
+        let tiles = (width as usize).div_ceil(TILE) * (height as usize).div_ceil(TILE);
+        Self {
+            fragments: [vec![CachedFragment::EMPTY; pixels], vec![CachedFragment::EMPTY; pixels]],
+            tile_ends: [vec![0; tiles], vec![0; tiles]],
+        }
+    }
+
+    /// A cache over this memory (empty).
+    pub fn cache(&mut self) -> FrameCache<'_> {
+        let [fa, fb] = &mut self.fragments;
+        let [ta, tb] = &mut self.tile_ends;
+        FrameCache::new(FrameBuffers { fragments: fa, tile_ends: ta }, FrameBuffers { fragments: fb, tile_ends: tb })
     }
 }

@@ -1,0 +1,160 @@
+//! Re-shading a cached frame gives the rasterizer's own sums to the bit, and a chain with spare
+//! instances and a frame cache is the chain without them.
+#![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+mod fit_support;
+
+use fit_support::*;
+use gpmm_core::fit::{
+    image_chain, image_log_likelihood, landmark_chain, BackgroundModel, FitParams, GaussianPixel, ImageEval, ImageProblem, Instance,
+    InstanceBuffers, LightSolveConfig, Mixture, Prior, Problem, SpareBuffers, TargetImage, DEFAULT_PIXEL_SIGMA,
+};
+use gpmm_core::frame_cache::{CachedFragment, FrameBuffers, FrameCache};
+use gpmm_core::{ProjectedVertex, ShLight, Vec3};
+use rand_core::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// Everything a cached instance borrows: two instances' per-vertex buffers and two frame slots.
+struct CachedBuffers {
+    main: [Vec<Vec3>; 3],
+    projected: Vec<ProjectedVertex>,
+    spare: [Vec<Vec3>; 3],
+    fragments: [Vec<CachedFragment>; 2],
+    tile_ends: [Vec<u32>; 2],
+}
+
+impl CachedBuffers {
+    fn new(n: usize) -> Self {
+        let v = || vec![[0.0f32; 3]; n];
+        let pixels = (W * H) as usize;
+        let tiles = (W as usize).div_ceil(16) * (H as usize).div_ceil(16);
+        Self {
+            main: [v(), v(), v()],
+            projected: vec![ProjectedVertex::INVALID; n],
+            spare: [v(), v(), v()],
+            fragments: [vec![CachedFragment::EMPTY; pixels], vec![CachedFragment::EMPTY; pixels]],
+            tile_ends: [vec![0; tiles], vec![0; tiles]],
+        }
+    }
+
+    fn instance(&mut self) -> Instance<'_, KS, KC> {
+        let n = self.projected.len();
+        let [pos, alb, nor] = &mut self.main;
+        let [pos2, alb2, nor2] = &mut self.spare;
+        let [fa, fb] = &mut self.fragments;
+        let [ta, tb] = &mut self.tile_ends;
+        let cache = FrameCache::new(FrameBuffers { fragments: fa, tile_ends: ta }, FrameBuffers { fragments: fb, tile_ends: tb });
+        Instance::new(InstanceBuffers { positions: pos, albedos: alb, normals: nor, projected: &mut self.projected }, n)
+            .unwrap()
+            .with_spare(SpareBuffers { positions: pos2, normals: nor2, albedos: alb2 })
+            .unwrap()
+            .with_frame_cache(cache)
+    }
+}
+
+fn bits(e: &ImageEval) -> (u32, u32, u32) {
+    (e.log_likelihood.to_bits(), e.rmse().to_bits(), e.covered)
+}
+
+#[test]
+fn reshading_gives_the_rendered_sums_to_the_bit() {
+    let synth = Synth::new(11);
+    let truth = truth();
+    let pixels = render_target(&synth, &truth);
+    let points = project_landmarks(&synth.model(), &truth);
+    let valid = all_valid(points.len());
+    let model = synth.model();
+    let prior = Prior::around(&truth);
+    let mixture = Mixture::image_default(W as f32);
+    let problem =
+        Problem { model, landmarks: target(&points, &valid), prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
+    let image = TargetImage::new(&pixels, W, H).unwrap();
+    let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap(),
+        background: &bg,
+        light_solve: LightSolveConfig::default(),
+    };
+
+    let mut plain_bufs = Buffers::new(synth.vertices());
+    let mut plain = plain_bufs.instance();
+    let mut cached_bufs = CachedBuffers::new(synth.vertices());
+    let mut cached = cached_bufs.instance();
+    let mut raster = Raster::new();
+
+    // A start away from the truth, then colour, light and pose changes in turn.
+    let mut start = truth.clone();
+    start.pose.yaw += 0.05;
+    start.shape_coeffs_mut()[0] = 0.2;
+    let mut recoloured = start.clone();
+    recoloured.color_coeffs_mut().copy_from_slice(&[-0.4, 0.9, 0.1, -0.2]);
+    let mut relit = recoloured.clone();
+    relit.light = ShLight::from_ambient_diffuse([0.5, 0.55, 0.6], [0.5, 0.4, 0.3], [-0.3, 0.4, 0.9]);
+    let mut turned = relit.clone();
+    turned.pose.pitch += 0.03;
+    let mut reshaped = turned.clone();
+    reshaped.shape_coeffs_mut()[1] = -1.2;
+    let sequence: [&FitParams<KS, KC>; 7] = [&start, &recoloured, &relit, &turned, &relit, &reshaped, &start];
+    for (i, p) in sequence.iter().enumerate() {
+        let want = image_log_likelihood(&problem, &ip, p, &mut plain, &mut raster).unwrap();
+        let got = image_log_likelihood(&problem, &ip, p, &mut cached, &mut raster).unwrap();
+        assert_eq!(bits(&got), bits(&want), "state {i}: {got:?} vs {want:?}");
+        assert!(want.covered > 2000);
+    }
+    // The colour and light changes were re-shaded (start -> recoloured -> relit; relit again
+    // after the pose change comes back to a kept geometry); the rest were rendered.
+    let frames = cached.frames().unwrap();
+    assert_eq!((frames.reshaded, frames.recorded), (3, 4), "re-shaded / rendered frames");
+}
+
+fn chain(cached: bool, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) {
+    let synth = Synth::new(11);
+    let truth = truth();
+    let pixels = render_target(&synth, &truth);
+    let points = project_landmarks(&synth.model(), &truth);
+    let valid = all_valid(points.len());
+    let model = synth.model();
+    let lm = target(&points, &valid);
+    let mut init = truth.clone();
+    init.pose.yaw += 0.08;
+    init.shape_coeffs_mut().fill(0.0);
+    init.color_coeffs_mut().fill(0.0);
+    init.light = ShLight::ambient([0.8; 3]);
+    let prior = Prior::around(&init);
+    let lm_mix = Mixture::landmark_default(W as f32);
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H, silhouette: None };
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let lm_fit = landmark_chain(&problem, &init, 500, &mut rng).unwrap();
+    let img_mix = Mixture::image_default(W as f32);
+    let problem = Problem { mixture: &img_mix, ..problem };
+    let image = TargetImage::new(&pixels, W, H).unwrap();
+    let bg = BackgroundModel::from_image(&image, 0.01).unwrap();
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap(),
+        background: &bg,
+        light_solve: LightSolveConfig::default(),
+    };
+    let mut raster = Raster::new();
+    if cached {
+        let mut bufs = CachedBuffers::new(synth.vertices());
+        let mut inst = bufs.instance();
+        let r = image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng).unwrap();
+        (r, inst.frames().unwrap().reshaded)
+    } else {
+        let mut bufs = Buffers::new(synth.vertices());
+        let mut inst = bufs.instance();
+        (image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng).unwrap(), 0)
+    }
+}
+
+#[test]
+fn a_chain_with_caches_is_the_chain_without() {
+    let (plain, _) = chain(false, 5);
+    let (cached, reshaded) = chain(true, 5);
+    // Debug prints every float in its shortest exact form: equal strings, equal bits.
+    assert_eq!(format!("{cached:?}"), format!("{plain:?}"));
+    assert!(reshaded > 30, "colour and light proposals are re-shaded ({reshaded})");
+}
