@@ -17,7 +17,7 @@ pub struct DeviceProfile {
     /// Tile side of the device's renderer (px); the host's parity runs use the same tiles so the
     /// likelihood sums in the same order.
     pub tile: usize,
-    /// Triangles binned per tile row (8 bytes each).
+    /// Triangles binned per frame, or per tile row if a frame's do not fit (12 bytes each).
     pub bin: usize,
     /// `Vec3` entries of the device's vertex pool: a fit takes three per model vertex (positions,
     /// albedos, normals), a render one (normals).

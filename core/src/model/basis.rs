@@ -61,17 +61,11 @@ impl<'a> FactoredBasis<'a> {
         if self.vertices == 0 {
             return Ok(());
         }
-        for ((c, dir), field) in coeffs.iter().zip(self.directions).zip(self.fields.chunks_exact(self.vertices)) {
-            if *c == 0.0 {
-                continue;
-            }
-            let d = [c * dir[0], c * dir[1], c * dir[2]];
-            for (o, f) in out.iter_mut().zip(field) {
-                o[0] += d[0] * f;
-                o[1] += d[1] * f;
-                o[2] += d[2] * f;
-            }
-        }
+        let comps = coeffs.iter().zip(self.directions).zip(self.fields.chunks_exact(self.vertices));
+        fold_factored_all(
+            comps.filter(|((c, _), _)| **c != 0.0).map(|((c, dir), field)| ([c * dir[0], c * dir[1], c * dir[2]], field)),
+            out,
+        );
         Ok(())
     }
 
@@ -207,7 +201,46 @@ impl QuantValues<'_> {
     }
 }
 
-/// Multiply-adds `out[v][a] += d[a] · q[v]` (factored) over one component's values.
+/// Multiply-adds the components `(d, values)` in turn, four per pass over `out`: each entry
+/// still sums the components in their order (the same bits as one pass per component), with a
+/// quarter of the loads and stores of `out`.
+fn fold_factored_all<'v, Q: Copy + Into<f32> + 'v>(comps: impl Iterator<Item = (Vec3, &'v [Q])>, out: &mut [Vec3]) {
+    let mut block: [(Vec3, &[Q]); 4] = [([0.0; 3], &[]); 4];
+    let mut filled = 0;
+    for comp in comps {
+        if let Some(slot) = block.get_mut(filled) {
+            *slot = comp;
+            filled += 1;
+        }
+        if filled == block.len() {
+            fold_factored4(&block, out);
+            filled = 0;
+        }
+    }
+    for (d, values) in block.iter().take(filled) {
+        fold_factored(*d, values, out);
+    }
+}
+
+/// Four components of [`fold_factored`] in one pass (one at a time if a field is short).
+fn fold_factored4<Q: Copy + Into<f32>>(block: &[(Vec3, &[Q]); 4], out: &mut [Vec3]) {
+    let [(d0, f0), (d1, f1), (d2, f2), (d3, f3)] = *block;
+    let n = out.len();
+    let (Some(f0), Some(f1), Some(f2), Some(f3)) = (f0.get(..n), f1.get(..n), f2.get(..n), f3.get(..n)) else {
+        for (d, values) in block {
+            fold_factored(*d, values, out);
+        }
+        return;
+    };
+    for ((((o, &q0), &q1), &q2), &q3) in out.iter_mut().zip(f0).zip(f1).zip(f2).zip(f3) {
+        let (q0, q1, q2, q3): (f32, f32, f32, f32) = (q0.into(), q1.into(), q2.into(), q3.into());
+        o[0] = o[0] + d0[0] * q0 + d1[0] * q1 + d2[0] * q2 + d3[0] * q3;
+        o[1] = o[1] + d0[1] * q0 + d1[1] * q1 + d2[1] * q2 + d3[1] * q3;
+        o[2] = o[2] + d0[2] * q0 + d1[2] * q1 + d2[2] * q2 + d3[2] * q3;
+    }
+}
+
+/// Multiply-adds `out[v] += d · q[v]` (factored) over one component's values.
 fn fold_factored<Q: Copy + Into<f32>>(d: Vec3, values: &[Q], out: &mut [Vec3]) {
     for (o, &q) in out.iter_mut().zip(values) {
         let q: f32 = q.into();
@@ -301,16 +334,15 @@ impl<'a> QuantizedBasis<'a> {
         let n = self.vertices;
         match self.directions {
             Some(dirs) => {
-                for (k, ((c, s), e)) in coeffs.iter().zip(self.scales).zip(dirs).enumerate() {
-                    let m = c * s;
-                    if m == 0.0 {
-                        continue;
+                let comps =
+                    coeffs.iter().zip(self.scales).zip(dirs).map(|((c, s), e)| (c * s, e)).enumerate().filter(|(_, (m, _))| *m != 0.0);
+                let d = |m: f32, e: &Vec3| [m * e[0], m * e[1], m * e[2]];
+                match self.values {
+                    QuantValues::I8(v) => {
+                        fold_factored_all(comps.map(|(k, (m, e))| (d(m, e), v.get(k * n..(k + 1) * n).unwrap_or(&[]))), out)
                     }
-                    let d = [m * e[0], m * e[1], m * e[2]];
-                    let range = k * n..(k + 1) * n;
-                    match self.values {
-                        QuantValues::I8(v) => fold_factored(d, v.get(range).unwrap_or(&[]), out),
-                        QuantValues::I16(v) => fold_factored(d, v.get(range).unwrap_or(&[]), out),
+                    QuantValues::I16(v) => {
+                        fold_factored_all(comps.map(|(k, (m, e))| (d(m, e), v.get(k * n..(k + 1) * n).unwrap_or(&[]))), out)
                     }
                 }
             }
@@ -362,7 +394,51 @@ impl<'a> QuantizedBasis<'a> {
     }
 }
 
-/// Multiply-adds `out[i][a] += d[a] · values[ids[i]]` (factored) over one component's values.
+/// [`gather_factored`] of the components `(d, values)` in turn, four per pass over `ids` (each
+/// entry sums the components in their order: the same bits as one pass per component).
+fn gather_factored_all<'v, Q: Copy + Into<f32> + 'v>(comps: impl Iterator<Item = (Vec3, &'v [Q])>, ids: &[u32], out: &mut [Vec3]) {
+    let mut block: [(Vec3, &[Q]); 4] = [([0.0; 3], &[]); 4];
+    let mut filled = 0;
+    for comp in comps {
+        if let Some(slot) = block.get_mut(filled) {
+            *slot = comp;
+            filled += 1;
+        }
+        if filled == block.len() {
+            gather_factored4(&block, ids, out);
+            filled = 0;
+        }
+    }
+    for (d, values) in block.iter().take(filled) {
+        gather_factored(*d, values, ids, out);
+    }
+}
+
+/// Four components of [`gather_factored`] in one pass.
+fn gather_factored4<Q: Copy + Into<f32>>(block: &[(Vec3, &[Q]); 4], ids: &[u32], out: &mut [Vec3]) {
+    let [(d0, f0), (d1, f1), (d2, f2), (d3, f3)] = *block;
+    for (o, &v) in out.iter_mut().zip(ids) {
+        let v = v as usize;
+        let (Some(&q0), Some(&q1), Some(&q2), Some(&q3)) = (f0.get(v), f1.get(v), f2.get(v), f3.get(v)) else {
+            // A short field: component by component, as one pass each would.
+            for (d, values) in block {
+                if let Some(&q) = values.get(v) {
+                    let q: f32 = q.into();
+                    o[0] += d[0] * q;
+                    o[1] += d[1] * q;
+                    o[2] += d[2] * q;
+                }
+            }
+            continue;
+        };
+        let (q0, q1, q2, q3): (f32, f32, f32, f32) = (q0.into(), q1.into(), q2.into(), q3.into());
+        o[0] = o[0] + d0[0] * q0 + d1[0] * q1 + d2[0] * q2 + d3[0] * q3;
+        o[1] = o[1] + d0[1] * q0 + d1[1] * q1 + d2[1] * q2 + d3[1] * q3;
+        o[2] = o[2] + d0[2] * q0 + d1[2] * q1 + d2[2] * q2 + d3[2] * q3;
+    }
+}
+
+/// Multiply-adds `out[i] += d · values[ids[i]]` (factored) over one component's values.
 fn gather_factored<Q: Copy + Into<f32>>(d: Vec3, values: &[Q], ids: &[u32], out: &mut [Vec3]) {
     for (o, &v) in out.iter_mut().zip(ids) {
         if let Some(&q) = values.get(v as usize) {
@@ -438,13 +514,25 @@ impl Basis<'_> {
         }
         match self {
             Basis::Factored(b) => {
-                for ((c, e), field) in coeffs.iter().zip(b.directions).zip(b.fields.chunks_exact(n.max(1))) {
-                    gather_factored([c * e[0], c * e[1], c * e[2]], field, ids, out);
-                }
+                let comps = coeffs.iter().zip(b.directions).zip(b.fields.chunks_exact(n.max(1)));
+                gather_factored_all(comps.map(|((c, e), field)| ([c * e[0], c * e[1], c * e[2]], field)), ids, out);
             }
             Basis::Dense(b) => {
                 for (c, comp) in coeffs.iter().zip(b.values.chunks_exact((3 * n).max(1))) {
                     gather_dense(*c, comp, ids, out);
+                }
+            }
+            Basis::Quantized(b) if b.directions.is_some() => {
+                let dirs = b.directions.unwrap_or(&[]);
+                let comps = coeffs.iter().zip(b.scales).zip(dirs).map(|((c, s), e)| (c * s, e)).enumerate();
+                let d = |m: f32, e: &Vec3| [m * e[0], m * e[1], m * e[2]];
+                match b.values {
+                    QuantValues::I8(v) => {
+                        gather_factored_all(comps.map(|(k, (m, e))| (d(m, e), v.get(k * n..(k + 1) * n).unwrap_or(&[]))), ids, out)
+                    }
+                    QuantValues::I16(v) => {
+                        gather_factored_all(comps.map(|(k, (m, e))| (d(m, e), v.get(k * n..(k + 1) * n).unwrap_or(&[]))), ids, out)
+                    }
                 }
             }
             Basis::Quantized(b) => {

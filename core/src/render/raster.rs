@@ -1,14 +1,16 @@
 //! Tile-based, fixed-memory triangle rasterizer.
 //!
-//! Per frame, the image (any size up to [`MAX_IMAGE_SIZE`]) is walked in rows of `TH`-pixel tiles.
-//! For each tile row, one scan over the triangle list (a float pre-test on the vertices' y, then
-//! the exact set-up for those that pass) collects the triangles whose bounding box meets the row
-//! into a fixed-capacity bin of `BIN` entries (the same scans classify every triangle once for
-//! [`FrameStats`]); each `TW × TH` tile of the row then rasterizes the binned triangles that
-//! overlap it into the tile buffers, and the finished tile is handed to a [`TileSink`]. If a row's bin overflows, every tile of that row falls back to
-//! scanning the whole triangle list (slower, never lossy; counted in [`FrameStats::overflow_rows`]).
-//! `BIN = 0` always takes that path ("iterate over all triangles per tile"). Memory is the tile
-//! buffers plus the bin: nothing scales with the image or the mesh.
+//! Per frame, one scan over the triangle list sets every triangle up once (validation, fixed-point
+//! snapping, winding, bounding box; it also classifies every triangle for [`FrameStats`]) and
+//! collects the drawn ones, in list order, into a fixed-capacity bin of `BIN` entries (index and
+//! box). The image is then walked in rows of `TH`-pixel tiles; each `TW × TH` tile rasterizes the
+//! binned triangles whose box overlaps it into the tile buffers, and the finished tile is handed
+//! to a [`TileSink`]. If the frame's drawn triangles do not fit, each tile row bins its own
+//! (a float pre-test on the vertices' y, then the set-up); if a row's do not fit either, every
+//! tile of that row scans the whole triangle list (slower, never lossy; counted in
+//! [`FrameStats::overflow_rows`]). `BIN = 0` always takes that path ("iterate over all triangles
+//! per tile"). The three paths draw the same triangles in the same order: the same tiles. Memory
+//! is the tile buffers plus the bin: nothing scales with the image or the mesh.
 //!
 //! Rasterization:
 //! - Vertices snap to fixed point with [`SUBPIXEL_BITS`] fractional bits (round half away from
@@ -99,12 +101,21 @@ pub struct FrameStats {
 #[derive(Debug, Clone, Copy)]
 struct BinEntry {
     tri: u32,
+    /// Inclusive pixel bounds of the triangle's box in the image.
     x0: u16,
     x1: u16,
+    y0: u16,
+    y1: u16,
 }
 
 impl BinEntry {
-    const EMPTY: Self = Self { tri: 0, x0: 0, x1: 0 };
+    const EMPTY: Self = Self { tri: 0, x0: 0, x1: 0, y0: 0, y1: 0 };
+
+    /// The entry of triangle `tri` with set-up `s` (bounds are below [`MAX_IMAGE_SIZE`]).
+    fn new(tri: u32, s: &Setup) -> Self {
+        let [x0, x1, y0, y1] = s.bbox.map(|b| b as u16);
+        Self { tri, x0, x1, y0, y1 }
+    }
 }
 
 /// Fixed-point triangle, oriented to positive area, with its pixel bounding box in the image.
@@ -426,8 +437,8 @@ pub fn fragment_weights<I: TriIndex>(
 
 /// The tile rasterizer: one `TW × TH` tile of buffers and a per-tile-row bin of `BIN` triangles.
 ///
-/// RAM: `size_of::<Self>()` ≈ `28 · TW · TH + 8 · BIN` bytes (colour 12, depth 4, triangle id 4 and
-/// barycentrics 8 bytes per tile pixel; 8 bytes per bin entry). Create it once (it can live in a
+/// RAM: `size_of::<Self>()` ≈ `28 · TW · TH + 12 · BIN` bytes (colour 12, depth 4, triangle id 4 and
+/// barycentrics 8 bytes per tile pixel; 12 bytes per bin entry). Create it once (it can live in a
 /// `static`, see [`TileRasterizer::new`]) and reuse it for every frame.
 #[derive(Debug, Clone)]
 pub struct TileRasterizer<const TW: usize, const TH: usize, const BIN: usize> {
@@ -478,74 +489,87 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
         }
         let th = TH as u32;
         let frame = Frame { vertices, triangles, width, height, cull };
+        // One set-up per triangle: validation, statistics and, if they all fit, the bin of the frame.
+        let listed = self.bin_frame(&frame, &mut stats)?;
         let mut ty0 = 0u32;
         while ty0 < height {
             let row = RowSpan { y0: ty0, rows: th.min(height - ty0) };
-            let (n, overflow) = self.bin_row(&frame, row, &mut stats)?;
-            self.tile_row(&frame, row, n, overflow, &mut stats, sink);
+            match listed {
+                Some(n) => self.tile_row(&frame, row, Binned::Frame(n), &mut stats, sink),
+                None => {
+                    let binned = self.bin_row(&frame, row);
+                    self.tile_row(&frame, row, binned, &mut stats, sink);
+                }
+            }
             ty0 += row.rows;
         }
         Ok(stats)
     }
 
-    /// Scans the triangle list and bins, in list order, the triangles meeting tile row `row`;
-    /// returns the entry count and whether the bin overflowed (binning stops, the scan goes on).
-    ///
-    /// Statistics: each triangle is classified exactly once per frame, in the scan of the first
-    /// tile row whose [`may_meet_rows`] pre-test it passes, or in the first row's scan if it passes
-    /// none. The first row's scan also validates every index, so errors come before any tile.
-    fn bin_row<I: TriIndex>(&mut self, f: &Frame<'_, I>, row: RowSpan, stats: &mut FrameStats) -> Result<(usize, bool), RasterError> {
-        let (ry0, ry1) = row.bounds();
-        let first = ry0 == 0;
-        let (py0, py1) = (ry0 - TH as i32, ry0 - 1);
-        let last = f.height as i32 - 1;
+    /// Sets up every triangle once: checks the indices, classifies each triangle for the
+    /// statistics and bins, in list order, the drawn ones with their boxes. `None` if they do not
+    /// all fit (the rows then bin for themselves).
+    fn bin_frame<I: TriIndex>(&mut self, f: &Frame<'_, I>, stats: &mut FrameStats) -> Result<Option<usize>, RasterError> {
         let mut n = 0usize;
         let mut overflow = false;
         for (id, tri) in (0u32..).zip(f.triangles) {
-            let v = match fetch(f.vertices, tri) {
-                Some(v) => v,
-                None if first => return Err(RasterError::IndexOutOfRange),
-                None => continue,
-            };
-            let meets = may_meet_rows(v, ry0, ry1);
-            let home = if first { meets || !may_meet_rows(v, 0, last) } else { meets && !may_meet_rows(v, py0, py1) };
-            if !meets && !home {
-                continue;
-            }
+            let v = fetch(f.vertices, tri).ok_or(RasterError::IndexOutOfRange)?;
             let s = setup(v, f.cull, f.width, f.height);
-            if home {
-                classify_into(stats, s.as_ref().map(|_| ()).map_err(|r| *r));
-            }
+            classify_into(stats, s.as_ref().map(|_| ()).map_err(|r| *r));
             let Ok(s) = s else { continue };
-            if overflow || !meets || s.bbox[3] < ry0 || s.bbox[2] > ry1 {
+            if overflow {
                 continue;
             }
             match self.bin.get_mut(n) {
                 Some(slot) => {
-                    *slot = BinEntry { tri: id, x0: s.bbox[0] as u16, x1: s.bbox[1] as u16 };
+                    *slot = BinEntry::new(id, &s);
                     n += 1;
                 }
-                // Keep scanning (for the statistics), without binning.
+                // Keep scanning (indices and statistics), without binning.
                 None => overflow = true,
             }
         }
-        Ok((n, overflow))
+        Ok((!overflow).then_some(n))
     }
 
-    /// Renders the tiles of one tile row from the first `n` bin entries, or, if the bin
-    /// `overflow`ed, from a scan of the whole list per tile.
+    /// Scans the triangle list and bins, in list order, the triangles meeting tile row `row`
+    /// (after the frame's bin overflowed); [`Binned::Overflow`] if they do not fit either.
+    fn bin_row<I: TriIndex>(&mut self, f: &Frame<'_, I>, row: RowSpan) -> Binned {
+        let (ry0, ry1) = row.bounds();
+        let mut n = 0usize;
+        for (id, tri) in (0u32..).zip(f.triangles) {
+            let Some(v) = fetch(f.vertices, tri) else { continue };
+            if !may_meet_rows(v, ry0, ry1) {
+                continue;
+            }
+            let Ok(s) = setup(v, f.cull, f.width, f.height) else { continue };
+            if s.bbox[3] < ry0 || s.bbox[2] > ry1 {
+                continue;
+            }
+            match self.bin.get_mut(n) {
+                Some(slot) => {
+                    *slot = BinEntry::new(id, &s);
+                    n += 1;
+                }
+                None => return Binned::Overflow,
+            }
+        }
+        Binned::Row(n)
+    }
+
+    /// Renders the tiles of one tile row from the bin's first entries (the frame's or the row's),
+    /// or, if the row's bin overflowed, from a scan of the whole list per tile.
     fn tile_row<I: TriIndex, S: TileSink<TW, TH>>(
         &mut self,
         f: &Frame<'_, I>,
         row: RowSpan,
-        n: usize,
-        overflow: bool,
+        binned: Binned,
         stats: &mut FrameStats,
         sink: &mut S,
     ) {
         let (ry0, ry1) = row.bounds();
         let tw = TW as u32;
-        if overflow {
+        if binned == Binned::Overflow {
             stats.overflow_rows += 1;
         }
         let mut tx0 = 0u32;
@@ -553,7 +577,11 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
             let cols = tw.min(f.width - tx0);
             self.tile.reset(tx0, row.y0, cols, row.rows);
             let tx1 = tx0 + cols - 1;
-            if overflow {
+            let entries = match binned {
+                Binned::Frame(n) | Binned::Row(n) => n,
+                Binned::Overflow => 0,
+            };
+            if binned == Binned::Overflow {
                 for (id, tri) in (0u32..).zip(f.triangles) {
                     let Some(v) = fetch(f.vertices, tri) else { continue };
                     if !may_meet_rows(v, ry0, ry1) {
@@ -563,16 +591,16 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
                         stats.covered_pixels += raster(&mut self.tile, &s, v, id);
                     }
                 }
-            } else {
-                for e in self.bin.iter().take(n) {
-                    if u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1 {
-                        continue;
-                    }
-                    let Some(v) = f.triangles.get(e.tri as usize).and_then(|t| fetch(f.vertices, t)) else { continue };
-                    // Binned triangles passed `validate` and the winding test: only the geometry is redone.
-                    if let Ok(s) = geometry(v, f.cull, f.width, f.height) {
-                        stats.covered_pixels += raster(&mut self.tile, &s, v, e.tri);
-                    }
+            }
+            for e in self.bin.iter().take(entries) {
+                let outside_x = u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1;
+                if outside_x || i32::from(e.y1) < ry0 || i32::from(e.y0) > ry1 {
+                    continue;
+                }
+                let Some(v) = f.triangles.get(e.tri as usize).and_then(|t| fetch(f.vertices, t)) else { continue };
+                // Binned triangles passed `validate` and the winding test: only the geometry is redone.
+                if let Ok(s) = geometry(v, f.cull, f.width, f.height) {
+                    stats.covered_pixels += raster(&mut self.tile, &s, v, e.tri);
                 }
             }
             sink.consume(&self.tile);
@@ -580,6 +608,17 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
             tx0 += cols;
         }
     }
+}
+
+/// What the bin holds for a tile row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Binned {
+    /// The first `n` entries are every drawn triangle of the frame.
+    Frame(usize),
+    /// The first `n` entries are the triangles meeting this row.
+    Row(usize),
+    /// The row's triangles did not fit: its tiles scan the whole list.
+    Overflow,
 }
 
 /// The inputs of one frame.
