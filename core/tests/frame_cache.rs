@@ -1,5 +1,5 @@
 //! Re-shading a cached frame gives the rasterizer's own sums to the bit, and a chain with spare
-//! instances and a frame cache is the chain without them.
+//! instances, a shading cache and a frame cache is the chain without them.
 #![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
@@ -11,6 +11,8 @@ use gpmm_core::fit::{
     InstanceBuffers, LightSolveConfig, Mixture, Prior, Problem, SpareBuffers, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
 use gpmm_core::frame_cache::{CachedFragment, FrameBuffers, FrameCache};
+use gpmm_core::light::SH_COEFFS;
+use gpmm_core::shading::{ShadingBuffers, ShadingCache};
 use gpmm_core::{ProjectedVertex, ShLight, Vec3};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -22,6 +24,8 @@ struct CachedBuffers {
     spare: [Vec<Vec3>; 3],
     fragments: [Vec<CachedFragment>; 2],
     tile_ends: [Vec<u32>; 2],
+    basis: Vec<[f32; SH_COEFFS]>,
+    irradiance: Vec<Vec3>,
 }
 
 impl CachedBuffers {
@@ -35,6 +39,8 @@ impl CachedBuffers {
             spare: [v(), v(), v()],
             fragments: [vec![CachedFragment::EMPTY; pixels], vec![CachedFragment::EMPTY; pixels]],
             tile_ends: [vec![0; tiles], vec![0; tiles]],
+            basis: vec![[0.0; SH_COEFFS]; n],
+            irradiance: v(),
         }
     }
 
@@ -50,6 +56,7 @@ impl CachedBuffers {
             .with_spare(SpareBuffers { positions: pos2, normals: nor2, albedos: alb2 })
             .unwrap()
             .with_frame_cache(cache)
+            .with_shading_cache(ShadingCache::new(ShadingBuffers { basis: &mut self.basis, irradiance: &mut self.irradiance }, n).unwrap())
     }
 }
 
@@ -157,4 +164,36 @@ fn a_chain_with_caches_is_the_chain_without() {
     // Debug prints every float in its shortest exact form: equal strings, equal bits.
     assert_eq!(format!("{cached:?}"), format!("{plain:?}"));
     assert!(reshaded > 30, "colour and light proposals are re-shaded ({reshaded})");
+}
+
+#[test]
+fn the_shading_cache_gives_shade_vertices_colours_and_errors() {
+    use gpmm_core::{shade_vertices, Pose, VertexError};
+    let n = 50;
+    let normals: Vec<Vec3> = (0..n).map(|i| [(i as f32 * 0.37).sin(), (i as f32 * 0.11).cos(), 0.5 + (i % 7) as f32 * 0.1]).collect();
+    let albedo_a: Vec<Vec3> = (0..n).map(|i| [0.2 + (i % 5) as f32 * 0.1, 0.3, 0.7 - (i % 3) as f32 * 0.1]).collect();
+    let albedo_b: Vec<Vec3> = albedo_a.iter().map(|a| [a[2], a[0], a[1]]).collect();
+    let pose_a = Pose { yaw: 0.3, pitch: -0.1, roll: 0.05, translation: [0.0, 0.0, -500.0] };
+    let pose_b = Pose { yaw: 0.31, ..pose_a };
+    let light_a = ShLight::from_ambient_diffuse([0.6; 3], [0.4, 0.3, 0.2], [0.2, 0.5, 0.8]);
+    let light_b = ShLight::from_ambient_diffuse([0.5; 3], [0.5, 0.3, 0.2], [-0.2, 0.5, 0.8]);
+    let (mut basis, mut irradiance) = (vec![[0.0; SH_COEFFS]; n], vec![[0.0; 3]; n]);
+    let mut cache = ShadingCache::new(ShadingBuffers { basis: &mut basis, irradiance: &mut irradiance }, n).unwrap();
+    let steps =
+        [(&albedo_a, &pose_a, &light_a), (&albedo_b, &pose_a, &light_a), (&albedo_b, &pose_a, &light_b), (&albedo_a, &pose_b, &light_b)];
+    for (i, (albedos, pose, light)) in steps.into_iter().enumerate() {
+        let mut want = vec![ProjectedVertex::INVALID; n];
+        let mut got = vec![ProjectedVertex::INVALID; n];
+        shade_vertices(albedos, &normals, pose, light, &mut want).unwrap();
+        cache.shade(albedos, &normals, 1, pose, light, &mut got).unwrap();
+        let bits = |v: &[ProjectedVertex]| v.iter().map(|p| p.color.map(f32::to_bits)).collect::<Vec<_>>();
+        assert_eq!(bits(&got), bits(&want), "step {i}");
+    }
+    // A non-finite albedo is refused as shade_vertices refuses it, from a cached state too.
+    let mut bad = albedo_a.clone();
+    bad[3][1] = f32::NAN;
+    let mut out = vec![ProjectedVertex::INVALID; n];
+    assert_eq!(shade_vertices(&bad, &normals, &pose_b, &light_b, &mut out), Err(VertexError::NonFinite));
+    assert_eq!(cache.shade(&bad, &normals, 1, &pose_b, &light_b, &mut out), Err(VertexError::NonFinite));
+    assert_eq!(cache.shade(&albedo_a, &normals[1..], 1, &pose_b, &light_b, &mut out), Err(VertexError::LengthMismatch));
 }

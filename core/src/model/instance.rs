@@ -13,7 +13,7 @@ use crate::model::basis::Vec3;
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
 use crate::render::frame_cache::{FrameCache, GeometryKey};
-use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, TriIndex};
+use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, ShadingCache, TriIndex};
 
 /// Caller-provided per-vertex buffers (each exactly one entry per model vertex).
 #[derive(Debug)]
@@ -76,6 +76,7 @@ pub struct Instance<'b, const KS: usize, const KC: usize> {
     geometry: Option<GeometryKey>,
     serial: u64,
     frames: Option<FrameCache<'b>>,
+    shading_cache: Option<ShadingCache<'b>>,
     /// Shape instances computed so far (positions and normals).
     pub shape_updates: u32,
     /// Colour instances computed so far.
@@ -98,6 +99,7 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
             geometry: None,
             serial: 0,
             frames: None,
+            shading_cache: None,
             shape_updates: 0,
             color_updates: 0,
         })
@@ -117,6 +119,13 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
     /// colour or light (see [`crate::render::frame_cache`]).
     pub fn with_frame_cache(mut self, frames: FrameCache<'b>) -> Self {
         self.frames = Some(frames);
+        self
+    }
+
+    /// Keeps the rotated normals' Lambert bases and the irradiance in `cache`, so that a change of
+    /// colour or light re-shades without recomputing them (see [`ShadingCache`]).
+    pub fn with_shading_cache(mut self, cache: ShadingCache<'b>) -> Self {
+        self.shading_cache = Some(cache);
         self
     }
 
@@ -155,7 +164,10 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
         };
         if self.shading != Some(shading) {
             self.shading = None;
-            shade_vertices(self.bufs.albedos, self.bufs.normals, &params.pose, &params.light, self.bufs.projected)?;
+            match self.shading_cache.as_mut() {
+                Some(c) => c.shade(self.bufs.albedos, self.bufs.normals, shape, &params.pose, &params.light, self.bufs.projected)?,
+                None => shade_vertices(self.bufs.albedos, self.bufs.normals, &params.pose, &params.light, self.bufs.projected)?,
+            }
             self.shading = Some(shading);
         }
         let geometry = GeometryKey::new(shape, &params.pose, params.focal, width, height);
@@ -281,6 +293,9 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
         self.geometry = None;
         if let Some(f) = self.frames.as_mut() {
             f.clear();
+        }
+        if let Some(c) = self.shading_cache.as_mut() {
+            c.clear();
         }
     }
 }

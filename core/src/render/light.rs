@@ -104,7 +104,12 @@ impl ShLight {
 
     /// RGB irradiance for the (camera-space) normal `n`; `n` need not be unit length.
     pub fn irradiance(&self, n: Vec3) -> Vec3 {
-        let b = lambert_basis(n);
+        self.irradiance_of(&lambert_basis(n))
+    }
+
+    /// RGB irradiance for the Lambert basis `b` of a normal ([`lambert_basis`]).
+    #[inline(always)]
+    pub fn irradiance_of(&self, b: &[f32; SH_COEFFS]) -> Vec3 {
         let mut e = [0.0f32; 3];
         for (bv, c) in b.iter().zip(&self.coeffs) {
             e[0] += bv * c[0];

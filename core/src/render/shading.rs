@@ -6,7 +6,7 @@
 //! [`project_vertices`], and a shape change [`vertex_normals`] too ([`vertex_stage`] does all).
 
 use crate::render::camera::Camera;
-use crate::render::light::ShLight;
+use crate::render::light::{lambert_basis, ShLight, SH_COEFFS};
 use crate::render::pose::{mat_vec, Pose};
 use crate::Vec3;
 
@@ -136,6 +136,87 @@ pub fn shade_vertices(
         o.color = [a[0] * e[0], a[1] * e[1], a[2] * e[2]];
     }
     Ok(())
+}
+
+/// Caller-provided memory for shading a sequence of instances (one entry per vertex each): the
+/// Lambert basis of each rotated normal and each vertex's irradiance, kept between calls of
+/// [`ShadingCache::shade`].
+#[derive(Debug)]
+pub struct ShadingBuffers<'b> {
+    /// Per vertex, [`lambert_basis`] of the rotated normal.
+    pub basis: &'b mut [[f32; SH_COEFFS]],
+    /// Per vertex, the irradiance.
+    pub irradiance: &'b mut [Vec3],
+}
+
+/// [`shade_vertices`] that keeps what did not change: the rotated normals' Lambert bases (while
+/// the normals and rotation stay) and the irradiance (while the light stays too), so a change of
+/// colour costs three products per vertex and a change of light 27 multiply-adds. The same
+/// arithmetic in the same order as [`shade_vertices`]: the same colours to the bit.
+#[derive(Debug)]
+pub struct ShadingCache<'b> {
+    bufs: ShadingBuffers<'b>,
+    basis_key: Option<(u64, [u32; 3])>,
+    irradiance_key: Option<(u64, [u32; 3], [[u32; 3]; SH_COEFFS])>,
+}
+
+impl<'b> ShadingCache<'b> {
+    /// A cache over `bufs`; `Err` unless both have `vertices` entries.
+    pub fn new(bufs: ShadingBuffers<'b>, vertices: usize) -> Result<Self, VertexError> {
+        if bufs.basis.len() != vertices || bufs.irradiance.len() != vertices {
+            return Err(VertexError::LengthMismatch);
+        }
+        Ok(Self { bufs, basis_key: None, irradiance_key: None })
+    }
+
+    /// Forgets what it holds.
+    pub fn clear(&mut self) {
+        self.basis_key = None;
+        self.irradiance_key = None;
+    }
+
+    /// [`shade_vertices`], where `normals` are named by `normals_id` (the same id must mean the
+    /// same normals in every call).
+    pub fn shade(
+        &mut self,
+        albedos: &[Vec3],
+        normals: &[Vec3],
+        normals_id: u64,
+        pose: &Pose,
+        light: &ShLight,
+        out: &mut [ProjectedVertex],
+    ) -> Result<(), VertexError> {
+        let n = out.len();
+        if albedos.len() != n || normals.len() != n || self.bufs.basis.len() != n || self.bufs.irradiance.len() != n {
+            return Err(VertexError::LengthMismatch);
+        }
+        if !albedos.iter().all(finite3) || !light.coeffs.iter().all(finite3) || !pose_finite(pose) {
+            return Err(VertexError::NonFinite);
+        }
+        let angles = [pose.yaw, pose.pitch, pose.roll].map(f32::to_bits);
+        if self.basis_key != Some((normals_id, angles)) {
+            self.clear();
+            if !normals.iter().all(finite3) {
+                return Err(VertexError::NonFinite);
+            }
+            let r = pose.rotation();
+            for (b, nv) in self.bufs.basis.iter_mut().zip(normals) {
+                *b = lambert_basis(mat_vec(&r, *nv));
+            }
+            self.basis_key = Some((normals_id, angles));
+        }
+        let light_key = light.coeffs.map(|c| c.map(f32::to_bits));
+        if self.irradiance_key != Some((normals_id, angles, light_key)) {
+            for (e, b) in self.bufs.irradiance.iter_mut().zip(self.bufs.basis.iter()) {
+                *e = light.irradiance_of(b);
+            }
+            self.irradiance_key = Some((normals_id, angles, light_key));
+        }
+        for ((o, a), e) in out.iter_mut().zip(albedos).zip(self.bufs.irradiance.iter()) {
+            o.color = [a[0] * e[0], a[1] * e[1], a[2] * e[2]];
+        }
+        Ok(())
+    }
 }
 
 fn pose_finite(pose: &Pose) -> bool {

@@ -27,6 +27,8 @@ use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
     standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SpareBuffers, TargetImage, MAX_LANDMARKS,
 };
+use gpmm_core::light::SH_COEFFS;
+use gpmm_core::shading::{ShadingBuffers, ShadingCache};
 use gpmm_core::{Cull, ProjectedVertex};
 use image::{RgbImage, Rgba, RgbaImage};
 use rand::SeedableRng;
@@ -230,11 +232,15 @@ pub fn fit_prepared(
         (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![ProjectedVertex::INVALID; nv]);
     let (mut pos2, mut alb2, mut nor2) = (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv]);
     let mut frame_memory = FrameMemory::new(w, h);
+    let (mut basis, mut irradiance) = (vec![[0.0f32; SH_COEFFS]; nv], vec![[0.0f32; 3]; nv]);
+    let shading = ShadingCache::new(ShadingBuffers { basis: &mut basis, irradiance: &mut irradiance }, nv)
+        .map_err(|e| FitRunError::Core { stage: "instance", error: e.into() })?;
     let mut inst =
         Instance::<KS, KC>::new(InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj }, nv)
             .and_then(|i| i.with_spare(SpareBuffers { positions: &mut pos2, normals: &mut nor2, albedos: &mut alb2 }))
             .map_err(core("instance"))?
-            .with_frame_cache(frame_memory.cache());
+            .with_frame_cache(frame_memory.cache())
+            .with_shading_cache(shading);
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 
