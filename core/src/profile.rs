@@ -24,6 +24,10 @@ pub struct DeviceProfile {
     pub vertex_pool: usize,
     /// Projected-vertex entries (24 B each): one per model vertex, for a fit or a render.
     pub projected_pool: usize,
+    /// Covered pixels the fit's compact frame cache holds (2 B each, plus a coverage bit per
+    /// image pixel): a colour or light proposal re-shades a frame up to this size instead of
+    /// rendering it (`gpmm_core::frame_cache`).
+    pub frame_cache_pixels: usize,
     /// Program flash (bytes), from address 0.
     pub flash_code_bytes: usize,
     /// Data partition (bytes) right after the program flash: the blob and the fit input.
@@ -45,9 +49,10 @@ pub const M4F: DeviceProfile = DeviceProfile {
     shape_capacity: 64,
     color_capacity: 64,
     tile: 32,
-    bin: 2048,
+    bin: 1536,
     vertex_pool: 3072,
     projected_pool: 1024,
+    frame_cache_pixels: 7168,
     flash_code_bytes: 512 * 1024,
     partition_bytes: 512 * 1024,
     ram_bytes: 192 * 1024,
@@ -63,9 +68,10 @@ pub const M7: DeviceProfile = DeviceProfile {
     shape_capacity: 100,
     color_capacity: 100,
     tile: 32,
-    bin: 2048,
+    bin: 4096,
     vertex_pool: 9216,
     projected_pool: 3072,
+    frame_cache_pixels: 28672,
     flash_code_bytes: 1024 * 1024,
     partition_bytes: 1024 * 1024,
     ram_bytes: 512 * 1024,

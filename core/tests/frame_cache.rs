@@ -10,7 +10,7 @@ use gpmm_core::fit::{
     image_chain, image_log_likelihood, landmark_chain, BackgroundModel, FitParams, GaussianPixel, ImageEval, ImageProblem, Instance,
     InstanceBuffers, LightSolveConfig, Mixture, Prior, Problem, SpareBuffers, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
-use gpmm_core::frame_cache::{CachedFragment, FrameBuffers, FrameCache};
+use gpmm_core::frame_cache::{CachedFragment, CompactBuffers, FrameBuffers, FrameCache};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::shading::{ShadingBuffers, ShadingCache};
 use gpmm_core::{ProjectedVertex, ShLight, Vec3};
@@ -26,6 +26,8 @@ struct CachedBuffers {
     tile_ends: [Vec<u32>; 2],
     basis: Vec<[f32; SH_COEFFS]>,
     irradiance: Vec<Vec3>,
+    covered: Vec<u32>,
+    ids: Vec<u16>,
 }
 
 impl CachedBuffers {
@@ -41,7 +43,19 @@ impl CachedBuffers {
             tile_ends: [vec![0; tiles], vec![0; tiles]],
             basis: vec![[0.0; SH_COEFFS]; n],
             irradiance: v(),
+            covered: vec![0; pixels.div_ceil(32)],
+            ids: vec![0; pixels],
         }
+    }
+
+    /// The device's configuration: no spare instance, no shading cache, one compact frame slot.
+    fn compact_instance(&mut self) -> Instance<'_, KS, KC> {
+        let n = self.projected.len();
+        let [pos, alb, nor] = &mut self.main;
+        let cache = FrameCache::compact(CompactBuffers { covered: &mut self.covered, triangles: &mut self.ids });
+        Instance::new(InstanceBuffers { positions: pos, albedos: alb, normals: nor, projected: &mut self.projected }, n)
+            .unwrap()
+            .with_frame_cache(cache)
     }
 
     fn instance(&mut self) -> Instance<'_, KS, KC> {
@@ -89,6 +103,8 @@ fn reshading_gives_the_rendered_sums_to_the_bit() {
     let mut plain = plain_bufs.instance();
     let mut cached_bufs = CachedBuffers::new(synth.vertices());
     let mut cached = cached_bufs.instance();
+    let mut compact_bufs = CachedBuffers::new(synth.vertices());
+    let mut compact = compact_bufs.compact_instance();
     let mut raster = Raster::new();
 
     // A start away from the truth, then colour, light and pose changes in turn.
@@ -108,15 +124,27 @@ fn reshading_gives_the_rendered_sums_to_the_bit() {
         let want = image_log_likelihood(&problem, &ip, p, &mut plain, &mut raster).unwrap();
         let got = image_log_likelihood(&problem, &ip, p, &mut cached, &mut raster).unwrap();
         assert_eq!(bits(&got), bits(&want), "state {i}: {got:?} vs {want:?}");
+        let small = image_log_likelihood(&problem, &ip, p, &mut compact, &mut raster).unwrap();
+        assert_eq!(bits(&small), bits(&want), "compact, state {i}: {small:?} vs {want:?}");
         assert!(want.covered > 2000);
     }
     // The colour and light changes were re-shaded (start -> recoloured -> relit; relit again
     // after the pose change comes back to a kept geometry); the rest were rendered.
     let frames = cached.frames().unwrap();
     assert_eq!((frames.reshaded, frames.recorded), (3, 4), "re-shaded / rendered frames");
+    // One compact slot: relit after the pose change is rendered again.
+    let frames = compact.frames().unwrap();
+    assert_eq!((frames.reshaded, frames.recorded), (2, 5), "compact: re-shaded / rendered frames");
 }
 
-fn chain(cached: bool, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) {
+#[derive(Clone, Copy, PartialEq)]
+enum Caches {
+    None,
+    Host,
+    Device,
+}
+
+fn chain(caches: Caches, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) {
     let synth = Synth::new(11);
     let truth = truth();
     let pixels = render_target(&synth, &truth);
@@ -145,9 +173,9 @@ fn chain(cached: bool, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) {
         light_solve: LightSolveConfig::default(),
     };
     let mut raster = Raster::new();
-    if cached {
+    if caches != Caches::None {
         let mut bufs = CachedBuffers::new(synth.vertices());
-        let mut inst = bufs.instance();
+        let mut inst = if caches == Caches::Host { bufs.instance() } else { bufs.compact_instance() };
         let r = image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng).unwrap();
         (r, inst.frames().unwrap().reshaded)
     } else {
@@ -159,11 +187,13 @@ fn chain(cached: bool, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) {
 
 #[test]
 fn a_chain_with_caches_is_the_chain_without() {
-    let (plain, _) = chain(false, 5);
-    let (cached, reshaded) = chain(true, 5);
-    // Debug prints every float in its shortest exact form: equal strings, equal bits.
-    assert_eq!(format!("{cached:?}"), format!("{plain:?}"));
-    assert!(reshaded > 30, "colour and light proposals are re-shaded ({reshaded})");
+    let (plain, _) = chain(Caches::None, 5);
+    for caches in [Caches::Host, Caches::Device] {
+        let (cached, reshaded) = chain(caches, 5);
+        // Debug prints every float in its shortest exact form: equal strings, equal bits.
+        assert_eq!(format!("{cached:?}"), format!("{plain:?}"));
+        assert!(reshaded > 30, "colour and light proposals are re-shaded ({reshaded})");
+    }
 }
 
 #[test]

@@ -5,7 +5,9 @@
 //!
 //! RAM: the per-vertex buffers of the fit (positions, albedos and normals: three `Vec3` per
 //! vertex) are carved out of one static `Vec3` pool, the projected vertices out of the
-//! renderer's static array; the rest (parameters, chain states, background model) is stack.
+//! renderer's static array, the compact frame cache (a coverage bit per pixel, a triangle id per
+//! covered pixel) out of two static arrays; the rest (parameters, chain states, background
+//! model) is stack.
 
 use crate::{clock, fail, stack, Rasterizer, PROFILE};
 use gpmm_core::blob::ModelBlob;
@@ -13,6 +15,7 @@ use gpmm_core::fit::{
     project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, Stage, StandardFit, TargetImage, MAX_LANDMARKS,
 };
 use gpmm_core::format::fit_input::{self, FitInput};
+use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
 use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
 use gpmm_core::{ProjectedVertex, Vec3};
 use rand_core::SeedableRng;
@@ -40,7 +43,7 @@ fn instructions_now() -> u64 {
 }
 
 /// Fits the blob at the start of `part` to the fit input after it; logs everything, fails on bad data.
-pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVertex], raster: &mut Rasterizer) {
+pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVertex], raster: &mut Rasterizer, cache: CompactBuffers<'_>) {
     let t_start = instructions_now();
     // The blob may be followed by more data: its header says how long it is.
     let blob = match ModelBlob::parse(part) {
@@ -81,8 +84,10 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
     };
     let (positions, rest) = vec3s.split_at_mut(n);
     let (albedos, normals) = rest.split_at_mut(n);
+    // A colour or light proposal re-shades the last frame from the compact cache instead of
+    // rendering it (the same sums: host and device still agree).
     let mut instance = match Instance::<KS, KC>::new(InstanceBuffers { positions, albedos, normals, projected }, n) {
-        Ok(i) => i,
+        Ok(i) => i.with_frame_cache(FrameCache::compact(cache)),
         Err(e) => fit_failed("instance", e),
     };
     let image = match TargetImage::new(input.pixels, input.width, input.height) {

@@ -28,6 +28,7 @@ mod stack;
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
+use gpmm_core::frame_cache::CompactBuffers;
 use gpmm_core::profile::{DeviceProfile, M4F, M7};
 use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasterizer, Vec3};
 
@@ -38,10 +39,10 @@ pub(crate) const PROFILE: DeviceProfile = if cfg!(feature = "m7") { M7 } else { 
 /// array of `projected_pool` entries (12 and 24 bytes of RAM each). A fit takes three `Vec3`
 /// (positions, albedos, normals) and one projected vertex per model vertex, a render one of each,
 /// so both take meshes of up to `projected_pool` vertices: 1,024 on `m4f` (its blob has at most
-/// 1,000), 3,072 on `m7` (at most 2,000). `m4f`: 36 + 24 KiB of buffers and the renderer's
-/// 45 KiB leave about 85 KiB of the 192 KiB for the stack (the fit's peak is about 40 KiB: chain
-/// states and parameter copies). Nothing guards the stack's end, so these margins are checked by
-/// the tests (static + peak <= RAM).
+/// 1,000), 3,072 on `m7` (at most 2,000). `m4f`: 36 + 24 KiB of buffers, the renderer's 46 KiB
+/// and the fit's 16 KiB frame cache leave about 70 KiB of the 192 KiB for the stack (the fit's
+/// peak is about 46 KiB: chain states and parameter copies). Nothing guards the stack's end, so
+/// these margins are checked by the tests (static + peak <= RAM).
 const MAX_VERTICES: usize = PROFILE.vertex_pool;
 /// Entries of the projected-vertex array: the largest mesh a fit or a render takes.
 const MAX_PROJECTED: usize = PROFILE.projected_pool;
@@ -49,13 +50,18 @@ const MAX_PROJECTED: usize = PROFILE.projected_pool;
 /// list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M instructions, at
 /// 32×32 2.59 M (same fit). The host's parity runs use the profile's tile too.
 const TILE: usize = PROFILE.tile;
-/// Triangles binned per tile row (8 bytes each); a row with more scans the whole list instead
-/// (never lossy, but slow: with 1,024 the template's frame overflowed 2 rows and took 80 M
-/// instead of 28 M instructions).
+/// Triangles binned per frame (12 bytes each); a frame with more drawn triangles bins per tile
+/// row, and a row with more scans the whole list (never lossy, but slow: with 1,024 per row the
+/// template's frame overflowed 2 rows and took 80 M instead of 28 M instructions). A 1,000-vertex
+/// blob has about 2,000 triangles, of which the front faces (about half) are drawn.
 const BIN: usize = PROFILE.bin;
 
 /// The renderer of this firmware (tile buffers + bin).
 pub(crate) type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
+/// Covered pixels the fit's compact frame cache holds (2 bytes each).
+const CACHE_PIXELS: usize = PROFILE.frame_cache_pixels;
+/// Words of the frame cache's coverage mask (one bit per image pixel).
+const CACHE_WORDS: usize = (PROFILE.image_side as usize * PROFILE.image_side as usize).div_ceil(32);
 
 #[entry]
 fn main() -> ! {
@@ -63,6 +69,8 @@ fn main() -> ! {
     static mut NORMALS: [Vec3; MAX_VERTICES] = [[0.0; 3]; MAX_VERTICES];
     static mut PROJECTED: [ProjectedVertex; MAX_PROJECTED] = [ProjectedVertex::INVALID; MAX_PROJECTED];
     static mut RASTERIZER: Rasterizer = Rasterizer::new();
+    static mut CACHE_COVERED: [u32; CACHE_WORDS] = [0; CACHE_WORDS];
+    static mut CACHE_TRIANGLES: [u16; CACHE_PIXELS] = [0; CACHE_PIXELS];
 
     let mut core = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
     clock::start(&mut core.SYST);
@@ -89,7 +97,7 @@ fn main() -> ! {
     if partition::is_erased(part) {
         defmt::info!("no data partition (first word erased)");
     } else if !device_mesh::is_device_mesh(part) {
-        fit::run(part, NORMALS, PROJECTED, RASTERIZER);
+        fit::run(part, NORMALS, PROJECTED, RASTERIZER, CompactBuffers { covered: CACHE_COVERED, triangles: CACHE_TRIANGLES });
     } else {
         let m = match device_mesh::parse(part, MAX_PROJECTED.min(MAX_VERTICES)) {
             Ok(m) => m,

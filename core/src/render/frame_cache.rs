@@ -14,8 +14,14 @@
 //! proposal the chain's own frame is still there. Memory is the caller's: per slot one
 //! [`CachedFragment`] per pixel that may be covered and one entry per tile. A frame that does
 //! not fit is simply not kept.
+//!
+//! A small device keeps one compact slot instead ([`FrameCache::compact`]): a coverage bit per
+//! pixel and a 16-bit triangle id per covered pixel (2 bytes instead of 32); each re-shade then
+//! derives the weights again, pixel by pixel ([`crate::raster::FragmentSetup`], once per run of
+//! pixels of one triangle), which still skips binning, set-up of unseen triangles and the tile
+//! buffers.
 
-use crate::raster::{blend, fragment_weights};
+use crate::raster::{blend, fragment_weights, FragmentSetup};
 use crate::render::pose::Pose;
 use crate::render::shading::{ProjectedVertex, TriIndex};
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
@@ -71,16 +77,39 @@ pub struct FrameBuffers<'c> {
     pub tile_ends: &'c mut [u32],
 }
 
+/// Caller-provided memory of a compact slot: one bit per pixel (row-major, 32 a word) and one
+/// triangle id per covered pixel.
+#[derive(Debug)]
+pub struct CompactBuffers<'c> {
+    /// Coverage bits: at least `width · height / 32` words (rounded up).
+    pub covered: &'c mut [u32],
+    /// The covering triangle of each covered pixel, in the rasterizer's order.
+    pub triangles: &'c mut [u16],
+}
+
+#[derive(Debug)]
+enum Store<'c> {
+    Full(FrameBuffers<'c>),
+    Compact(CompactBuffers<'c>),
+    Unused,
+}
+
 #[derive(Debug)]
 struct Slot<'c> {
-    bufs: FrameBuffers<'c>,
+    store: Store<'c>,
     fragments: usize,
     tiles: usize,
+    /// The recorded frame's tile size.
+    tile: (u32, u32),
     key: Option<GeometryKey>,
     derived: bool,
 }
 
-impl Slot<'_> {
+impl<'c> Slot<'c> {
+    fn new(store: Store<'c>) -> Self {
+        Self { store, fragments: 0, tiles: 0, tile: (0, 0), key: None, derived: false }
+    }
+
     fn clear(&mut self) {
         self.fragments = 0;
         self.tiles = 0;
@@ -113,8 +142,12 @@ pub struct FrameCache<'c> {
 impl<'c> FrameCache<'c> {
     /// A cache over two slots of caller memory.
     pub fn new(a: FrameBuffers<'c>, b: FrameBuffers<'c>) -> Self {
-        let slot = |bufs| Slot { bufs, fragments: 0, tiles: 0, key: None, derived: false };
-        Self { slots: [slot(a), slot(b)], newest: 0, reshaded: 0, recorded: 0 }
+        Self { slots: [Slot::new(Store::Full(a)), Slot::new(Store::Full(b))], newest: 0, reshaded: 0, recorded: 0 }
+    }
+
+    /// A cache of one compact slot (see the module docs): the last frame recorded.
+    pub fn compact(bufs: CompactBuffers<'c>) -> Self {
+        Self { slots: [Slot::new(Store::Compact(bufs)), Slot::new(Store::Unused)], newest: 0, reshaded: 0, recorded: 0 }
     }
 
     /// Forgets every frame.
@@ -134,7 +167,9 @@ impl<'c> FrameCache<'c> {
     /// [`Recorder::finish`] after a successful render: only then is the frame kept.
     pub fn recorder<'r, S>(&'r mut self, key: GeometryKey, keep: Option<GeometryKey>, inner: &'r mut S) -> Recorder<'r, 'c, S> {
         let [a, b] = &self.slots;
-        let older = if keep.is_some() && a.key == keep {
+        let older = if matches!(b.store, Store::Unused) {
+            0
+        } else if keep.is_some() && a.key == keep {
             1
         } else if keep.is_some() && b.key == keep {
             0
@@ -145,7 +180,15 @@ impl<'c> FrameCache<'c> {
         let [a, b] = &mut self.slots;
         let slot = if older == 0 { a } else { b };
         slot.clear();
-        Recorder { slot, inner, key, overflow: false, counter: &mut self.recorded }
+        let mut overflow = false;
+        if let Store::Compact(c) = &mut slot.store {
+            let words = (key.size[0] as usize * key.size[1] as usize).div_ceil(32);
+            match c.covered.get_mut(..words) {
+                Some(bits) => bits.fill(0),
+                None => overflow = true,
+            }
+        }
+        Recorder { slot, inner, key, overflow, counter: &mut self.recorded }
     }
 
     /// Re-shades the kept frame of geometry `key` with the colours of `vertices` (whose positions
@@ -161,33 +204,125 @@ impl<'c> FrameCache<'c> {
         let Some(slot) = self.slots.iter_mut().find(|s| s.key.as_ref() == Some(key)) else {
             return false;
         };
-        if !slot.derived && !derive(slot, vertices, triangles, key.size) {
-            slot.clear();
-            return false;
-        }
-        let (Some(frags), Some(ends)) = (slot.bufs.fragments.get(..slot.fragments), slot.bufs.tile_ends.get(..slot.tiles)) else {
-            return false;
+        let done = match &slot.store {
+            Store::Full(_) => reshade_full(slot, key, vertices, triangles, sink),
+            Store::Compact(c) => reshade_compact(c, slot.fragments, slot.tiles, slot.tile, key, vertices, triangles, sink),
+            Store::Unused => false,
         };
-        let mut start = 0usize;
-        for &end in ends {
-            let end = end as usize;
-            for f in frags.get(start..end).unwrap_or(&[]) {
-                let [a, b, c] = f.vertices;
-                let (Some(va), Some(vb), Some(vc)) = (vertices.get(a as usize), vertices.get(b as usize), vertices.get(c as usize)) else {
-                    return false;
-                };
-                let color = blend(f.weights, [va.color, vb.color, vc.color]);
-                if !color.iter().all(|v| v.is_finite()) {
-                    return false;
+        if done {
+            self.reshaded = self.reshaded.wrapping_add(1);
+        }
+        done
+    }
+}
+
+/// Re-shades a full slot (deriving the weights on first use).
+fn reshade_full<I: TriIndex, S: FragmentSink>(
+    slot: &mut Slot<'_>,
+    key: &GeometryKey,
+    vertices: &[ProjectedVertex],
+    triangles: &[[I; 3]],
+    sink: &mut S,
+) -> bool {
+    if !slot.derived && !derive(slot, vertices, triangles, key.size) {
+        slot.clear();
+        return false;
+    }
+    let Store::Full(bufs) = &slot.store else {
+        return false;
+    };
+    let (Some(frags), Some(ends)) = (bufs.fragments.get(..slot.fragments), bufs.tile_ends.get(..slot.tiles)) else {
+        return false;
+    };
+    let mut start = 0usize;
+    for &end in ends {
+        let end = end as usize;
+        for f in frags.get(start..end).unwrap_or(&[]) {
+            let [a, b, c] = f.vertices;
+            let (Some(va), Some(vb), Some(vc)) = (vertices.get(a as usize), vertices.get(b as usize), vertices.get(c as usize)) else {
+                return false;
+            };
+            let color = blend(f.weights, [va.color, vb.color, vc.color]);
+            if !color.iter().all(|v| v.is_finite()) {
+                return false;
+            }
+            sink.fragment(f.pixel, color);
+        }
+        sink.end_tile();
+        start = end;
+    }
+    true
+}
+
+/// Triangle set-ups a compact re-shade keeps (about 60 bytes each, on the stack).
+const SETUPS: usize = 64;
+
+/// Re-shades a compact slot: walks the tiles in the rasterizer's order, and within each its
+/// covered pixels, deriving each pixel's weights from its triangle.
+#[allow(clippy::too_many_arguments)]
+fn reshade_compact<I: TriIndex, S: FragmentSink>(
+    c: &CompactBuffers<'_>,
+    fragments: usize,
+    tiles: usize,
+    (tw, th): (u32, u32),
+    key: &GeometryKey,
+    vertices: &[ProjectedVertex],
+    triangles: &[[I; 3]],
+    sink: &mut S,
+) -> bool {
+    let [w, h] = key.size;
+    if tw == 0 || th == 0 || (w.div_ceil(tw) * h.div_ceil(th)) as usize != tiles {
+        return false;
+    }
+    let Some(ids) = c.triangles.get(..fragments) else {
+        return false;
+    };
+    let mut next = ids.iter();
+    // The set-ups of recently seen triangles, direct-mapped by id: a pixel row of a tile crosses
+    // a handful of triangles, and the next row mostly the same ones.
+    let mut recent: [Option<(u16, FragmentSetup)>; SETUPS] = [None; SETUPS];
+    for ty0 in (0..h).step_by(th as usize) {
+        for tx0 in (0..w).step_by(tw as usize) {
+            for y in ty0..(ty0 + th).min(h) {
+                for x in tx0..(tx0 + tw).min(w) {
+                    let pixel = y * w + x;
+                    let bit = c.covered.get((pixel / 32) as usize).map_or(0, |b| (b >> (pixel % 32)) & 1);
+                    if bit == 0 {
+                        continue;
+                    }
+                    let Some(&t) = next.next() else {
+                        return false;
+                    };
+                    let Some(entry) = recent.get_mut(usize::from(t) % SETUPS) else {
+                        return false;
+                    };
+                    let f = match *entry {
+                        Some((id, f)) if id == t => f,
+                        _ => {
+                            let Some(f) = triangles.get(usize::from(t)).and_then(|tri| FragmentSetup::new(vertices, tri, w, h)) else {
+                                return false;
+                            };
+                            *entry = Some((t, f));
+                            f
+                        }
+                    };
+                    let [a, b, cc] = f.ids;
+                    let (Some(weights), Some(va), Some(vb), Some(vc)) =
+                        (f.weights_at(x, y), vertices.get(a as usize), vertices.get(b as usize), vertices.get(cc as usize))
+                    else {
+                        return false;
+                    };
+                    let color = blend(weights, [va.color, vb.color, vc.color]);
+                    if !color.iter().all(|v| v.is_finite()) {
+                        return false;
+                    }
+                    sink.fragment(pixel, color);
                 }
-                sink.fragment(f.pixel, color);
             }
             sink.end_tile();
-            start = end;
         }
-        self.reshaded = self.reshaded.wrapping_add(1);
-        true
     }
+    next.next().is_none()
 }
 
 /// Derives the vertex ids and weights of every fragment of `slot` (`false` if one is not drawn).
@@ -196,7 +331,10 @@ fn derive<I: TriIndex>(slot: &mut Slot<'_>, vertices: &[ProjectedVertex], triang
     if w == 0 {
         return false;
     }
-    let Some(frags) = slot.bufs.fragments.get_mut(..slot.fragments) else {
+    let Store::Full(bufs) = &mut slot.store else {
+        return false;
+    };
+    let Some(frags) = bufs.fragments.get_mut(..slot.fragments) else {
         return false;
     };
     for f in frags.iter_mut() {
@@ -242,27 +380,56 @@ impl<const TW: usize, const TH: usize, S: TileSink<TW, TH>> TileSink<TW, TH> for
         let (x0, y0) = tile.origin();
         let (w, h) = tile.size();
         let width = self.key.size[0];
+        self.slot.tile = (TW as u32, TH as u32);
         let mut n = self.slot.fragments;
-        for (row, y) in tile.triangles().iter().zip(y0..y0 + h) {
-            for (t, x) in row.iter().zip(x0..x0 + w) {
-                if *t == NO_TRIANGLE {
-                    continue;
+        match &mut self.slot.store {
+            Store::Full(bufs) => {
+                for (row, y) in tile.triangles().iter().zip(y0..y0 + h) {
+                    for (t, x) in row.iter().zip(x0..x0 + w) {
+                        if *t == NO_TRIANGLE {
+                            continue;
+                        }
+                        let Some(f) = bufs.fragments.get_mut(n) else {
+                            self.overflow = true;
+                            return;
+                        };
+                        *f = CachedFragment { pixel: y * width + x, triangle: *t, vertices: [0; 3], weights: [0.0; 3] };
+                        n += 1;
+                    }
                 }
-                let Some(f) = self.slot.bufs.fragments.get_mut(n) else {
-                    self.overflow = true;
-                    return;
-                };
-                *f = CachedFragment { pixel: y * width + x, triangle: *t, vertices: [0; 3], weights: [0.0; 3] };
-                n += 1;
+                match bufs.tile_ends.get_mut(self.slot.tiles) {
+                    Some(e) => *e = n as u32,
+                    None => {
+                        self.overflow = true;
+                        return;
+                    }
+                }
+            }
+            Store::Compact(c) => {
+                for (row, y) in tile.triangles().iter().zip(y0..y0 + h) {
+                    for (t, x) in row.iter().zip(x0..x0 + w) {
+                        if *t == NO_TRIANGLE {
+                            continue;
+                        }
+                        let pixel = y * width + x;
+                        let (Some(slot), Ok(id), Some(bits)) =
+                            (c.triangles.get_mut(n), u16::try_from(*t), c.covered.get_mut((pixel / 32) as usize))
+                        else {
+                            self.overflow = true;
+                            return;
+                        };
+                        *slot = id;
+                        *bits |= 1 << (pixel % 32);
+                        n += 1;
+                    }
+                }
+            }
+            Store::Unused => {
+                self.overflow = true;
+                return;
             }
         }
         self.slot.fragments = n;
-        match self.slot.bufs.tile_ends.get_mut(self.slot.tiles) {
-            Some(e) => {
-                *e = n as u32;
-                self.slot.tiles += 1;
-            }
-            None => self.overflow = true,
-        }
+        self.slot.tiles += 1;
     }
 }

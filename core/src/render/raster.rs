@@ -412,27 +412,64 @@ pub fn fragment_weights<I: TriIndex>(
     width: u32,
     height: u32,
 ) -> Option<([u32; 3], [f32; 3])> {
-    let v = fetch(vertices, tri)?;
-    let s = setup(v, Cull::None, width, height).ok()?;
-    let [va, vb, vc] = v;
-    let [ia, ib, ic] = tri.map(|i| i.index() as u32);
-    let (ids, inv_w) =
-        if s.swapped { ([ia, ic, ib], [va.inv_w, vc.inv_w, vb.inv_w]) } else { ([ia, ib, ic], [va.inv_w, vb.inv_w, vc.inv_w]) };
-    let area = if s.small { s.area as i32 as f32 } else { s.area as f32 };
-    let inv_area = 1.0 / area;
-    let (cx, cy) = (i64::from(x as i32) * i64::from(ONE) + i64::from(HALF), i64::from(y as i32) * i64::from(ONE) + i64::from(HALF));
-    let mut l = [0.0f32; 3];
-    for (k, lk) in l.iter_mut().enumerate() {
-        let (pa, pb) = (s.p.get((k + 1) % 3)?, s.p.get((k + 2) % 3)?);
-        let (dx, dy) = (i64::from(pb[0] - pa[0]), i64::from(pb[1] - pa[1]));
-        let e = dx * (cy - i64::from(pa[1])) - dy * (cx - i64::from(pa[0]));
-        if e < 0 {
-            return None;
-        }
-        *lk = e.to_f32() * inv_area;
+    let f = FragmentSetup::new(vertices, tri, width, height)?;
+    Some((f.ids, f.weights_at(x, y)?))
+}
+
+/// One triangle's set-up for [`fragment_weights`], reusable for all its pixels.
+#[derive(Debug, Clone, Copy)]
+pub struct FragmentSetup {
+    /// Vertex ids in the rasterizer's set-up order.
+    pub ids: [u32; 3],
+    inv_w: [f32; 3],
+    p: [[i32; 2]; 3],
+    small: bool,
+    inv_area: f32,
+}
+
+impl FragmentSetup {
+    /// The set-up of triangle `tri` in a `width × height` frame (`None` if it would not be drawn).
+    pub fn new<I: TriIndex>(vertices: &[ProjectedVertex], tri: &[I; 3], width: u32, height: u32) -> Option<Self> {
+        let v = fetch(vertices, tri)?;
+        let s = setup(v, Cull::None, width, height).ok()?;
+        let [va, vb, vc] = v;
+        let [ia, ib, ic] = tri.map(|i| i.index() as u32);
+        let (ids, inv_w) =
+            if s.swapped { ([ia, ic, ib], [va.inv_w, vc.inv_w, vb.inv_w]) } else { ([ia, ib, ic], [va.inv_w, vb.inv_w, vc.inv_w]) };
+        // (The same value either way; `i64 as f32` is a library call on Cortex-M4.)
+        let area = if s.small { s.area as i32 as f32 } else { s.area as f32 };
+        Some(Self { ids, inv_w, p: s.p, small: s.small, inv_area: 1.0 / area })
     }
-    let iw = interpolated_inv_w(l, inv_w);
-    Some((ids, perspective_weights(l, inv_w, iw)))
+
+    /// The perspective-correct weights at pixel `(x, y)` (`None` if the triangle does not cover it).
+    pub fn weights_at(&self, x: u32, y: u32) -> Option<[f32; 3]> {
+        // i32 only near the triangle, where its products cannot overflow (a small triangle's
+        // pixels are within 2^14 of its vertices; a far pixel is simply not covered).
+        let [px, py] = self.p[0];
+        let near = |c: u32, p: i32| (i64::from(c) * i64::from(ONE) + i64::from(HALF) - i64::from(p)).abs() < 1 << 15;
+        let l = if self.small && near(x, px) && near(y, py) { self.edges::<i32>(x, y)? } else { self.edges::<i64>(x, y)? };
+        let iw = interpolated_inv_w(l, self.inv_w);
+        Some(perspective_weights(l, self.inv_w, iw))
+    }
+
+    /// The normalized edge functions at the centre of `(x, y)`, in `E` (exact in either type for
+    /// a small triangle, so the same `f32`s as the rasterizer's).
+    #[inline(always)]
+    fn edges<E: EdgeInt>(&self, x: u32, y: u32) -> Option<[f32; 3]> {
+        let (cx, cy) =
+            (E::from_i32(x as i32) * E::from_i32(ONE) + E::from_i32(HALF), E::from_i32(y as i32) * E::from_i32(ONE) + E::from_i32(HALF));
+        let mut l = [0.0f32; 3];
+        for (k, lk) in l.iter_mut().enumerate() {
+            let (pa, pb) = (self.p.get((k + 1) % 3)?, self.p.get((k + 2) % 3)?);
+            let (dx, dy) = (E::from_i32(pb[0] - pa[0]), E::from_i32(pb[1] - pa[1]));
+            let e = dx * (cy - E::from_i32(pa[1])) - dy * (cx - E::from_i32(pa[0]));
+            if e < E::ZERO {
+                return None;
+            }
+            *lk = e.to_f32() * self.inv_area;
+        }
+        Some(l)
+    }
 }
 
 /// The tile rasterizer: one `TW × TH` tile of buffers and a per-tile-row bin of `BIN` triangles.
