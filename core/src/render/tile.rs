@@ -21,7 +21,8 @@ pub struct Fragment {
 /// A `TW × TH` tile of the frame: buffers in tile-local coordinates `[y][x]`.
 ///
 /// Only the top-left `size()` part is valid (tiles at the right/bottom border may be smaller).
-/// Uncovered pixels have colour 0, depth 0 and triangle [`NO_TRIANGLE`].
+/// Uncovered pixels have colour 0, depth 0 and triangle [`NO_TRIANGLE`] (their barycentrics are
+/// left from earlier tiles).
 #[derive(Debug, Clone)]
 pub struct Tile<const TW: usize, const TH: usize> {
     pub(crate) x0: u32,
@@ -92,7 +93,8 @@ impl<const TW: usize, const TH: usize> Tile<TW, TH> {
         &self.tri
     }
 
-    /// Perspective-correct barycentrics `[y][x]` of the triangle's 2nd and 3rd vertex (the 1st is `1 − b1 − b2`).
+    /// Perspective-correct barycentrics `[y][x]` of the triangle's 2nd and 3rd vertex (the 1st is
+    /// `1 − b1 − b2`); meaningful only where [`Tile::triangles`] is not [`NO_TRIANGLE`].
     pub fn barycentrics(&self) -> &[[[f32; 2]; TW]; TH] {
         &self.bary
     }
@@ -112,9 +114,7 @@ impl<const TW: usize, const TH: usize> Tile<TW, TH> {
         for row in self.tri.iter_mut() {
             row.fill(NO_TRIANGLE);
         }
-        for row in self.bary.iter_mut() {
-            row.fill([0.0; 2]);
-        }
+        // Barycentrics are read only where a triangle covers (written there): not cleared.
     }
 }
 
