@@ -17,9 +17,9 @@
 //!
 //! A small device keeps one compact slot instead ([`FrameCache::compact`]): a coverage bit per
 //! pixel and a 16-bit triangle id per covered pixel (2 bytes instead of 32); each re-shade then
-//! derives the weights again, pixel by pixel ([`crate::raster::FragmentSetup`], once per run of
-//! pixels of one triangle), which still skips binning, set-up of unseen triangles and the tile
-//! buffers.
+//! derives the weights again, pixel by pixel ([`crate::raster::FragmentSetup`], kept for 128
+//! recent triangles on the stack), which still skips binning, the set-up of hidden triangles and
+//! the tile buffers.
 
 use crate::raster::{blend, fragment_weights, FragmentSetup};
 use crate::render::pose::Pose;
@@ -255,7 +255,7 @@ fn reshade_full<I: TriIndex, S: FragmentSink>(
 }
 
 /// Triangle set-ups a compact re-shade keeps (about 60 bytes each, on the stack).
-const SETUPS: usize = 64;
+const SETUPS: usize = 128;
 
 /// Re-shades a compact slot: walks the tiles in the rasterizer's order, and within each its
 /// covered pixels, deriving each pixel's weights from its triangle.
@@ -284,39 +284,48 @@ fn reshade_compact<I: TriIndex, S: FragmentSink>(
     for ty0 in (0..h).step_by(th as usize) {
         for tx0 in (0..w).step_by(tw as usize) {
             for y in ty0..(ty0 + th).min(h) {
-                for x in tx0..(tx0 + tw).min(w) {
-                    let pixel = y * w + x;
-                    let bit = c.covered.get((pixel / 32) as usize).map_or(0, |b| (b >> (pixel % 32)) & 1);
-                    if bit == 0 {
-                        continue;
-                    }
-                    let Some(&t) = next.next() else {
+                let row = y * w;
+                let (start, end) = (row + tx0, row + (tx0 + tw).min(w));
+                // The covered pixels of [start, end), a mask word at a time.
+                let mut at = start;
+                while at < end {
+                    let (word, shift) = ((at / 32) as usize, at % 32);
+                    let span = (32 - shift).min(end - at);
+                    let Some(&bits) = c.covered.get(word) else {
                         return false;
                     };
-                    let Some(entry) = recent.get_mut(usize::from(t) % SETUPS) else {
-                        return false;
-                    };
-                    let f = match *entry {
-                        Some((id, f)) if id == t => f,
-                        _ => {
-                            let Some(f) = triangles.get(usize::from(t)).and_then(|tri| FragmentSetup::new(vertices, tri, w, h)) else {
-                                return false;
-                            };
-                            *entry = Some((t, f));
-                            f
+                    let mut bits = (bits >> shift) & (u32::MAX >> (32 - span));
+                    while bits != 0 {
+                        let pixel = at + bits.trailing_zeros();
+                        bits &= bits - 1;
+                        let Some(&t) = next.next() else {
+                            return false;
+                        };
+                        let Some(entry) = recent.get_mut(usize::from(t) % SETUPS) else {
+                            return false;
+                        };
+                        let f = match entry {
+                            Some((id, f)) if *id == t => f,
+                            _ => {
+                                let Some(f) = triangles.get(usize::from(t)).and_then(|tri| FragmentSetup::new(vertices, tri, w, h)) else {
+                                    return false;
+                                };
+                                &entry.insert((t, f)).1
+                            }
+                        };
+                        let [a, b, cc] = f.ids;
+                        let (Some(weights), Some(va), Some(vb), Some(vc)) =
+                            (f.weights_at(pixel - row, y), vertices.get(a as usize), vertices.get(b as usize), vertices.get(cc as usize))
+                        else {
+                            return false;
+                        };
+                        let color = blend(weights, [va.color, vb.color, vc.color]);
+                        if !color.iter().all(|v| v.is_finite()) {
+                            return false;
                         }
-                    };
-                    let [a, b, cc] = f.ids;
-                    let (Some(weights), Some(va), Some(vb), Some(vc)) =
-                        (f.weights_at(x, y), vertices.get(a as usize), vertices.get(b as usize), vertices.get(cc as usize))
-                    else {
-                        return false;
-                    };
-                    let color = blend(weights, [va.color, vb.color, vc.color]);
-                    if !color.iter().all(|v| v.is_finite()) {
-                        return false;
+                        sink.fragment(pixel, color);
                     }
-                    sink.fragment(pixel, color);
+                    at += span;
                 }
             }
             sink.end_tile();
