@@ -460,3 +460,24 @@ fn landmark_vertices_alone_match_the_full_instance() {
     let mut out = [0.0f32; 3];
     assert!(db.add_vertex(&c, n, &mut out).is_err());
 }
+
+#[test]
+fn contiguous_landmark_fields_give_the_same_landmarks_and_wrong_ones_are_refused() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let mut fields = vec![0.0f32; model.shape_rank() * model.landmarks().len()];
+    model.landmark_fields(&mut fields).unwrap();
+    let fast = model.with_landmark_fields(&fields).unwrap();
+    let truth = truth();
+    let (mut a, mut b) = (vec![[0.0f32; 3]; 68], vec![[0.0f32; 3]; 68]);
+    model.landmark_positions(truth.shape_coeffs(), &mut a).unwrap();
+    fast.landmark_positions(truth.shape_coeffs(), &mut b).unwrap();
+    let bits = |v: &[[f32; 3]]| v.iter().map(|p| p.map(f32::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&a), bits(&b));
+    // Fields that are not the basis's at the landmarks, or of the wrong length, are refused.
+    let mut wrong = fields.clone();
+    wrong[5] += 1.0;
+    assert_eq!(model.with_landmark_fields(&wrong).err(), Some(FitError::BadConfig));
+    assert_eq!(model.with_landmark_fields(&fields[1..]).err(), Some(FitError::LengthMismatch));
+    assert!(model.landmark_fields(&mut fields[1..]).is_none());
+}

@@ -48,6 +48,16 @@ impl<'a> FactoredBasis<'a> {
         self.vertices
     }
 
+    /// The per-vertex fields, `rank × vertices` row-major.
+    pub fn fields(&self) -> &'a [f32] {
+        self.fields
+    }
+
+    /// The unit direction of each component.
+    pub fn directions(&self) -> &'a [Vec3] {
+        self.directions
+    }
+
     /// Adds `Σ_k coeffs[k] · f_k ⊗ e_k` to `out` (one entry per vertex).
     ///
     /// Fewer coefficients than components means the rest are zero.

@@ -1,7 +1,7 @@
 //! The borrowed model view used by the fitter (its cached per-vertex instance is in [`super::instance`]).
 
 use crate::error::FitError;
-use crate::model::basis::{Basis, Vec3};
+use crate::model::basis::{Basis, FactoredBasis, Vec3};
 use crate::render::shading::TriIndex;
 
 /// Most landmarks a model or a fit target has.
@@ -16,7 +16,22 @@ pub struct MorphableModel<'a, I: TriIndex = u32> {
     color: Basis<'a>,
     triangles: &'a [[I; 3]],
     landmarks: &'a [u32],
+    /// The shape basis at the landmark vertices only, contiguous (see [`MorphableModel::with_landmark_fields`]).
+    landmark_basis: Option<FactoredBasis<'a>>,
 }
+
+/// `0, 1, 2, …`: the vertex ids of a basis restricted to the landmarks.
+// (A compile-time loop: `i < MAX_LANDMARKS` bounds the index.)
+#[allow(clippy::indexing_slicing)]
+const IN_ORDER: [u32; MAX_LANDMARKS] = {
+    let mut ids = [0u32; MAX_LANDMARKS];
+    let mut i = 0;
+    while i < MAX_LANDMARKS {
+        ids[i] = i as u32;
+        i += 1;
+    }
+    ids
+};
 
 impl<'a, I: TriIndex> MorphableModel<'a, I> {
     /// Wraps borrowed model data, checking every length and index once (O(vertices + triangles)).
@@ -41,7 +56,47 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         if !shape_mean.iter().chain(color_mean).flatten().all(|v| v.is_finite()) {
             return Err(FitError::NonFinite);
         }
-        Ok(Self { shape_mean, color_mean, shape, color, triangles, landmarks })
+        Ok(Self { shape_mean, color_mean, shape, color, triangles, landmarks, landmark_basis: None })
+    }
+
+    /// The shape basis's fields at the landmark vertices, `rank × landmarks` row-major, into `out`
+    /// (for [`MorphableModel::with_landmark_fields`]); `None` unless the shape basis is factored
+    /// and `out` has exactly that length.
+    pub fn landmark_fields(&self, out: &mut [f32]) -> Option<()> {
+        let Basis::Factored(shape) = self.shape else {
+            return None;
+        };
+        let (n, l) = (shape.vertices(), self.landmarks.len());
+        if out.len() != shape.rank() * l || n == 0 || l == 0 {
+            return None;
+        }
+        for (full, part) in shape.fields().chunks_exact(n).zip(out.chunks_exact_mut(l)) {
+            for (p, &v) in part.iter_mut().zip(self.landmarks) {
+                *p = *full.get(v as usize)?;
+            }
+        }
+        Some(())
+    }
+
+    /// Uses `fields` (`rank × landmarks` row-major: component `k`'s field at landmark `j` is
+    /// `fields[k · landmarks + j]`) for the landmark positions: the same values as the shape
+    /// basis's at the landmark vertices (checked here, bit for bit), but contiguous, so the
+    /// landmark sums of every shape proposal read a few kilobytes instead of gathering across the
+    /// whole basis. Only for a factored shape basis.
+    pub fn with_landmark_fields(mut self, fields: &'a [f32]) -> Result<Self, FitError> {
+        let Basis::Factored(shape) = self.shape else {
+            return Err(FitError::BadConfig);
+        };
+        let (n, l) = (shape.vertices(), self.landmarks.len());
+        let basis = FactoredBasis::new(fields, shape.directions(), l).map_err(|_| FitError::LengthMismatch)?;
+        let same = shape.fields().chunks_exact(n.max(1)).zip(fields.chunks_exact(l.max(1))).all(|(full, part)| {
+            self.landmarks.iter().zip(part).all(|(&v, p)| full.get(v as usize).map(|f| f.to_bits()) == Some(p.to_bits()))
+        });
+        if !same {
+            return Err(FitError::BadConfig);
+        }
+        self.landmark_basis = Some(basis);
+        Ok(self)
     }
 
     /// Number of vertices.
@@ -107,7 +162,11 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         for (o, &l) in out.iter_mut().zip(self.landmarks) {
             *o = self.shape_mean.get(l as usize).copied().ok_or(FitError::IndexOutOfRange)?;
         }
-        self.shape.add_vertices(coeffs, self.landmarks, out)?;
+        match (self.landmark_basis, IN_ORDER.get(..n)) {
+            // The same components in the same order, from contiguous fields: the same sums.
+            (Some(b), Some(ids)) => Basis::Factored(b).add_vertices(coeffs, ids, out)?,
+            _ => self.shape.add_vertices(coeffs, self.landmarks, out)?,
+        }
         Ok(n)
     }
 }

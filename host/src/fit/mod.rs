@@ -222,7 +222,13 @@ pub fn fit_prepared(
     if prepared.landmarks.len() != n_lm {
         return Err(FitRunError::Settings(format!("{} target landmarks for a model with {n_lm}", prepared.landmarks.len())));
     }
-    let mm = morphable(model)?;
+    // The shape basis at the landmarks, contiguous: every shape proposal's landmark sums read it.
+    let full = morphable(model)?;
+    let mut landmark_fields = vec![0.0f32; full.shape_rank() * full.landmarks().len()];
+    let mm = match full.landmark_fields(&mut landmark_fields) {
+        Some(()) => full.with_landmark_fields(&landmark_fields).map_err(core("landmark fields"))?,
+        None => full,
+    };
     let core_settings = settings.core();
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
     let target = TargetImage::new(&pixels, w, h).map_err(core("target image"))?;
