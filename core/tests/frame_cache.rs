@@ -209,13 +209,17 @@ fn the_shading_cache_gives_shade_vertices_colours_and_errors() {
     let light_b = ShLight::from_ambient_diffuse([0.5; 3], [0.5, 0.3, 0.2], [-0.2, 0.5, 0.8]);
     let (mut basis, mut irradiance) = (vec![[0.0; SH_COEFFS]; n], vec![[0.0; 3]; n]);
     let mut cache = ShadingCache::new(ShadingBuffers { basis: &mut basis, irradiance: &mut irradiance }, n).unwrap();
-    let steps =
-        [(&albedo_a, &pose_a, &light_a), (&albedo_b, &pose_a, &light_a), (&albedo_b, &pose_a, &light_b), (&albedo_a, &pose_b, &light_b)];
-    for (i, (albedos, pose, light)) in steps.into_iter().enumerate() {
+    let steps = [
+        (&albedo_a, 1, &pose_a, &light_a),
+        (&albedo_b, 2, &pose_a, &light_a),
+        (&albedo_b, 2, &pose_a, &light_b),
+        (&albedo_a, 1, &pose_b, &light_b),
+    ];
+    for (i, (albedos, albedos_id, pose, light)) in steps.into_iter().enumerate() {
         let mut want = vec![ProjectedVertex::INVALID; n];
         let mut got = vec![ProjectedVertex::INVALID; n];
         shade_vertices(albedos, &normals, pose, light, &mut want).unwrap();
-        cache.shade(albedos, &normals, 1, pose, light, &mut got).unwrap();
+        cache.shade(albedos, albedos_id, &normals, 1, pose, light, &mut got).unwrap();
         let bits = |v: &[ProjectedVertex]| v.iter().map(|p| p.color.map(f32::to_bits)).collect::<Vec<_>>();
         assert_eq!(bits(&got), bits(&want), "step {i}");
     }
@@ -224,6 +228,6 @@ fn the_shading_cache_gives_shade_vertices_colours_and_errors() {
     bad[3][1] = f32::NAN;
     let mut out = vec![ProjectedVertex::INVALID; n];
     assert_eq!(shade_vertices(&bad, &normals, &pose_b, &light_b, &mut out), Err(VertexError::NonFinite));
-    assert_eq!(cache.shade(&bad, &normals, 1, &pose_b, &light_b, &mut out), Err(VertexError::NonFinite));
-    assert_eq!(cache.shade(&albedo_a, &normals[1..], 1, &pose_b, &light_b, &mut out), Err(VertexError::LengthMismatch));
+    assert_eq!(cache.shade(&bad, 3, &normals, 1, &pose_b, &light_b, &mut out), Err(VertexError::NonFinite));
+    assert_eq!(cache.shade(&albedo_a, 1, &normals[1..], 1, &pose_b, &light_b, &mut out), Err(VertexError::LengthMismatch));
 }

@@ -165,7 +165,7 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
         if self.shading != Some(shading) {
             self.shading = None;
             match self.shading_cache.as_mut() {
-                Some(c) => c.shade(self.bufs.albedos, self.bufs.normals, shape, &params.pose, &params.light, self.bufs.projected)?,
+                Some(c) => c.shade(self.bufs.albedos, color, self.bufs.normals, shape, &params.pose, &params.light, self.bufs.projected)?,
                 None => shade_vertices(self.bufs.albedos, self.bufs.normals, &params.pose, &params.light, self.bufs.projected)?,
             }
             self.shading = Some(shading);

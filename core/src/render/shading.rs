@@ -158,6 +158,7 @@ pub struct ShadingCache<'b> {
     bufs: ShadingBuffers<'b>,
     basis_key: Option<(u64, [u32; 3])>,
     irradiance_key: Option<(u64, [u32; 3], [[u32; 3]; SH_COEFFS])>,
+    finite_albedos: Option<u64>,
 }
 
 impl<'b> ShadingCache<'b> {
@@ -166,20 +167,23 @@ impl<'b> ShadingCache<'b> {
         if bufs.basis.len() != vertices || bufs.irradiance.len() != vertices {
             return Err(VertexError::LengthMismatch);
         }
-        Ok(Self { bufs, basis_key: None, irradiance_key: None })
+        Ok(Self { bufs, basis_key: None, irradiance_key: None, finite_albedos: None })
     }
 
     /// Forgets what it holds.
     pub fn clear(&mut self) {
         self.basis_key = None;
         self.irradiance_key = None;
+        self.finite_albedos = None;
     }
 
-    /// [`shade_vertices`], where `normals` are named by `normals_id` (the same id must mean the
-    /// same normals in every call).
+    /// [`shade_vertices`], where `albedos` and `normals` are named by `albedos_id` and
+    /// `normals_id` (the same id must mean the same values in every call).
+    #[allow(clippy::too_many_arguments)]
     pub fn shade(
         &mut self,
         albedos: &[Vec3],
+        albedos_id: u64,
         normals: &[Vec3],
         normals_id: u64,
         pose: &Pose,
@@ -190,8 +194,15 @@ impl<'b> ShadingCache<'b> {
         if albedos.len() != n || normals.len() != n || self.bufs.basis.len() != n || self.bufs.irradiance.len() != n {
             return Err(VertexError::LengthMismatch);
         }
-        if !albedos.iter().all(finite3) || !light.coeffs.iter().all(finite3) || !pose_finite(pose) {
+        if !light.coeffs.iter().all(finite3) || !pose_finite(pose) {
             return Err(VertexError::NonFinite);
+        }
+        // Albedos already found finite are not checked again.
+        if self.finite_albedos != Some(albedos_id) {
+            if !albedos.iter().all(finite3) {
+                return Err(VertexError::NonFinite);
+            }
+            self.finite_albedos = Some(albedos_id);
         }
         let angles = [pose.yaw, pose.pitch, pose.roll].map(f32::to_bits);
         if self.basis_key != Some((normals_id, angles)) {
