@@ -7,8 +7,9 @@ mod fit_support;
 
 use fit_support::*;
 use gpmm_core::fit::{
-    image_chain, image_log_likelihood, initial_guess, landmark_chain, solve_light, BackgroundModel, FitError, FitParams, GaussianPixel,
-    ImageProblem, LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
+    image_chain, image_log_likelihood, initial_guess, landmark_chain, solve_color, solve_light, BackgroundModel, ColorScene,
+    ColorSolveConfig, FitError, FitParams, GaussianPixel, ImageProblem, LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior,
+    Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
 use gpmm_core::{Basis, FactoredBasis, ShLight};
 use rand_core::SeedableRng;
@@ -178,6 +179,66 @@ fn least_squares_light_recovers_the_rendered_light() {
     inst.update(&model, &other, W, H).unwrap();
     let l2 = solve_light(inst.positions(), inst.normals(), inst.albedos(), &other.pose, &cam, &image, &cfg).unwrap();
     assert_eq!(l, l2);
+}
+
+#[test]
+fn colour_solve_recovers_the_rendered_albedo_and_raises_the_likelihood() {
+    let scene = Scene::new();
+    let model = scene.synth.model();
+    let truth = truth();
+    let image = TargetImage::new(&scene.pixels, W, H).unwrap();
+    let mut bufs = Buffers::new(scene.synth.vertices());
+    let mut inst = bufs.instance();
+    inst.update(&model, &truth, W, H).unwrap();
+    let cam = truth.camera(W, H);
+    let cs = ColorScene {
+        positions: inst.positions(),
+        normals: inst.normals(),
+        pose: &truth.pose,
+        camera: &cam,
+        light: &truth.light,
+        image: &image,
+    };
+    let config = ColorSolveConfig { stride: 1, min_cos: 0.2, pixel_sigma: DEFAULT_PIXEL_SIGMA, weight: 1.0, iterations: 30 };
+    let mut coeffs = [0.0f32; KC];
+    let samples = solve_color::<_, KC>(&model, &cs, &config, &mut coeffs).unwrap();
+    eprintln!("{samples} samples: solved {coeffs:?}, truth {:?}", truth.color_coeffs());
+    assert!(samples > 100);
+    for (a, b) in coeffs.iter().zip(truth.color_coeffs()) {
+        assert!((a - b).abs() < 0.1, "{coeffs:?} vs {:?}", truth.color_coeffs());
+    }
+    // Bad input is refused and leaves the coefficients alone.
+    let mut keep = coeffs;
+    let bad = ColorSolveConfig { stride: 0, ..config };
+    assert_eq!(solve_color::<_, KC>(&model, &cs, &bad, &mut keep), Err(FitError::BadConfig));
+    let bad = ColorSolveConfig { pixel_sigma: f32::NAN, ..config };
+    assert_eq!(solve_color::<_, KC>(&model, &cs, &bad, &mut keep), Err(FitError::BadConfig));
+    let mut too_many = [0.0f32; KC + 1];
+    assert!(solve_color::<_, KC>(&model, &cs, &config, &mut too_many).is_err());
+    assert_eq!(keep, coeffs);
+    // The solved albedo explains the image as well as the truth does, far better than the mean.
+    let background = BackgroundModel::from_image(&image, 0.01).unwrap();
+    let lm = target(&scene.points, &scene.valid);
+    let prior = Prior::around(&truth);
+    let mixture = Mixture::landmark_default(W as f32);
+    let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
+    let ip = ImageProblem {
+        image,
+        pixel: GaussianPixel::new(DEFAULT_PIXEL_SIGMA).unwrap(),
+        background: &background,
+        light_solve: LightSolveConfig::default(),
+    };
+    let mut raster = Raster::new();
+    let mut mean_color = truth.clone();
+    mean_color.color_coeffs_mut().fill(0.0);
+    let mut solved = truth.clone();
+    solved.color_coeffs_mut().copy_from_slice(&coeffs);
+    let ll =
+        |p: &FitParams<KS, KC>, inst: &mut _, raster: &mut _| image_log_likelihood(&problem, &ip, p, inst, raster).unwrap().log_likelihood;
+    let (at_mean, at_solved, at_truth) =
+        (ll(&mean_color, &mut inst, &mut raster), ll(&solved, &mut inst, &mut raster), ll(&truth, &mut inst, &mut raster));
+    eprintln!("log-likelihood: mean colour {at_mean:.1}, solved {at_solved:.1}, truth {at_truth:.1}");
+    assert!(at_solved > at_truth - 20.0 && at_solved > at_mean + 100.0);
 }
 
 fn run_both(

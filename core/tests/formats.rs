@@ -75,7 +75,7 @@ fn fit_input_carries_every_setting() {
     let settings = FitSettings {
         landmarks: LandmarkSettings { steps: 123, ..d.landmarks },
         image: ImageSettings { steps: 45, pixel_sigma: 0.07, ..d.image },
-        start: StartSettings { nominal_distance_mm: 800.0 },
+        start: StartSettings { nominal_distance_mm: 800.0, ..StartSettings::DEFAULT },
         ..d
     };
     let (w, h) = (5u32, 3u32);

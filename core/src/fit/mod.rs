@@ -10,6 +10,7 @@
 //!   Gaussian drift proposals.
 //! - [`observer`]: [`ChainObserver`]s that see every proposal's outcome ([`Acceptance`] counts).
 //! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
+//! - [`color_fit`]: the colour coefficients by regularized least squares (conjugate gradients).
 //! - [`chain`]: Metropolis-Hastings with delayed acceptance (prior and landmarks, then the image).
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
 //! - [`settings`]: its one [`FitSettings`] (steps, ranks, σ's, proposal mixtures, light).
@@ -21,6 +22,7 @@
 /// The parameter vector, under its old path (`gpmm_core::fit::params`); it lives in [`crate::model`].
 pub use crate::model::params;
 pub mod chain;
+pub mod color_fit;
 pub mod contour;
 pub mod image;
 pub mod init;
@@ -42,6 +44,7 @@ pub use chain::{
     filter_stage, image_chain, image_chain_observed, image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_observed,
     landmark_chain_with, run_chain, ChainState, FitResult, ImageProblem, LandmarksOnly, Problem, RenderedImage, SecondStage,
 };
+pub use color_fit::{solve_color, ColorScene, ColorSolveConfig};
 pub use contour::{Silhouette, CONTOUR_POOL, MAX_CONTOUR, NO_VERTEX};
 pub use image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use init::{initial_guess, landmark_pivot};

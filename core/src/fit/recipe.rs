@@ -13,12 +13,15 @@
 //!    other: on faces from another model (ICT) such a joint chain underestimated a 30° yaw by
 //!    5–7°, because the template's landmark depths (the silhouette contour above all) differ from
 //!    the face's.
-//! 3. The shape phase's best sample gets the closed-form least-squares SH light on every visible vertex.
+//! 3. The shape phase's best sample gets the closed-form least-squares SH light on every visible
+//!    vertex, then (if [`FitSettings::start`] asks for rounds) the colour coefficients solved for
+//!    that light and the light again for the new albedo ([`super::color_fit`]).
 //! 4. The image chain from there (prior × landmarks × image, delayed acceptance; all parameters).
 //!
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
 use super::chain::{image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, FitResult, ImageProblem, Problem};
+use super::color_fit::{solve_color, ColorScene, ColorSolveConfig};
 use super::contour::Silhouette;
 use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::{initial_guess, landmark_pivot};
@@ -177,6 +180,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     {
         start.light = l;
     }
+    start_color_rounds::<I, KS, KC>(model, &image, settings, &mut start, instance, w, h)?;
 
     // 4. The image chain.
     let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
@@ -189,6 +193,56 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let phase = PhaseObserver { observer, stage: Stage::ImageChain, offset: 0, total: img_steps, steps: img_steps, report_end: true };
     let image = image_chain_with(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
     Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
+}
+
+/// The colour-and-light rounds of the image chain's start (step 3 of [`standard_fit`],
+/// [`StartSettings::color_rounds`](super::settings::StartSettings)): the colour coefficients
+/// solved for the light, then the light for the new albedo; a failed solve ends the rounds and
+/// keeps what was found before it.
+#[inline(never)]
+fn start_color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
+    model: &MorphableModel<'_, I>,
+    image: &TargetImage<'_>,
+    settings: &FitSettings,
+    start: &mut FitParams<KS, KC>,
+    instance: &mut Instance<'_, KS, KC>,
+    w: u32,
+    h: u32,
+) -> Result<(), FitError> {
+    let s = &settings.start;
+    let config = ColorSolveConfig {
+        stride: s.color_stride,
+        min_cos: settings.light.min_cos,
+        pixel_sigma: settings.image.pixel_sigma,
+        weight: s.color_weight,
+        iterations: s.color_iterations,
+    };
+    let every_vertex = settings.light.solve_config(settings.light.start_stride);
+    for _ in 0..s.color_rounds {
+        let camera = start.camera(w, h);
+        let mut coeffs = [0.0f32; KC];
+        let k = start.color_coeffs().len();
+        let (Some(c), Some(current)) = (coeffs.get_mut(..k), Some(start.color_coeffs())) else { break };
+        c.copy_from_slice(current);
+        let scene = ColorScene {
+            positions: instance.positions(),
+            normals: instance.normals(),
+            pose: &start.pose,
+            camera: &camera,
+            light: &start.light,
+            image,
+        };
+        if solve_color::<I, KC>(model, &scene, &config, c).is_err() {
+            break;
+        }
+        start.color_coeffs_mut().copy_from_slice(c);
+        instance.update(model, start, w, h)?;
+        match solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &camera, image, &every_vertex) {
+            Ok(l) => start.light = l,
+            Err(_) => break,
+        }
+    }
+    Ok(())
 }
 
 /// The two phases of the landmark chain (step 2 of [`standard_fit`]): returns the pose phase's

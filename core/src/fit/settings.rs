@@ -85,13 +85,28 @@ pub struct RankSettings {
     pub color: usize,
 }
 
-/// The start of the landmark chain.
+/// The starts of the chains: the landmark chain's distance, the image chain's colour and light solve.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct StartSettings {
     /// Distance of the start pose (mm); the start focal length is chosen to match it.
     pub nominal_distance_mm: f32,
+    /// Rounds of the image chain's start solve: each solves the colour coefficients for the
+    /// light, then the light for the colour (0: the light alone, colour coefficients zero).
+    pub color_rounds: u32,
+    /// Vertex stride of the colour solve (≥ 1).
+    pub color_stride: usize,
+    /// Pixels a sampled vertex stands for in the colour solve's data term (> 0).
+    pub color_weight: f32,
+    /// Conjugate-gradient iterations of one colour solve.
+    pub color_iterations: u32,
+}
+
+impl StartSettings {
+    /// Start at 500 mm; no colour solve.
+    pub const DEFAULT: Self =
+        Self { nominal_distance_mm: 500.0, color_rounds: 0, color_stride: 2, color_weight: 1.0, color_iterations: 30 };
 }
 
 impl FitSettings {
@@ -110,7 +125,7 @@ impl FitSettings {
         },
         image: ImageSettings { steps: 600, pixel_sigma: DEFAULT_PIXEL_SIGMA, background_floor: 0.01 },
         ranks: RankSettings { shape: 200, color: 50 },
-        start: StartSettings { nominal_distance_mm: 500.0 },
+        start: StartSettings::DEFAULT,
         proposals: ProposalSettings::DEFAULT,
         light: LightSettings::DEFAULT,
     };
@@ -138,6 +153,8 @@ impl FitSettings {
         if positive(l.sigma)
             && positive(i.pixel_sigma)
             && positive(self.start.nominal_distance_mm)
+            && self.start.color_stride >= 1
+            && positive(self.start.color_weight)
             && positive(l.contour_sigma_factor)
             && i.background_floor >= 0.0
             && (0.0..=1.0).contains(&l.pose_share)
@@ -423,7 +440,9 @@ mod tests {
             FitSettings { landmarks: LandmarkSettings { contour_sigma_factor: f32::INFINITY, ..d.landmarks }, ..d },
             FitSettings { landmarks: LandmarkSettings { sigma: -1.0, ..d.landmarks }, ..d },
             FitSettings { image: ImageSettings { background_floor: -0.5, ..d.image }, ..d },
-            FitSettings { start: StartSettings { nominal_distance_mm: 0.0 }, ..d },
+            FitSettings { start: StartSettings { nominal_distance_mm: 0.0, ..d.start }, ..d },
+            FitSettings { start: StartSettings { color_stride: 0, ..d.start }, ..d },
+            FitSettings { start: StartSettings { color_weight: f32::NAN, ..d.start }, ..d },
             FitSettings { light: LightSettings { solve_stride: 0, ..d.light }, ..d },
             FitSettings { light: LightSettings { lambda: f32::NAN, ..d.light }, ..d },
             FitSettings { proposals: ProposalSettings { image: MixtureShares::NONE, ..d.proposals }, ..d },

@@ -3,12 +3,12 @@
 //!
 //! The settings travel as a postcard payload of the caller's settings type (the core's
 //! `FitSettings` in practice), so every setting the host uses reaches the device.
-//! Layout, version 2 (little-endian; offsets in bytes):
+//! Layout (little-endian; offsets in bytes; docs/formats.md keeps the history of versions):
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `GPFI` |
-//! | 4 | 4 | version (`u32`, 2) |
+//! | 4 | 4 | version (`u32`, 4) |
 //! | 8 | 4 | image width `W` |
 //! | 12 | 4 | image height `H` |
 //! | 16 | 4 | landmark count `L` |
@@ -26,7 +26,7 @@ use serde::{de::DeserializeOwned, Serialize};
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFI";
 /// The layout version written and read.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// Bytes before the settings payload.
 pub const HEADER_BYTES: usize = 32;
 /// Largest settings payload.

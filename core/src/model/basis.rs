@@ -502,6 +502,33 @@ impl Basis<'_> {
         }
     }
 
+    /// Component `k`'s (scaled) vector at `vertex`; zero outside the basis.
+    pub fn component_at(&self, k: usize, vertex: usize) -> Vec3 {
+        let n = self.vertices();
+        if k >= self.rank() || vertex >= n {
+            return [0.0; 3];
+        }
+        let at = k * n + vertex;
+        let scale = |m: f32, e: &Vec3| [m * e[0], m * e[1], m * e[2]];
+        match self {
+            Basis::Factored(b) => match (b.fields.get(at), b.directions.get(k)) {
+                (Some(f), Some(e)) => scale(*f, e),
+                _ => [0.0; 3],
+            },
+            Basis::Dense(b) => match b.values.get(3 * at..3 * at + 3) {
+                Some([x, y, z]) => [*x, *y, *z],
+                _ => [0.0; 3],
+            },
+            Basis::Quantized(b) => {
+                let s = b.scales.get(k).copied().unwrap_or(0.0);
+                match b.directions.and_then(|d| d.get(k)) {
+                    Some(e) => scale(s * b.values.get(at), e),
+                    None => [s * b.values.get(3 * at), s * b.values.get(3 * at + 1), s * b.values.get(3 * at + 2)],
+                }
+            }
+        }
+    }
+
     /// Adds the linear combination of components at one vertex to `out`.
     pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
         match self {

@@ -147,6 +147,16 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         Ok(self.color.add_instance(coeffs, out)?)
     }
 
+    /// Mean albedo, one per vertex.
+    pub fn color_mean(&self) -> &'a [Vec3] {
+        self.color_mean
+    }
+
+    /// Colour component `k`'s (scaled) vector at `vertex` (zero outside the basis).
+    pub fn color_component(&self, k: usize, vertex: usize) -> Vec3 {
+        self.color.component_at(k, vertex)
+    }
+
     /// Instance position of one vertex (`rank` multiply-adds per coordinate).
     pub fn vertex_position(&self, coeffs: &[f32], vertex: u32) -> Result<Vec3, FitError> {
         let mut p = self.shape_mean.get(vertex as usize).copied().ok_or(FitError::IndexOutOfRange)?;
