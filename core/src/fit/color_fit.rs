@@ -5,7 +5,8 @@
 //! in the coefficients `a`. Against the target colours `I` at the projected vertices, the
 //! posterior mode under the prior `a ~ N(0, I)` with pixel noise σ minimizes
 //! `w Σ (e (m + B a) − I)² + |a|²`, `w` = [`ColorSolveConfig::weight`] / σ² per sample. The
-//! normal equations `(w AᵀA + I) a = w Aᵀ (I − e m)` are solved by conjugate gradients without
+//! normal equations `(w AᵀA + I) a = w Aᵀ (I − e m)` are solved by conjugate gradients (Jacobi
+//! preconditioned) without
 //! forming the matrix (each iteration is one pass over the samples), so memory is a few
 //! coefficient vectors and one row of the basis: nothing scales with the model.
 //! Visibility is a back-facing test only, as in [`super::light_fit`].
@@ -72,11 +73,10 @@ fn visit_samples(scene: &ColorScene<'_, '_>, config: &ColorSolveConfig, mut f: i
     m
 }
 
-/// The rendered colour change `e ⊙ Σ_k x_k B_k` at `vertex` (first `x.len()` components).
-fn basis_times<I: TriIndex>(model: &MorphableModel<'_, I>, vertex: usize, e: Vec3, x: &[f32]) -> Vec3 {
+/// The rendered colour change `e ⊙ Σ_k x_k row_k` of one vertex (`row`: its basis row).
+fn row_times(row: &[Vec3], e: Vec3, x: &[f32]) -> Vec3 {
     let mut s = [0.0f32; 3];
-    for (k, xk) in x.iter().enumerate() {
-        let b = model.color_component(k, vertex);
+    for (b, xk) in row.iter().zip(x) {
         s[0] += xk * b[0];
         s[1] += xk * b[1];
         s[2] += xk * b[2];
@@ -84,11 +84,10 @@ fn basis_times<I: TriIndex>(model: &MorphableModel<'_, I>, vertex: usize, e: Vec
     [e[0] * s[0], e[1] * s[1], e[2] * s[2]]
 }
 
-/// Adds `scale · Σ_c e_c B_k,c d_c` to `out[k]` for every component `k < out.len()`.
-fn add_transposed<I: TriIndex>(model: &MorphableModel<'_, I>, vertex: usize, e: Vec3, d: Vec3, scale: f32, out: &mut [f32]) {
+/// Adds `scale · Σ_c e_c row_k,c d_c` to `out[k]` for every component `k`.
+fn add_row_transposed(row: &[Vec3], e: Vec3, d: Vec3, scale: f32, out: &mut [f32]) {
     let ed = [scale * e[0] * d[0], scale * e[1] * d[1], scale * e[2] * d[2]];
-    for (k, o) in out.iter_mut().enumerate() {
-        let b = model.color_component(k, vertex);
+    for (o, b) in out.iter_mut().zip(row) {
         *o += b[0] * ed[0] + b[1] * ed[1] + b[2] * ed[2];
     }
 }
@@ -128,16 +127,26 @@ pub fn solve_color<I: TriIndex, const KC: usize>(
     let mut res = [0.0f32; KC];
     let mut p = [0.0f32; KC];
     let mut ap = [0.0f32; KC];
-    let (Some(x), Some(res), Some(p), Some(ap)) = (x.get_mut(..k), res.get_mut(..k), p.get_mut(..k), ap.get_mut(..k)) else {
+    let mut diag = [1.0f32; KC];
+    let mut row = [[0.0f32; 3]; KC];
+    let (Some(x), Some(res), Some(p), Some(ap), Some(diag), Some(row)) =
+        (x.get_mut(..k), res.get_mut(..k), p.get_mut(..k), ap.get_mut(..k), diag.get_mut(..k), row.get_mut(..k))
+    else {
         return Err(FitError::Model(ModelError::TooManyCoefficients));
     };
     x.copy_from_slice(coeffs);
-    // res = w Aᵀ (I − e m − A x) − x: the negative gradient at the start.
+    // res = w Aᵀ (I − e m − A x) − x: the negative gradient at the start; diag: the diagonal of
+    // w AᵀA + I, the preconditioner (Jacobi).
     let samples = visit_samples(scene, config, |v, e, target| {
         let m = mean.get(v).copied().unwrap_or([0.0; 3]);
-        let ax = basis_times(model, v, e, x);
+        model.color_components_at(v, row);
+        let ax = row_times(row, e, x);
         let d = [target[0] - e[0] * m[0] - ax[0], target[1] - e[1] * m[1] - ax[1], target[2] - e[2] * m[2] - ax[2]];
-        add_transposed(model, v, e, d, w, res);
+        add_row_transposed(row, e, d, w, res);
+        let e2 = [w * e[0] * e[0], w * e[1] * e[1], w * e[2] * e[2]];
+        for (g, b) in diag.iter_mut().zip(row.iter()) {
+            *g += e2[0] * b[0] * b[0] + e2[1] * b[1] * b[1] + e2[2] * b[2] * b[2];
+        }
     });
     if samples < 16 {
         return Err(FitError::Singular);
@@ -145,34 +154,42 @@ pub fn solve_color<I: TriIndex, const KC: usize>(
     for (r, xi) in res.iter_mut().zip(x.iter()) {
         *r -= xi;
     }
-    p.copy_from_slice(res);
-    let mut rr = dot(res, res);
-    let tolerance = rr * 1e-10;
+    // Preconditioned conjugate gradients: z = res / diag.
+    let precondition = |p: &mut [f32], res: &[f32]| {
+        for ((pi, ri), g) in p.iter_mut().zip(res).zip(diag.iter()) {
+            *pi = ri / g;
+        }
+    };
+    precondition(p, res);
+    let mut rz = dot(res, p);
+    let tolerance = rz * 1e-10;
     for _ in 0..config.iterations {
-        if rr.is_nan() || rr <= tolerance {
+        if rz.is_nan() || rz <= tolerance {
             break;
         }
         // ap = (w AᵀA + I) p
         ap.copy_from_slice(p);
         visit_samples(scene, config, |v, e, _| {
-            let a = basis_times(model, v, e, p);
-            add_transposed(model, v, e, a, w, ap);
+            model.color_components_at(v, row);
+            let a = row_times(row, e, p);
+            add_row_transposed(row, e, a, w, ap);
         });
         let pap = dot(p, ap);
         if pap.is_nan() || pap <= 0.0 {
             break;
         }
-        let alpha = rr / pap;
+        let alpha = rz / pap;
         for ((xi, ri), (pi, api)) in x.iter_mut().zip(res.iter_mut()).zip(p.iter().zip(ap.iter())) {
             *xi += alpha * pi;
             *ri -= alpha * api;
         }
-        let rr_new = dot(res, res);
-        let beta = rr_new / rr;
-        for (pi, ri) in p.iter_mut().zip(res.iter()) {
-            *pi = ri + beta * *pi;
+        // p = z + β p with z = res / diag, β = (res·z) / rz.
+        let rz_new: f32 = res.iter().zip(diag.iter()).map(|(r, g)| r * r / g).sum();
+        let beta = rz_new / rz;
+        for ((pi, ri), g) in p.iter_mut().zip(res.iter()).zip(diag.iter()) {
+            *pi = ri / g + beta * *pi;
         }
-        rr = rr_new;
+        rz = rz_new;
     }
     if !x.iter().all(|v| v.is_finite()) {
         return Err(FitError::Singular);

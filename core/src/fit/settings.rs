@@ -106,7 +106,7 @@ pub struct StartSettings {
 impl StartSettings {
     /// Start at 500 mm; no colour solve.
     pub const DEFAULT: Self =
-        Self { nominal_distance_mm: 500.0, color_rounds: 0, color_stride: 2, color_weight: 1.0, color_iterations: 30 };
+        Self { nominal_distance_mm: 500.0, color_rounds: 0, color_stride: 2, color_weight: 1.0, color_iterations: 12 };
 }
 
 impl FitSettings {

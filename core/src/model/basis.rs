@@ -529,6 +529,39 @@ impl Basis<'_> {
         }
     }
 
+    /// The (scaled) vectors of the first `out.len()` components at `vertex` into `out` (zero
+    /// outside the basis): one row of the basis, read with the layout matched once.
+    pub fn components_at(&self, vertex: usize, out: &mut [Vec3]) {
+        let n = self.vertices();
+        let rank = self.rank();
+        if vertex >= n {
+            out.fill([0.0; 3]);
+            return;
+        }
+        let keep = out.len().min(rank);
+        let (out, rest) = out.split_at_mut(keep);
+        rest.fill([0.0; 3]);
+        match self {
+            Basis::Factored(b) => {
+                for ((o, e), f) in out.iter_mut().zip(b.directions).zip(b.fields.iter().skip(vertex).step_by(n)) {
+                    *o = [f * e[0], f * e[1], f * e[2]];
+                }
+            }
+            Basis::Dense(b) => {
+                for (o, v) in out.iter_mut().zip(b.values.chunks_exact(3).skip(vertex).step_by(n)) {
+                    if let [x, y, z] = v {
+                        *o = [*x, *y, *z];
+                    }
+                }
+            }
+            Basis::Quantized(_) => {
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = self.component_at(k, vertex);
+                }
+            }
+        }
+    }
+
     /// Adds the linear combination of components at one vertex to `out`.
     pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
         match self {

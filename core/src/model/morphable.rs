@@ -157,6 +157,11 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         self.color.component_at(k, vertex)
     }
 
+    /// The first `out.len()` colour components' (scaled) vectors at `vertex` into `out`.
+    pub fn color_components_at(&self, vertex: usize, out: &mut [Vec3]) {
+        self.color.components_at(vertex, out)
+    }
+
     /// Instance position of one vertex (`rank` multiply-adds per coordinate).
     pub fn vertex_position(&self, coeffs: &[f32], vertex: u32) -> Result<Vec3, FitError> {
         let mut p = self.shape_mean.get(vertex as usize).copied().ok_or(FitError::IndexOutOfRange)?;
