@@ -16,11 +16,15 @@
 //! 3. The shape phase's best sample gets the closed-form least-squares SH light on every visible
 //!    vertex, then (if [`FitSettings::start`] asks for rounds) the colour coefficients solved for
 //!    that light and the light again for the new albedo ([`super::color_fit`]).
-//! 4. The image chain from there (prior × landmarks × image, delayed acceptance; all parameters).
+//! 4. The image chain from there (prior × landmarks × image, delayed acceptance; all parameters);
+//!    optionally its best sample's colour and light solved again ([`ImageSettings::color_polish_rounds`](super::settings::ImageSettings)),
+//!    kept if that raises the log posterior.
 //!
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
-use super::chain::{image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, FitResult, ImageProblem, Problem};
+use super::chain::{
+    image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, ChainState, FitResult, ImageProblem, Problem,
+};
 use super::color_fit::{solve_color, ColorScene, ColorSolveConfig};
 use super::contour::Silhouette;
 use super::image::{BackgroundModel, ImageEval, TargetImage};
@@ -31,7 +35,7 @@ use super::likelihood::GaussianPixel;
 use super::observer::{Acceptance, ChainObserver, ProposalStep};
 use super::params::FitParams;
 use super::prior::Prior;
-use super::proposal::Mixture;
+use super::proposal::{Mixture, StandardProposal};
 use super::settings::FitSettings;
 use super::FitError;
 use crate::model::instance::Instance;
@@ -180,7 +184,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     {
         start.light = l;
     }
-    start_color_rounds::<I, KS, KC>(model, &image, settings, &mut start, instance, w, h)?;
+    color_rounds::<I, KS, KC>(model, &image, settings, settings.start.color_rounds, &mut start, instance, w, h)?;
 
     // 4. The image chain.
     let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
@@ -191,19 +195,53 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
     let img_steps = settings.image.steps;
     let phase = PhaseObserver { observer, stage: Stage::ImageChain, offset: 0, total: img_steps, steps: img_steps, report_end: true };
-    let image = image_chain_with(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
+    let mut image = image_chain_with(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
+    polish(&problem, &ip, settings, &mut image, instance, raster)?;
     Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
 }
 
-/// The colour-and-light rounds of the image chain's start (step 3 of [`standard_fit`],
-/// [`StartSettings::color_rounds`](super::settings::StartSettings)): the colour coefficients
-/// solved for the light, then the light for the new albedo; a failed solve ends the rounds and
-/// keeps what was found before it.
+/// The image chain's best sample after [`ImageSettings::color_polish_rounds`](super::settings::ImageSettings)
+/// colour-and-light rounds, kept if its log posterior (prior, landmarks, image) is higher.
 #[inline(never)]
-fn start_color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
+fn polish<I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+    problem: &Problem<'_, I, StandardProposal>,
+    ip: &ImageProblem<'_, GaussianPixel, BackgroundModel>,
+    settings: &FitSettings,
+    image: &mut FitResult<KS, KC>,
+    instance: &mut Instance<'_, KS, KC>,
+    raster: &mut TileRasterizer<TW, TH, BIN>,
+) -> Result<(), FitError> {
+    let rounds = settings.image.color_polish_rounds;
+    if rounds == 0 {
+        return Ok(());
+    }
+    let (w, h) = (problem.width, problem.height);
+    let mut p = image.best.clone();
+    instance.update(&problem.model, &p, w, h)?;
+    color_rounds::<I, KS, KC>(&problem.model, &ip.image, settings, rounds, &mut p, instance, w, h)?;
+    let state = ChainState::new(problem, &p)?;
+    let Ok(eval) = image_log_likelihood(problem, ip, &p, instance, raster) else { return Ok(()) };
+    let posterior = state.filter_term() + eval.log_likelihood;
+    if posterior > image.best_log_posterior {
+        image.best = p;
+        image.best_log_posterior = posterior;
+        image.best_landmarks = state.landmarks;
+        image.best_image = Some(eval);
+    }
+    Ok(())
+}
+
+/// `rounds` colour-and-light rounds on `start` (step 3 of [`standard_fit`] with
+/// [`StartSettings::color_rounds`](super::settings::StartSettings), and the polish): the colour
+/// coefficients solved for the light, then the light for the new albedo; a failed solve ends
+/// the rounds and keeps what was found before it. `instance` must hold `start`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
     model: &MorphableModel<'_, I>,
     image: &TargetImage<'_>,
     settings: &FitSettings,
+    rounds: u32,
     start: &mut FitParams<KS, KC>,
     instance: &mut Instance<'_, KS, KC>,
     w: u32,
@@ -218,7 +256,7 @@ fn start_color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
         iterations: s.color_iterations,
     };
     let every_vertex = settings.light.solve_config(settings.light.start_stride);
-    for _ in 0..s.color_rounds {
+    for _ in 0..rounds {
         let camera = start.camera(w, h);
         let mut coeffs = [0.0f32; KC];
         let k = start.color_coeffs().len();

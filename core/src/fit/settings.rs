@@ -68,6 +68,9 @@ pub struct ImageSettings {
     pub pixel_sigma: f32,
     /// Uniform floor mixed into the background colour histogram.
     pub background_floor: f32,
+    /// Colour-and-light rounds (as [`StartSettings::color_rounds`]) on the image chain's best
+    /// sample, kept if its log posterior is higher (0: none).
+    pub color_polish_rounds: u32,
 }
 
 /// How many of the model's components are fitted (the leading ones; capped by the model's rank
@@ -123,7 +126,7 @@ impl FitSettings {
             student_t: 0.0,
             silhouette: false,
         },
-        image: ImageSettings { steps: 600, pixel_sigma: DEFAULT_PIXEL_SIGMA, background_floor: 0.01 },
+        image: ImageSettings { steps: 600, pixel_sigma: DEFAULT_PIXEL_SIGMA, background_floor: 0.01, color_polish_rounds: 0 },
         ranks: RankSettings { shape: 200, color: 50 },
         start: StartSettings::DEFAULT,
         proposals: ProposalSettings::DEFAULT,
