@@ -674,6 +674,47 @@ mod tests {
     }
 
     #[test]
+    fn basis_rows_are_the_unit_coefficient_sums_for_every_layout() {
+        let fields = [1.0, 2.0, 3.0, 0.5, -1.0, 0.25];
+        let dirs = [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]];
+        let dense = [0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7, 0.8, -0.9, 1.0, 1.1, 1.2, 1.3, -1.4, 1.5, 1.6, 1.7, 1.8];
+        let q8: [i8; 6] = [12, -7, 127, -128, 0, 55];
+        let q16: [i16; 18] = [1, -2, 3, 400, -500, 600, 7, 8, 9, -10, 11, 12, 13, 14, 15, 16, 17, -32767];
+        let scales = [0.01, 0.002];
+        let bases = [
+            Basis::Factored(FactoredBasis::new(&fields, &dirs, 3).unwrap()),
+            Basis::Dense(DenseBasis::new(&dense, 2, 3).unwrap()),
+            Basis::Quantized(QuantizedBasis::new(QuantValues::I8(&q8), &scales, Some(&dirs), 3).unwrap()),
+            Basis::Quantized(QuantizedBasis::new(QuantValues::I16(&q16), &scales, None, 3).unwrap()),
+        ];
+        for b in bases {
+            for v in 0..3 {
+                // Three slots for a rank-2 basis: the extra one is zero.
+                let mut row = [[9.0f32; 3]; 3];
+                b.components_at(v, &mut row);
+                for (k, r) in row.iter().enumerate() {
+                    let mut unit = [0.0f32; 2];
+                    let mut expected = [0.0f32; 3];
+                    if k < 2 {
+                        unit[k] = 1.0;
+                        b.add_vertex(&unit, v, &mut expected).unwrap();
+                    }
+                    for a in 0..3 {
+                        assert!((r[a] - expected[a]).abs() <= 1e-6 * (1.0 + expected[a].abs()), "{b:?} v{v} k{k}: {r:?} vs {expected:?}");
+                    }
+                    assert_eq!(*r, b.component_at(k, v));
+                }
+            }
+            // Outside the basis: zeros, no panic.
+            let mut row = [[9.0f32; 3]; 2];
+            b.components_at(3, &mut row);
+            assert_eq!(row, [[0.0; 3]; 2]);
+            assert_eq!(b.component_at(0, 3), [0.0; 3]);
+            assert_eq!(b.component_at(2, 0), [0.0; 3]);
+        }
+    }
+
+    #[test]
     fn factored_matches_dense_expansion() {
         let fields = [1.0, 2.0, 3.0, 0.5, -1.0, 0.0];
         let dirs = [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]];
