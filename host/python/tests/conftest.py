@@ -71,6 +71,17 @@ def small_model_path(tmp_path_factory, run_cli, template) -> Path:
 
 
 @pytest.fixture(scope="session")
+def demo_model_path(tmp_path_factory, run_cli, template) -> Path:
+    """The demo's model (`gpmm demo` builds it with these options: symmetric-full, ranks 200/200,
+    the whole cropped template), built by the gpmm program: about 10 s."""
+    out = tmp_path_factory.mktemp("demo") / "model.gpmm"
+    ply, lm = template
+    run_cli("build", "--template", ply, "--landmarks", lm, "--kernel", "symmetric-full",
+            "--rank-shape", "200", "--rank-color", "200", "-o", out)
+    return out
+
+
+@pytest.fixture(scope="session")
 def astronaut(data_dir):
     img = data_dir / "images" / "astronaut.png"
     pts = data_dir / "images" / "astronaut.pts"

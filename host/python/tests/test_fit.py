@@ -1,5 +1,7 @@
 """A fit from Python equals `gpmm fit` on the same photo, landmarks, settings and seed."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -14,15 +16,27 @@ def py_fit(small_model_path, astronaut):
     return model.fit(gpmm.load_image(img), gpmm.read_pts(pts), **FIT_FLAGS)
 
 
-def test_fit_matches_the_cli(py_fit, cli_fit):
+def assert_same_fit(py_fit, cli_fit):
     for key in ("yaw_deg", "pitch_deg", "roll_deg", "focal_px", "log_likelihood", "pixel_rmse", "covered_pixels"):
         assert py_fit[key] == cli_fit[key], key
-    np.testing.assert_array_equal(py_fit["shape"], np.array(cli_fit["shape"], np.float32))
-    np.testing.assert_array_equal(py_fit["color"], np.array(cli_fit["color"], np.float32))
-    np.testing.assert_array_equal(py_fit["light"], np.array(cli_fit["light"], np.float32))
-    np.testing.assert_array_equal(py_fit["translation_mm"], np.array(cli_fit["translation_mm"], np.float32))
-    np.testing.assert_array_equal(py_fit["fitted_landmarks"], np.array(cli_fit["fitted_landmarks"], np.float32))
+    for key in ("shape", "color", "light", "translation_mm", "fitted_landmarks", "photo_pose_deg"):
+        np.testing.assert_array_equal(np.asarray(py_fit[key], np.float32), np.array(cli_fit[key], np.float32), err_msg=key)
     assert py_fit["acceptance"] == cli_fit["acceptance"]
+
+
+def test_demo_model_default_fit_matches_the_cli(demo_model_path, astronaut, run_cli, tmp_path):
+    """The demo model, the astronaut, gpmm fit's defaults (seed 0, 5000 + 600 steps, 200 + 50 components)."""
+    img, pts = astronaut
+    run_cli("fit", demo_model_path, img, "--landmarks", pts, "--no-timing", "-o", tmp_path)
+    cli = json.loads((tmp_path / "fit.json").read_text())
+    model = gpmm.load(demo_model_path)
+    fit = model.fit(gpmm.load_image(img), gpmm.read_pts(pts))
+    assert fit["fitted_ranks"] == [200, 50] and fit["landmark_steps"] == 5000 and fit["image_steps"] == 600
+    assert_same_fit(fit, cli)
+
+
+def test_fit_matches_the_cli(py_fit, cli_fit):
+    assert_same_fit(py_fit, cli_fit)
     assert py_fit["crop"] == cli_fit["crop"]
 
 
