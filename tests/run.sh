@@ -48,6 +48,7 @@ GPMM_BIN="$PWD/target/release/gpmm" target/py-venv/bin/python -m pytest host/pyt
 # Print one closing summary line over all test binaries and the pytest suite.
 passed=$(grep -Eo '^test result: [a-zA-Z]+\. [0-9]+ passed' target/test-output.txt | awk '{s+=$4} END {print s+0}')
 failed=$(grep -Eo '[0-9]+ failed' target/test-output.txt | awk '{s+=$1} END {print s+0}')
-py_passed=$(tail -n 1 target/pytest-output.txt | grep -Eo '[0-9]+ passed' | awk '{s+=$1} END {print s+0}')
-py_failed=$(tail -n 1 target/pytest-output.txt | grep -Eo '[0-9]+ failed' | awk '{s+=$1} END {print s+0}')
+# pytest's last line: "23 passed in 12.5s" or "1 failed, 22 passed in …" (awk, not grep: no match is 0).
+py_passed=$(tail -n 1 target/pytest-output.txt | awk '{for (i = 2; i <= NF; i++) if ($i ~ /^passed/) s += $(i-1)} END {print s+0}')
+py_failed=$(tail -n 1 target/pytest-output.txt | awk '{for (i = 2; i <= NF; i++) if ($i ~ /^failed/) s += $(i-1)} END {print s+0}')
 echo "$((passed + py_passed)) passed, $((failed + py_failed)) failed"
