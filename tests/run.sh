@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole gpmm test suite, from a fresh checkout on a fresh Debian machine.
-# Installs what it needs, then: formatting, lints, unit + integration tests of the workspace.
+# Installs what it needs, then: formatting, lints, unit + integration tests of the workspace, and
+# the Python package built into a virtual environment with its pytest suite.
 # Usage: bash tests/run.sh            (GPMM_DATA overrides the data directory, default ../shared/data)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -35,7 +36,19 @@ bash firmware-sim/install-deps.sh
 
 step "cargo test (workspace)"
 cargo test --workspace 2>&1 | tee target/test-output.txt
-# Print one closing summary line over all test binaries.
+
+step "Python package (venv, pip install ./host/python, pytest)"
+bash host/python/tests/setup-venv.sh target/py-venv
+# The package's tests compare against the gpmm program: build it first.
+cargo build --release -p gpmm
+target/py-venv/bin/pip install --quiet ./host/python
+GPMM_BIN="$PWD/target/release/gpmm" target/py-venv/bin/python -m pytest host/python/tests -q -p no:cacheprovider 2>&1 \
+    | tee target/pytest-output.txt
+
+# Print one closing summary line over all test binaries and the pytest suite.
 passed=$(grep -Eo '^test result: [a-zA-Z]+\. [0-9]+ passed' target/test-output.txt | awk '{s+=$4} END {print s+0}')
 failed=$(grep -Eo '[0-9]+ failed' target/test-output.txt | awk '{s+=$1} END {print s+0}')
-echo "${passed} passed, ${failed} failed"
+# pytest's last line: "23 passed in 12.5s" or "1 failed, 22 passed in …" (awk, not grep: no match is 0).
+py_passed=$(tail -n 1 target/pytest-output.txt | awk '{for (i = 2; i <= NF; i++) if ($i ~ /^passed/) s += $(i-1)} END {print s+0}')
+py_failed=$(tail -n 1 target/pytest-output.txt | awk '{for (i = 2; i <= NF; i++) if ($i ~ /^failed/) s += $(i-1)} END {print s+0}')
+echo "$((passed + py_passed)) passed, $((failed + py_failed)) failed"

@@ -1,7 +1,7 @@
 //! `gpmm build` (a model from one scan) and `gpmm info` (a model file's key figures).
 
 use crate::progress::spinner;
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use gpmm_host::gp::kernel::{Hyperparameters, ModelKernel};
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
@@ -75,24 +75,11 @@ pub struct InfoArgs {
     pub model: PathBuf,
 }
 
-/// Parses `R,G,B` with each channel in [0,1].
-pub fn parse_rgb(s: &str) -> Result<[f64; 3], String> {
-    let v: Vec<f64> = s.split(',').map(|p| p.trim().parse::<f64>().map_err(|e| format!("'{p}': {e}"))).collect::<Result<_, _>>()?;
-    match v.as_slice() {
-        [r, g, b] if v.iter().all(|x| (0.0..=1.0).contains(x)) => Ok([*r, *g, *b]),
-        _ => Err("expected three numbers in [0,1], e.g. 0.8,0.6,0.5".into()),
-    }
-}
+pub use gpmm_host::render::light::parse_rgb;
 
 /// The rank of one part from `--rank-*` or `--captured-*` (200 components if neither is given).
 pub fn rank_spec(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<RankSpec> {
-    match (count, captured) {
-        (Some(0), _) => bail!("--rank-{what} 0: a model needs at least one {what} component"),
-        (Some(k), _) => Ok(RankSpec::Count(k)),
-        (None, Some(f)) if f > 0.0 && f <= 1.0 => Ok(RankSpec::Captured(f)),
-        (None, Some(f)) => bail!("--captured-{what} {f} must be in (0, 1]"),
-        (None, None) => Ok(RankSpec::Count(200)),
-    }
+    RankSpec::from_flags(count, captured, what).map_err(anyhow::Error::msg)
 }
 
 /// Runs `gpmm build`.
@@ -193,32 +180,7 @@ pub fn info_json(path: &Path) -> Result<serde_json::Value> {
 
 /// The key figures of a model as JSON.
 pub fn model_summary(model: &GpModel, bytes: u64) -> serde_json::Value {
-    let head = |v: &[f64]| v.iter().take(10).copied().collect::<Vec<_>>();
-    let layout = |b: &gpmm_host::gp::model::PartBasis| match b {
-        gpmm_host::gp::model::PartBasis::Factored { .. } => "factored",
-        gpmm_host::gp::model::PartBasis::Dense { .. } => "dense",
-    };
-    serde_json::json!({
-        "vertices": model.vertices(),
-        "triangles": model.triangles.len(),
-        "landmarks": model.landmarks.len(),
-        "landmark_scheme": model.metadata.landmark_scheme,
-        "kernel": model.metadata.kernel,
-        "rank_shape": model.shape.rank(),
-        "rank_color": model.color.rank(),
-        "captured_shape": model.captured_shape(),
-        "captured_color": model.captured_color(),
-        "basis_layout": { "shape": layout(&model.shape.basis), "color": layout(&model.color.basis) },
-        "eigenvalues_shape_head": head(&model.shape.eigenvalues),
-        "eigenvalues_color_head": head(&model.color.eigenvalues),
-        "nystrom_points": model.metadata.nystrom_points,
-        "hyperparameters": model.metadata.hyperparameters,
-        "template": model.metadata.template,
-        "attribution": model.metadata.template.attribution,
-        "units": model.metadata.units,
-        "format_version": model.metadata.version,
-        "file_bytes": bytes,
-    })
+    model.summary(bytes)
 }
 
 /// Runs `gpmm info`: the model file's key figures as JSON on stdout.

@@ -2,7 +2,6 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use gpmm_core::fit::LandmarkSettings;
 use gpmm_host::fit::FitJob;
 use gpmm_host::gp::model_io;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -70,25 +69,19 @@ pub struct FitSettingsArgs {
 
 impl FitSettingsArgs {
     /// The flags mapped into the one settings type (everything not on the command line: defaults;
-    /// `--set` overrides last).
+    /// `--set` overrides last), by the host library's mapping the Python package shares.
     pub fn settings(&self) -> Result<gpmm_host::fit::FitOptions> {
-        let mut options = self.flag_settings();
-        options.fit = gpmm_host::fit::override_settings(&options.fit, &self.overrides)?;
-        Ok(options)
-    }
-
-    fn flag_settings(&self) -> gpmm_host::fit::FitOptions {
-        gpmm_host::fit::FitOptions {
-            size: self.size,
-            seed: self.seed,
-            fit: {
-                let d = gpmm_host::fit::FitSettings::DEFAULT
-                    .with_steps(self.landmark_steps, self.image_steps)
-                    .with_ranks(self.shape_rank, self.color_rank);
-                let landmarks = LandmarkSettings { sigma: self.landmark_sigma, contour_sigma_factor: self.contour_sigma, ..d.landmarks };
-                gpmm_host::fit::FitSettings { landmarks, ..d }
-            },
-        }
+        Ok(gpmm_host::fit::FitOptions::from_flags(
+            self.size,
+            self.seed,
+            self.landmark_steps,
+            self.image_steps,
+            self.shape_rank,
+            self.color_rank,
+            self.landmark_sigma,
+            self.contour_sigma,
+            &self.overrides,
+        )?)
     }
 }
 

@@ -6,6 +6,7 @@ mod demo;
 mod device;
 mod eval;
 mod fit;
+mod h5;
 mod progress;
 mod register;
 mod render;
@@ -98,6 +99,17 @@ pub enum Command {
     /// log-likelihood and 68 landmarks. --compare-host runs the same fit on the host core too.
     /// Needs a gpmm source checkout (firmware-sim/) and installs QEMU and the toolchain if missing.
     DeviceFit(device::DeviceFitArgs),
+    /// Import a statismo / scalismo-faces .h5 model (e.g. the Basel Face Model) as a gpmm model (dense layout).
+    ///
+    /// Reads /shape and /color (model/mean, pcaBasis, pcaVariance, version, representer/cells;
+    /// version 0.8 bases are read as scaled). Units: millimetres, detected from the mean shape's
+    /// width (BFM 2017/2019: mm; BFM 2009: um) unless --scale is given; colours in 0..255 are
+    /// divided by 255. Landmarks: --landmarks, else the file's when they are numbered vertex
+    /// landmarks (`ibug68.0` ...); otherwise the model has none and cannot be fitted to photos
+    /// (it says so). Prints a JSON report.
+    ImportH5(h5::ImportArgs),
+    /// Export a gpmm model as a statismo .h5 file (version 0.9: dense, unscaled orthonormal bases).
+    ExportH5(h5::ExportArgs),
 }
 
 /// Runs the program and maps errors to a message and exit code 1.
@@ -128,6 +140,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Quantize(a) => device::quantize(a),
         Command::Inspect(a) => device::inspect(a),
         Command::DeviceFit(a) => device::device_fit(a),
+        Command::ImportH5(a) => h5::import_h5(a),
+        Command::ExportH5(a) => h5::export_h5(a),
         Command::Render(a) => render::render(a),
         Command::Figure(a) => render::figure(a),
     }

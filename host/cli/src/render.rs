@@ -1,6 +1,5 @@
 //! `gpmm sample`, `gpmm render` and `gpmm figure`: pictures of a model.
 
-use crate::build::parse_rgb;
 use crate::progress::spinner;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -10,11 +9,12 @@ use gpmm_host::gp::model_io;
 use gpmm_host::mesh::io as mesh_io;
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::render::figure::{self, KernelFigureOptions};
+use gpmm_host::render::light::parse_background;
 use gpmm_host::render::{check_size, render_model, Background, RenderSettings, View};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// Arguments of `gpmm sample`.
@@ -179,48 +179,9 @@ fn parse_ranks(s: &str) -> Result<(usize, usize), String> {
     Ok((a, b))
 }
 
-fn parse_background(s: &str) -> Result<Background, String> {
-    if s.trim().eq_ignore_ascii_case("transparent") {
-        return Ok(Background::Transparent);
-    }
-    parse_rgb(s).map(|c| Background::Color(c.map(|v| v as f32))).map_err(|e| format!("{e}, or 'transparent'"))
-}
-
-/// The light presets of `--light`.
-pub const LIGHT_PRESETS: [&str; 5] = ["ambient", "frontal", "left", "right", "top"];
-
 /// Parses `--light`: a preset name, an inline 9x3 JSON array, or a JSON file holding one.
 pub fn parse_light(s: &str) -> Result<ShLight> {
-    let t = s.trim();
-    let directional = |d: [f32; 3]| ShLight::from_ambient_diffuse([0.6; 3], [0.4; 3], d);
-    match t.to_ascii_lowercase().as_str() {
-        "ambient" => return Ok(ShLight::ambient_white()),
-        "frontal" => return Ok(ShLight::frontal()),
-        "left" => return Ok(directional([-0.7, 0.2, 0.7])),
-        "right" => return Ok(directional([0.7, 0.2, 0.7])),
-        "top" => return Ok(directional([0.0, 0.8, 0.6])),
-        _ => {}
-    }
-    let text = if t.starts_with('[') {
-        t.to_string()
-    } else if Path::new(t).is_file() {
-        std::fs::read_to_string(t).with_context(|| format!("cannot read light file {t}"))?
-    } else {
-        bail!("unknown light '{t}': expected a preset ({}), a 9x3 JSON array of SH coefficients, or a JSON file", LIGHT_PRESETS.join(", "));
-    };
-    let rows: Vec<Vec<f32>> = serde_json::from_str(&text)
-        .with_context(|| format!("malformed light JSON: expected 9 rows of [r, g, b] SH coefficients, got '{}'", text.trim()))?;
-    if rows.len() != 9 || rows.iter().any(|r| r.len() != 3) {
-        bail!("light JSON must have 9 rows of 3 numbers (SH bands 0-2 x RGB), got {} rows", rows.len());
-    }
-    let mut light = ShLight::zero();
-    for (c, r) in light.coeffs.iter_mut().zip(&rows) {
-        *c = [r[0], r[1], r[2]];
-    }
-    if !light.coeffs.iter().flatten().all(|v| v.is_finite()) {
-        bail!("light JSON has a non-finite coefficient");
-    }
-    Ok(light)
+    gpmm_host::render::light::parse_light(s).map_err(anyhow::Error::msg)
 }
 
 /// Runs `gpmm sample`.

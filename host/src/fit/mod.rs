@@ -119,6 +119,29 @@ impl FitOptions {
     }
 }
 
+impl FitOptions {
+    /// The options `gpmm fit`'s flags give (everything else at the core's defaults), then the
+    /// `PATH=VALUE` overrides of `--set` applied last: the one mapping the CLI and the Python
+    /// package share.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_flags(
+        size: u32,
+        seed: u64,
+        landmark_steps: u32,
+        image_steps: u32,
+        shape_rank: usize,
+        color_rank: usize,
+        landmark_sigma: f32,
+        contour_sigma: f32,
+        overrides: &[String],
+    ) -> Result<Self, FitRunError> {
+        let d = FitSettings::DEFAULT.with_steps(landmark_steps, image_steps).with_ranks(shape_rank, color_rank);
+        let landmarks = gpmm_core::fit::LandmarkSettings { sigma: landmark_sigma, contour_sigma_factor: contour_sigma, ..d.landmarks };
+        let options = Self { size, seed, fit: FitSettings { landmarks, ..d } };
+        Ok(Self { fit: override_settings(&options.fit, overrides)?, ..options })
+    }
+}
+
 impl Default for FitOptions {
     fn default() -> Self {
         Self::DEFAULT
@@ -634,10 +657,46 @@ pub fn load_photo(
     one_based: bool,
     size: u32,
 ) -> Result<Prepared, FitRunError> {
+    check_landmarks(model)?;
     let pts = crate::photo::pts::read_pts(landmarks, one_based)?;
     let photo = crate::photo::load_rgb(image)?;
     pts.check(landmarks, model.landmarks.len(), &model.metadata.landmark_scheme, photo.width(), photo.height(), one_based)?;
     prepare(&photo, &pts.points, size)
+}
+
+/// Refuses a model without landmarks (e.g. a statismo import without usable ones) before any
+/// photo is read, with a message that says what to do.
+pub fn check_landmarks(model: &GpModel) -> Result<(), FitRunError> {
+    if model.landmarks.is_empty() {
+        return Err(FitRunError::Model(
+            "it has 0 landmarks (a model imported from .h5 needs them: gpmm import-h5 --landmarks FILE.json)".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks in-memory landmarks (`name` stands for their source in messages) against the model and
+/// the photo as a landmark file is checked, prepares the photo and fits: what `gpmm fit` does
+/// after reading its files, for callers that hold the image and points already (the Python package).
+pub fn fit_image(
+    model: &GpModel,
+    photo: &RgbImage,
+    points: &[[f32; 2]],
+    name: &str,
+    settings: &FitOptions,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<(Prepared, Outcome), FitRunError> {
+    settings.validate()?;
+    check_landmarks(model)?;
+    let path = std::path::Path::new(name);
+    if let Some(i) = points.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(FitRunError::Settings(format!("{name}: landmark {i} is not finite")));
+    }
+    let pts = crate::photo::pts::Pts { points: points.to_vec(), lines: (1..=points.len()).collect() };
+    pts.check(path, model.landmarks.len(), &model.metadata.landmark_scheme, photo.width(), photo.height(), true)?;
+    let prepared = prepare(photo, points, settings.size)?;
+    let outcome = fit_prepared(model, &prepared, settings, progress)?;
+    Ok((prepared, outcome))
 }
 
 /// `gpmm fit`: loads everything, fits and writes `fit.json`, `overlay.png` and `fit.ply` into the output directory.

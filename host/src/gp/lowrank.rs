@@ -32,6 +32,20 @@ pub enum RankSpec {
     Captured(f64),
 }
 
+impl RankSpec {
+    /// The rank of one part from a count or a captured fraction (200 components if neither is
+    /// given), as `gpmm build --rank-WHAT / --captured-WHAT` and the Python package take them.
+    pub fn from_flags(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<Self, String> {
+        match (count, captured) {
+            (Some(0), _) => Err(format!("--rank-{what} 0: a model needs at least one {what} component")),
+            (Some(k), _) => Ok(Self::Count(k)),
+            (None, Some(f)) if f > 0.0 && f <= 1.0 => Ok(Self::Captured(f)),
+            (None, Some(f)) => Err(format!("--captured-{what} {f} must be in (0, 1]")),
+            (None, None) => Ok(Self::Count(200)),
+        }
+    }
+}
+
 /// Nyström settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NystromOptions {

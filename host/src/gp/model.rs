@@ -147,6 +147,37 @@ impl GpModel {
         })
     }
 
+    /// The key figures `gpmm info` prints (and the Python package's `info()`), as JSON;
+    /// `bytes` is the file size (0 when unknown).
+    pub fn summary(&self, bytes: u64) -> serde_json::Value {
+        let head = |v: &[f64]| v.iter().take(10).copied().collect::<Vec<_>>();
+        let layout = |b: &PartBasis| match b {
+            PartBasis::Factored { .. } => "factored",
+            PartBasis::Dense { .. } => "dense",
+        };
+        serde_json::json!({
+            "vertices": self.vertices(),
+            "triangles": self.triangles.len(),
+            "landmarks": self.landmarks.len(),
+            "landmark_scheme": self.metadata.landmark_scheme,
+            "kernel": self.metadata.kernel,
+            "rank_shape": self.shape.rank(),
+            "rank_color": self.color.rank(),
+            "captured_shape": self.captured_shape(),
+            "captured_color": self.captured_color(),
+            "basis_layout": { "shape": layout(&self.shape.basis), "color": layout(&self.color.basis) },
+            "eigenvalues_shape_head": head(&self.shape.eigenvalues),
+            "eigenvalues_color_head": head(&self.color.eigenvalues),
+            "nystrom_points": self.metadata.nystrom_points,
+            "hyperparameters": self.metadata.hyperparameters,
+            "template": self.metadata.template,
+            "attribution": self.metadata.template.attribution,
+            "units": self.metadata.units,
+            "format_version": self.metadata.version,
+            "file_bytes": bytes,
+        })
+    }
+
     /// A random instance: all coefficients drawn from N(0, 1).
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> Result<Mesh, ModelError> {
         let a: Vec<f32> = (0..self.shape.rank()).map(|_| rng.sample(StandardNormal)).collect();

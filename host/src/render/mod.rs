@@ -8,6 +8,7 @@
 //! triangles are counter-clockwise seen from outside, so [`Cull::Clockwise`] keeps the front faces.
 
 pub mod figure;
+pub mod light;
 
 use crate::gp::model::GpModel;
 use crate::mesh::Mesh;

@@ -1,0 +1,167 @@
+"""Type stubs of gpmm's native module (gpmm._gpmm)."""
+
+from os import PathLike
+from typing import Any, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+_Path = Union[str, PathLike]
+_Light = Union[str, Sequence[Sequence[float]]]
+
+__version__: str
+LIGHT_PRESETS: list[str]
+
+class GpmmError(ValueError):
+    """An error of gpmm; the message is the one the gpmm program prints."""
+
+class Model:
+    """A morphable model: shape (mm) and albedo (linear RGB), bases, triangles, landmarks, metadata.
+
+    Immutable. Pickles through its model-file bytes, so it travels to worker processes.
+    """
+
+    @staticmethod
+    def load(path: _Path) -> Model:
+        """Loads a model file (.gpmm)."""
+    @staticmethod
+    def from_bytes(data: bytes) -> Model:
+        """A model from the bytes of a model file."""
+    def save(self, path: _Path) -> None:
+        """Writes the model file (safetensors, docs/model-format.md)."""
+    def to_bytes(self) -> bytes:
+        """The model file's bytes."""
+    def __reduce__(self) -> Tuple[Any, Tuple[bytes]]: ...
+    def __eq__(self, other: object) -> bool: ...
+    @property
+    def vertices(self) -> int:
+        """Number of vertices N."""
+    @property
+    def rank_shape(self) -> int:
+        """Number of shape components."""
+    @property
+    def rank_color(self) -> int:
+        """Number of colour components."""
+    @property
+    def layout(self) -> Tuple[str, str]:
+        """Basis layouts of shape and colour: 'factored' or 'dense'."""
+    @property
+    def shape_mean(self) -> npt.NDArray[np.float32]:
+        """Mean positions, N x 3 (mm)."""
+    @property
+    def color_mean(self) -> npt.NDArray[np.float32]:
+        """Mean albedo, N x 3 (linear RGB in [0, 1])."""
+    @property
+    def shape_eigenvalues(self) -> npt.NDArray[np.float64]:
+        """Shape eigenvalues (mm^2), K."""
+    @property
+    def color_eigenvalues(self) -> npt.NDArray[np.float64]:
+        """Colour eigenvalues, K."""
+    @property
+    def shape_basis(self) -> npt.NDArray[np.float32]:
+        """Shape basis K x N x 3, each component scaled by sqrt(eigenvalue)."""
+    @property
+    def color_basis(self) -> npt.NDArray[np.float32]:
+        """Colour basis K x N x 3, scaled like shape_basis."""
+    @property
+    def triangles(self) -> npt.NDArray[np.uint32]:
+        """Triangles T x 3 (counter-clockwise seen from outside)."""
+    @property
+    def landmarks(self) -> npt.NDArray[np.uint32]:
+        """Landmark vertex ids (iBUG-68 order for scheme ibug68)."""
+    @property
+    def metadata(self) -> dict[str, Any]:
+        """The model's metadata (docs/model-format.md)."""
+    def info(self) -> dict[str, Any]:
+        """The key figures `gpmm info` prints."""
+    def instance(
+        self, shape: Optional[Sequence[float]] = None, color: Optional[Sequence[float]] = None
+    ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+        """Positions and colours (clamped to [0, 1]) for the given coefficients (missing ones zero)."""
+    def sample(
+        self, n: int = 1, seed: int = 0
+    ) -> list[Tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]]:
+        """n random instances, drawn as `gpmm sample --seed` draws them."""
+    def render(
+        self,
+        shape: Optional[Sequence[float]] = None,
+        color: Optional[Sequence[float]] = None,
+        yaw: float = 0.0,
+        pitch: float = 0.0,
+        roll: float = 0.0,
+        light: Optional[_Light] = None,
+        width: int = 256,
+        height: int = 256,
+        background: str = "0,0,0",
+        fov: float = 20.0,
+    ) -> npt.NDArray[np.uint8]:
+        """Renders as `gpmm render` does: an H x W x 4 uint8 image."""
+    def fit(
+        self,
+        image: npt.NDArray[np.uint8],
+        landmarks: npt.ArrayLike,
+        *,
+        seed: Optional[int] = None,
+        size: Optional[int] = None,
+        landmark_steps: Optional[int] = None,
+        image_steps: Optional[int] = None,
+        shape_rank: Optional[int] = None,
+        color_rank: Optional[int] = None,
+        landmark_sigma: Optional[float] = None,
+        contour_sigma: Optional[float] = None,
+        set: Optional[Sequence[str]] = None,
+    ) -> dict[str, Any]:
+        """Fits the model to a photo as `gpmm fit` does; fit.json's fields plus 'overlay', 'render', 'working_image'."""
+    def quantize(
+        self,
+        profile: str = "m4f",
+        vertices: Optional[int] = None,
+        rank_shape: Optional[int] = None,
+        rank_color: Optional[int] = None,
+        bits: Optional[int] = None,
+    ) -> bytes:
+        """Quantizes for a device profile (m4f or m7) as `gpmm quantize` does: the model blob."""
+    def export_h5(self, path: _Path) -> None:
+        """Writes a statismo .h5 file (as `gpmm export-h5`)."""
+
+def load(path: _Path) -> Model:
+    """Loads a model file (.gpmm)."""
+
+def model_from_bytes(data: bytes) -> Model:
+    """A model from the bytes of a model file (what pickling uses)."""
+
+def kernels() -> list[str]:
+    """The nine kernel names."""
+
+def build(
+    template: _Path,
+    landmarks: _Path,
+    kernel: str = "symmetric-full",
+    rank_shape: Optional[int] = None,
+    rank_color: Optional[int] = None,
+    captured_shape: Optional[float] = None,
+    captured_color: Optional[float] = None,
+    vertices: Optional[int] = None,
+    scale: Optional[float] = None,
+    no_crop: bool = False,
+    texture: Optional[_Path] = None,
+    config: Optional[_Path] = None,
+    default_color: Optional[Tuple[float, float, float]] = None,
+    nystrom_points: int = 2000,
+    seed: Optional[int] = None,
+) -> Model:
+    """Builds a model from a template scan as `gpmm build` does."""
+
+def import_h5(
+    path: _Path, scale: Optional[float] = None, landmarks: Optional[_Path] = None
+) -> Tuple[Model, dict[str, Any]]:
+    """Imports a statismo / scalismo .h5 model (as `gpmm import-h5`): the model and a report."""
+
+def inspect(blob: bytes, strict: bool = True) -> dict[str, Any]:
+    """Validates a model blob with the device's parser: header and metadata."""
+
+def load_image(path: _Path) -> npt.NDArray[np.uint8]:
+    """Loads a photo as H x W x 3 uint8, as `gpmm fit` reads it."""
+
+def read_pts(path: _Path, one_based: bool = False) -> npt.NDArray[np.float32]:
+    """Reads an iBUG .pts file as L x 2 float32."""

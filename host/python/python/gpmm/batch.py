@@ -1,0 +1,119 @@
+"""Fitting a folder of photos on a Dask cluster (``distributed``), one model load per worker.
+
+>>> from distributed import Client, LocalCluster
+>>> import gpmm.batch
+>>> with LocalCluster(n_workers=2, threads_per_worker=1) as cluster, Client(cluster) as client:
+...     results = gpmm.batch.fit_folder("face.gpmm", "photos/", client=client, image_steps=300)
+
+Every image ``NAME.png`` / ``.jpg`` / ``.jpeg`` / ``.ppm`` is fitted with the landmark file
+``NAME.pts`` beside it (an image without one is an error, see :func:`find_photos`). Each fit is the same deterministic fit as ``gpmm fit`` with the
+same settings and seed, so the results equal sequential fits (``client=None``).
+
+The model reaches the workers in one of two ways: a *path* (every worker loads it once, from a
+file system all workers see) or a :class:`gpmm.Model` (scattered once to every worker; it
+pickles through its model-file bytes). Photos are read by the workers from their paths, so on
+a real cluster the folder must be on a shared file system (or pass arrays yourself to
+:func:`fit_arrays`).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+from typing import Any, Iterable, Optional, Union
+
+from . import Model, load, load_image, read_pts
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".ppm")
+
+_cache_lock = threading.Lock()
+_cache: dict[str, Model] = {}
+_loads = 0
+
+
+def worker_model(path: str) -> Model:
+    """The model at ``path``, loaded at most once per process (a Dask worker's cache)."""
+    global _loads
+    with _cache_lock:
+        model = _cache.get(path)
+        if model is None:
+            model = load(path)
+            _cache[path] = model
+            _loads += 1
+        return model
+
+
+def model_loads() -> int:
+    """How many times this process loaded a model file through :func:`worker_model`."""
+    return _loads
+
+
+def find_photos(folder: Union[str, os.PathLike]) -> list[tuple[str, str]]:
+    """The (image, landmarks) path pairs of a folder, sorted by name; an image without a
+    ``.pts`` beside it is an error (so that nothing is skipped silently)."""
+    pairs = []
+    for p in sorted(Path(folder).iterdir()):
+        if p.suffix.lower() in IMAGE_SUFFIXES:
+            pts = p.with_suffix(".pts")
+            if not pts.is_file():
+                raise FileNotFoundError(f"{p}: no landmark file {pts.name} beside it")
+            pairs.append((str(p), str(pts)))
+    if not pairs:
+        raise FileNotFoundError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in it")
+    return pairs
+
+
+def _summary(name: str, fit: dict[str, Any], keep_images: bool) -> dict[str, Any]:
+    out = {"image": name}
+    for k, v in fit.items():
+        if keep_images or k not in ("overlay", "render", "working_image"):
+            out[k] = v
+    return out
+
+
+def fit_file(model: Union[str, Model], image: str, landmarks: str, pts_one_based: bool = False,
+             keep_images: bool = False, **settings: Any) -> dict[str, Any]:
+    """Fits one photo (on whichever process runs it); ``model`` is a path (cached per process) or a Model."""
+    m = worker_model(model) if isinstance(model, str) else model
+    fit = m.fit(load_image(image), read_pts(landmarks, pts_one_based), **settings)
+    return _summary(os.path.basename(image), fit, keep_images)
+
+
+def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os.PathLike],
+               client: Optional[Any] = None, *, pts_one_based: bool = False, keep_images: bool = False,
+               **settings: Any) -> list[dict[str, Any]]:
+    """Fits every photo of ``folder`` (see :func:`find_photos`) with ``Model.fit``'s settings.
+
+    ``client``: a ``distributed.Client`` (a ``LocalCluster`` here, a scheduler address in
+    production); ``None`` fits sequentially in this process. Results come back in file-name
+    order: fit.json's fields (pose, coefficients, light, fitted landmarks, log-likelihood,
+    acceptance, ...) plus ``image`` (the file name); the images (``overlay`` ...) only with
+    ``keep_images=True``.
+    """
+    pairs = find_photos(folder)
+    model: Union[str, Model] = model_path if isinstance(model_path, Model) else os.fspath(model_path)
+    if client is None:
+        return [fit_file(model, i, p, pts_one_based, keep_images, **settings) for i, p in pairs]
+    if isinstance(model, Model):
+        model = client.scatter(model, broadcast=True)
+    futures = [
+        client.submit(fit_file, model, i, p, pts_one_based, keep_images, pure=False, **settings)
+        for i, p in pairs
+    ]
+    return client.gather(futures)
+
+
+def fit_arrays(model: Model, items: Iterable[tuple[str, Any, Any]], client: Optional[Any] = None,
+               **settings: Any) -> list[dict[str, Any]]:
+    """Fits (name, image array, landmarks array) items: for photos that are not files the workers see."""
+    items = list(items)
+    if client is None:
+        return [_summary(n, model.fit(img, pts, **settings), False) for n, img, pts in items]
+    shared = client.scatter(model, broadcast=True)
+    futures = [client.submit(_fit_array, shared, n, img, pts, pure=False, **settings) for n, img, pts in items]
+    return client.gather(futures)
+
+
+def _fit_array(model: Model, name: str, image: Any, landmarks: Any, **settings: Any) -> dict[str, Any]:
+    return _summary(name, model.fit(image, landmarks, **settings), False)

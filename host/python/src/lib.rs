@@ -1,0 +1,188 @@
+//! `gpmm._gpmm`: the native half of the gpmm Python package, a thin layer over the gpmm-host
+//! library (the code the `gpmm` program runs): models and their arrays, building from a template,
+//! sampling, rendering, fitting, quantization, blobs and statismo `.h5` files.
+//!
+//! Long work runs with the GIL released; every error is a `gpmm.GpmmError` (a `ValueError`)
+//! carrying the message the `gpmm` program prints for the same failure.
+
+mod arrays;
+mod model;
+
+use gpmm_host::device::quantize::BlobBuf;
+use gpmm_host::gp::kernel::{Hyperparameters, ModelKernel};
+use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::gp::model::{build_model, BuildOptions};
+use gpmm_host::gp::statismo::{self, ImportOptions};
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use model::Model;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+pyo3::create_exception!(_gpmm, GpmmError, pyo3::exceptions::PyValueError, "An error of gpmm (the message is the gpmm program's).");
+
+/// The message of an error and its sources, as the `gpmm` program prints it (`outer: inner: …`).
+pub(crate) fn message(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut s = e.to_string();
+    let mut source = e.source();
+    while let Some(inner) = source {
+        s.push_str(": ");
+        s.push_str(&inner.to_string());
+        source = inner.source();
+    }
+    s
+}
+
+/// A [`GpmmError`] from any error.
+pub(crate) fn err(e: impl std::error::Error + 'static) -> PyErr {
+    GpmmError::new_err(message(&e))
+}
+
+/// A [`GpmmError`] from a message.
+pub(crate) fn err_msg(s: impl Into<String>) -> PyErr {
+    GpmmError::new_err(s.into())
+}
+
+/// A serializable value as Python objects (dicts, lists, numbers) through its JSON text, so that
+/// floats are the ones the `gpmm` program writes (an f32 reads back as the program's decimal).
+pub(crate) fn json_to_py<'py, T: serde::Serialize + ?Sized>(py: Python<'py>, value: &T) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(value).map_err(err)?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// Loads a model file (`.gpmm`, safetensors).
+#[pyfunction]
+fn load(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
+    let name = path.display().to_string();
+    let m = py.detach(move || gpmm_host::gp::model_io::load(&path)).map_err(err)?;
+    Ok(Model::new(m, name))
+}
+
+/// A model from the bytes of a model file (what `Model.to_bytes()` and pickling give).
+#[pyfunction]
+fn model_from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<Model> {
+    let data = data.to_vec();
+    let m = py.detach(move || gpmm_host::gp::model_io::from_bytes(&data, "<bytes>")).map_err(err)?;
+    Ok(Model::new(m, "<bytes>".into()))
+}
+
+/// The nine kernel names `build` takes.
+#[pyfunction]
+fn kernels() -> Vec<&'static str> {
+    ModelKernel::ALL.iter().map(|k| k.name()).collect()
+}
+
+/// Builds a model from a template scan, as `gpmm build` does (same options, same defaults).
+#[pyfunction]
+#[pyo3(signature = (template, landmarks, kernel = "symmetric-full", rank_shape = None, rank_color = None,
+    captured_shape = None, captured_color = None, vertices = None, scale = None, no_crop = false,
+    texture = None, config = None, default_color = None, nystrom_points = 2000, seed = None))]
+#[allow(clippy::too_many_arguments)]
+fn build(
+    py: Python<'_>,
+    template: PathBuf,
+    landmarks: PathBuf,
+    kernel: &str,
+    rank_shape: Option<usize>,
+    rank_color: Option<usize>,
+    captured_shape: Option<f64>,
+    captured_color: Option<f64>,
+    vertices: Option<usize>,
+    scale: Option<f64>,
+    no_crop: bool,
+    texture: Option<PathBuf>,
+    config: Option<PathBuf>,
+    default_color: Option<[f64; 3]>,
+    nystrom_points: usize,
+    seed: Option<u64>,
+) -> PyResult<Model> {
+    let kernel: ModelKernel = kernel.parse().map_err(err)?;
+    let hyperparameters = match &config {
+        Some(p) => Hyperparameters::from_toml_file(p).map_err(err)?,
+        None => Hyperparameters::default(),
+    };
+    let opts = BuildOptions {
+        kernel,
+        hyperparameters,
+        rank_shape: RankSpec::from_flags(rank_shape, captured_shape, "shape").map_err(err_msg)?,
+        rank_color: RankSpec::from_flags(rank_color, captured_color, "color").map_err(err_msg)?,
+        nystrom: NystromOptions {
+            points: nystrom_points.max(1),
+            seed: seed.unwrap_or(NystromOptions::default().seed),
+            ..Default::default()
+        },
+    };
+    let topts = TemplateOptions { texture, scale, no_crop, vertices, default_color };
+    let model = py
+        .detach(move || -> Result<_, gpmm_host::mesh::template::TemplateError> {
+            let t = load_template(&template, &landmarks, &topts)?;
+            Ok(build_model(&t, &opts, |_, _, _| {}))
+        })
+        .map_err(err)?;
+    Ok(Model::new(model, "<built>".into()))
+}
+
+/// Imports a statismo / scalismo `.h5` model (as `gpmm import-h5`): the model and a dict of what was found.
+#[pyfunction]
+#[pyo3(signature = (path, scale = None, landmarks = None))]
+fn import_h5<'py>(py: Python<'py>, path: PathBuf, scale: Option<f64>, landmarks: Option<PathBuf>) -> PyResult<(Model, Bound<'py, PyAny>)> {
+    let name = path.display().to_string();
+    let (model, report) = py
+        .detach(move || -> Result<_, String> {
+            let landmarks = landmarks.as_deref().map(gpmm_host::mesh::io::read_landmarks_json).transpose().map_err(|e| message(&e))?;
+            statismo::import(&path, &ImportOptions { scale, landmarks }).map_err(|e| message(&e))
+        })
+        .map_err(err_msg)?;
+    let report = json_to_py(py, &report)?;
+    Ok((Model::new(model, name), report))
+}
+
+/// Validates a model blob with the device's parser: its header and metadata as a dict; raises
+/// (with the parser's message) if it is invalid, unless `strict=False` (then `error` says why).
+#[pyfunction]
+#[pyo3(signature = (blob, strict = true))]
+fn inspect<'py>(py: Python<'py>, blob: &[u8], strict: bool) -> PyResult<Bound<'py, PyAny>> {
+    let buf = BlobBuf::from_bytes(blob);
+    let (json, result) = gpmm_host::device::quantize::inspect(&buf);
+    if let (true, Err(e)) = (strict, &result) {
+        return Err(err_msg(format!("not a valid model blob: {e}")));
+    }
+    let d = json_to_py(py, &json)?;
+    if let Ok(dict) = d.cast::<PyDict>() {
+        dict.set_item("error", result.err().map(|e| e.to_string()))?;
+    }
+    Ok(d)
+}
+
+/// Loads a photo (PNG, JPEG or PPM) as an `H x W x 3` uint8 array, as `gpmm fit` reads it.
+#[pyfunction]
+fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
+    let img = py.detach(move || gpmm_host::photo::load_rgb(&path)).map_err(err)?;
+    arrays::rgb_to_numpy(py, &img)
+}
+
+/// Reads an iBUG `.pts` landmark file as an `L x 2` float32 array (0-based pixel coordinates).
+#[pyfunction]
+#[pyo3(signature = (path, one_based = false))]
+fn read_pts<'py>(py: Python<'py>, path: PathBuf, one_based: bool) -> PyResult<Bound<'py, PyAny>> {
+    let pts = gpmm_host::photo::pts::read_pts(&path, one_based).map_err(err)?;
+    arrays::points_to_numpy(py, &pts.points)
+}
+
+/// The native module.
+#[pymodule]
+fn _gpmm(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("GpmmError", m.py().get_type::<GpmmError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("LIGHT_PRESETS", gpmm_host::render::light::LIGHT_PRESETS.to_vec())?;
+    m.add_class::<Model>()?;
+    m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add_function(wrap_pyfunction!(model_from_bytes, m)?)?;
+    m.add_function(wrap_pyfunction!(kernels, m)?)?;
+    m.add_function(wrap_pyfunction!(build, m)?)?;
+    m.add_function(wrap_pyfunction!(import_h5, m)?)?;
+    m.add_function(wrap_pyfunction!(inspect, m)?)?;
+    m.add_function(wrap_pyfunction!(load_image, m)?)?;
+    m.add_function(wrap_pyfunction!(read_pts, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,354 @@
+//! `gpmm.Model`: a morphable model, its arrays, and what can be done with it.
+
+use crate::arrays::{
+    basis_to_numpy, numpy_to_points, numpy_to_rgb, points_to_numpy, rgb_to_numpy, rgba_to_numpy, vec3_to_numpy, vec_to_numpy,
+};
+use crate::{err, err_msg, json_to_py};
+use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
+use gpmm_host::fit::{fit_image, overlay, report, FitOptions, ReportInputs};
+use gpmm_host::gp::model::{GpModel, PartBasis};
+use gpmm_host::gp::{model_io, statismo};
+use gpmm_host::render::light::{light_from_rows, parse_background, parse_light};
+use gpmm_host::render::{render_model, RenderSettings, View};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict};
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A morphable model of shape (mm) and albedo (linear RGB): mean, bases, eigenvalues, triangles,
+/// landmarks and metadata. Immutable; pickles through its model-file bytes.
+#[pyclass(module = "gpmm._gpmm", name = "Model", frozen)]
+pub struct Model {
+    inner: Arc<GpModel>,
+    source: String,
+}
+
+impl Model {
+    /// Wraps a host model; `source` names it in fit reports (its file, or `<bytes>`).
+    pub fn new(model: GpModel, source: String) -> Self {
+        Self { inner: Arc::new(model), source }
+    }
+}
+
+fn layout(b: &PartBasis) -> &'static str {
+    match b {
+        PartBasis::Factored { .. } => "factored",
+        PartBasis::Dense { .. } => "dense",
+    }
+}
+
+/// A light from a preset name / JSON text / file, or from 9 rows of 3 numbers.
+fn light_arg(obj: &Bound<'_, PyAny>) -> PyResult<gpmm_core::ShLight> {
+    if let Ok(s) = obj.extract::<String>() {
+        return parse_light(&s).map_err(err_msg);
+    }
+    let rows: Vec<Vec<f32>> =
+        obj.extract().map_err(|_| err_msg("light must be a preset name, JSON text, a file or 9 rows of [r, g, b]"))?;
+    light_from_rows(&rows).map_err(err_msg)
+}
+
+#[pymethods]
+impl Model {
+    /// Loads a model file (`.gpmm`).
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        crate::load(py, path)
+    }
+
+    /// A model from the bytes of a model file.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<Self> {
+        crate::model_from_bytes(py, data)
+    }
+
+    /// Writes the model file (safetensors, docs/model-format.md).
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let m = self.inner.clone();
+        py.detach(move || model_io::save(&m, &path)).map_err(err)
+    }
+
+    /// The model file's bytes.
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let m = self.inner.clone();
+        let bytes = py.detach(move || model_io::to_bytes(&m)).map_err(err_msg)?;
+        Ok(PyBytes::new(py, &bytes))
+    }
+
+    /// Pickling: the model travels as its model-file bytes.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyBytes>,))> {
+        let f = py.import("gpmm._gpmm")?.getattr("model_from_bytes")?;
+        Ok((f, (self.to_bytes(py)?,)))
+    }
+
+    /// Equal arrays and metadata.
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other.extract::<PyRef<'_, Model>>().is_ok_and(|o| *o.inner == *self.inner)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<gpmm.Model {}: {} vertices, ranks {}/{} ({}/{}), {} landmarks>",
+            self.inner.metadata.kernel,
+            self.inner.vertices(),
+            self.inner.shape.rank(),
+            self.inner.color.rank(),
+            layout(&self.inner.shape.basis),
+            layout(&self.inner.color.basis),
+            self.inner.landmarks.len()
+        )
+    }
+
+    /// Number of vertices N.
+    #[getter]
+    fn vertices(&self) -> usize {
+        self.inner.vertices()
+    }
+
+    /// Number of shape components.
+    #[getter]
+    fn rank_shape(&self) -> usize {
+        self.inner.shape.rank()
+    }
+
+    /// Number of colour components.
+    #[getter]
+    fn rank_color(&self) -> usize {
+        self.inner.color.rank()
+    }
+
+    /// Basis layouts of shape and colour: `factored` or `dense`.
+    #[getter]
+    fn layout(&self) -> (&'static str, &'static str) {
+        (layout(&self.inner.shape.basis), layout(&self.inner.color.basis))
+    }
+
+    /// Mean positions, `N x 3` float32 (mm).
+    #[getter]
+    fn shape_mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        vec3_to_numpy(py, &self.inner.shape.mean)
+    }
+
+    /// Mean albedo, `N x 3` float32 (linear RGB in [0, 1]).
+    #[getter]
+    fn color_mean<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        vec3_to_numpy(py, &self.inner.color.mean)
+    }
+
+    /// Shape eigenvalues (mm²), float64 `K`.
+    #[getter]
+    fn shape_eigenvalues<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        vec_to_numpy(py, self.inner.shape.eigenvalues.clone())
+    }
+
+    /// Colour eigenvalues, float64 `K`.
+    #[getter]
+    fn color_eigenvalues<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        vec_to_numpy(py, self.inner.color.eigenvalues.clone())
+    }
+
+    /// Shape basis, `K x N x 3` float32, each component scaled by sqrt(eigenvalue) (dense, whatever the stored layout).
+    #[getter]
+    fn shape_basis<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let p = &self.inner.shape;
+        basis_to_numpy(py, statismo::dense_values(p), p.rank(), p.mean.len())
+    }
+
+    /// Colour basis, `K x N x 3` float32, scaled like `shape_basis`.
+    #[getter]
+    fn color_basis<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let p = &self.inner.color;
+        basis_to_numpy(py, statismo::dense_values(p), p.rank(), p.mean.len())
+    }
+
+    /// Triangles, `T x 3` uint32 (counter-clockwise seen from outside).
+    #[getter]
+    fn triangles<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        vec3_to_numpy(py, &self.inner.triangles)
+    }
+
+    /// Landmark vertex ids, uint32 `L` (iBUG-68 order for `ibug68`).
+    #[getter]
+    fn landmarks<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        vec_to_numpy(py, self.inner.landmarks.clone())
+    }
+
+    /// The model's metadata (docs/model-format.md) as a dict.
+    #[getter]
+    fn metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.inner.metadata)
+    }
+
+    /// The key figures `gpmm info` prints, as a dict.
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.inner.summary(0))
+    }
+
+    /// The instance for the given coefficients (missing ones zero): positions and colours (clamped to [0, 1]), `N x 3` float32 each.
+    #[pyo3(signature = (shape = None, color = None))]
+    fn instance<'py>(
+        &self,
+        py: Python<'py>,
+        shape: Option<Vec<f32>>,
+        color: Option<Vec<f32>>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        gpmm_host::render::check_coefficients(&self.inner, shape.as_deref().unwrap_or(&[]), color.as_deref().unwrap_or(&[]))
+            .map_err(err)?;
+        let mesh = self.inner.instance(&shape.unwrap_or_default(), &color.unwrap_or_default()).map_err(|e| err_msg(e.to_string()))?;
+        mesh_arrays(py, &mesh)
+    }
+
+    /// `n` random instances (all coefficients ~ N(0, 1)), drawn as `gpmm sample --seed` draws them: a list of (positions, colours).
+    #[pyo3(signature = (n = 1, seed = 0))]
+    fn sample<'py>(&self, py: Python<'py>, n: usize, seed: u64) -> PyResult<Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>> {
+        let m = self.inner.clone();
+        let meshes = py
+            .detach(move || {
+                let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+                (0..n).map(|_| m.sample(&mut rng)).collect::<Result<Vec<_>, _>>()
+            })
+            .map_err(|e| err_msg(e.to_string()))?;
+        meshes.iter().map(|mesh| mesh_arrays(py, mesh)).collect()
+    }
+
+    /// Renders the model as `gpmm render` does: an `H x W x 4` uint8 image (linear RGB as-is, alpha 0 where uncovered
+    /// only with background="transparent"). `light`: a preset, JSON text/file or 9 rows of [r, g, b].
+    #[pyo3(signature = (shape = None, color = None, yaw = 0.0, pitch = 0.0, roll = 0.0, light = None, width = 256, height = 256, background = "0,0,0", fov = 20.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        shape: Option<Vec<f32>>,
+        color: Option<Vec<f32>>,
+        yaw: f32,
+        pitch: f32,
+        roll: f32,
+        light: Option<&Bound<'py, PyAny>>,
+        width: u32,
+        height: u32,
+        background: &str,
+        fov: f32,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let light = match light {
+            Some(l) => light_arg(l)?,
+            None => parse_light("frontal").map_err(err_msg)?,
+        };
+        let settings = RenderSettings {
+            width,
+            height,
+            light,
+            background: parse_background(background).map_err(err_msg)?,
+            fov_deg: fov,
+            ..RenderSettings::default()
+        };
+        settings.validate().map_err(err)?;
+        let m = self.inner.clone();
+        let (s, c) = (shape.unwrap_or_default(), color.unwrap_or_default());
+        let img = py.detach(move || render_model(&m, &s, &c, View { yaw, pitch, roll }, &settings)).map_err(err)?;
+        rgba_to_numpy(py, &img)
+    }
+
+    /// Fits the model to a photo as `gpmm fit` does (same settings, defaults and seed: the same numbers).
+    ///
+    /// `image`: `H x W x 3` uint8 RGB; `landmarks`: `L x 2` pixel coordinates (0-based, pixel centres at +0.5).
+    /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
+    /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
+    /// `acceptance`, RMSEs, `crop`) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
+    /// `working_image` (the crop the chains saw).
+    #[pyo3(signature = (image, landmarks, *, seed = None, size = None, landmark_steps = None, image_steps = None,
+        shape_rank = None, color_rank = None, landmark_sigma = None, contour_sigma = None, set = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn fit<'py>(
+        &self,
+        py: Python<'py>,
+        image: &Bound<'py, PyAny>,
+        landmarks: &Bound<'py, PyAny>,
+        seed: Option<u64>,
+        size: Option<u32>,
+        landmark_steps: Option<u32>,
+        image_steps: Option<u32>,
+        shape_rank: Option<usize>,
+        color_rank: Option<usize>,
+        landmark_sigma: Option<f32>,
+        contour_sigma: Option<f32>,
+        set: Option<Vec<String>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let d = FitOptions::DEFAULT;
+        let opts = FitOptions::from_flags(
+            size.unwrap_or(d.size),
+            seed.unwrap_or(d.seed),
+            landmark_steps.unwrap_or(d.fit.landmarks.steps),
+            image_steps.unwrap_or(d.fit.image.steps),
+            shape_rank.unwrap_or(d.fit.ranks.shape),
+            color_rank.unwrap_or(d.fit.ranks.color),
+            landmark_sigma.unwrap_or(d.fit.landmarks.sigma),
+            contour_sigma.unwrap_or(d.fit.landmarks.contour_sigma_factor),
+            &set.unwrap_or_default(),
+        )
+        .map_err(err)?;
+        let photo = numpy_to_rgb(image)?;
+        let points = numpy_to_points(py, landmarks)?;
+        let m = self.inner.clone();
+        let source = self.source.clone();
+        let (rep, prepared, outcome) = py
+            .detach(move || {
+                let t0 = Instant::now();
+                let (prepared, outcome) = fit_image(&m, &photo, &points, "landmarks", &opts, &mut |_, _, _| {})?;
+                let inputs = ReportInputs { model_path: &source, image_path: "<array>", pts_path: "<array>", pts_one_based: false };
+                let rep = report(&m, &inputs, &prepared, &opts, &outcome, Some(t0.elapsed().as_secs_f64()));
+                Ok::<_, gpmm_host::fit::FitRunError>((rep, prepared, outcome))
+            })
+            .map_err(err)?;
+        let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
+        let out = json_to_py(py, &rep)?;
+        let dict = out.cast::<PyDict>().map_err(|_| err_msg("fit report is not a dict"))?;
+        dict.set_item("shape", vec_to_numpy(py, rep.shape.clone()))?;
+        dict.set_item("color", vec_to_numpy(py, rep.color.clone()))?;
+        dict.set_item("light", vec3_to_numpy(py, &rep.light)?)?;
+        dict.set_item("translation_mm", vec_to_numpy(py, rep.translation_mm.to_vec()))?;
+        dict.set_item("fitted_landmarks", points_to_numpy(py, &rep.fitted_landmarks)?)?;
+        dict.set_item("overlay", rgba_to_numpy(py, &ov)?)?;
+        dict.set_item("render", rgba_to_numpy(py, &outcome.render)?)?;
+        dict.set_item("working_image", rgb_to_numpy(py, &prepared.image)?)?;
+        Ok(out)
+    }
+
+    /// Quantizes the model for a device profile (`m4f` or `m7`) as `gpmm quantize` does: the model blob's bytes.
+    #[pyo3(signature = (profile = "m4f", vertices = None, rank_shape = None, rank_color = None, bits = None))]
+    fn quantize<'py>(
+        &self,
+        py: Python<'py>,
+        profile: &str,
+        vertices: Option<usize>,
+        rank_shape: Option<usize>,
+        rank_color: Option<usize>,
+        bits: Option<u8>,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let profile: Profile = profile.parse().map_err(err_msg)?;
+        let mut opts = QuantizeOptions::for_profile(profile);
+        opts.vertices = vertices.unwrap_or(opts.vertices);
+        opts.rank_shape = rank_shape.unwrap_or(opts.rank_shape.min(self.inner.shape.rank()));
+        opts.rank_color = rank_color.unwrap_or(opts.rank_color.min(self.inner.color.rank()));
+        if let Some(b) = bits {
+            opts.bits = Bits::from_count(b).ok_or_else(|| err_msg(format!("bits {b}: expected 8 or 16")))?;
+        }
+        opts.source = PathBuf::from(&self.source).file_name().map(|f| f.to_string_lossy().into_owned());
+        let m = self.inner.clone();
+        let blob = py.detach(move || q::quantize(&m, &opts).and_then(|qm| qm.to_bytes())).map_err(err)?;
+        Ok(PyBytes::new(py, &blob))
+    }
+
+    /// Writes the model as a statismo `.h5` file (as `gpmm export-h5`).
+    fn export_h5(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        let m = self.inner.clone();
+        py.detach(move || statismo::export(&m, &path)).map_err(err)
+    }
+}
+
+fn mesh_arrays<'py>(py: Python<'py>, mesh: &gpmm_host::mesh::Mesh) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let p: Vec<[f32; 3]> = mesh.positions.iter().map(|v| v.map(|x| x as f32)).collect();
+    let c: Vec<[f32; 3]> = mesh.colors.iter().map(|v| v.map(|x| x as f32)).collect();
+    Ok((vec3_to_numpy(py, &p)?, vec3_to_numpy(py, &c)?))
+}

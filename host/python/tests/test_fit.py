@@ -1,0 +1,66 @@
+"""A fit from Python equals `gpmm fit` on the same photo, landmarks, settings and seed."""
+
+import json
+
+import numpy as np
+import pytest
+
+import gpmm
+from conftest import FIT_FLAGS
+
+
+@pytest.fixture(scope="module")
+def py_fit(small_model_path, astronaut):
+    model = gpmm.load(small_model_path)
+    img, pts = astronaut
+    return model.fit(gpmm.load_image(img), gpmm.read_pts(pts), **FIT_FLAGS)
+
+
+def assert_same_fit(py_fit, cli_fit):
+    for key in ("yaw_deg", "pitch_deg", "roll_deg", "focal_px", "log_likelihood", "pixel_rmse", "covered_pixels"):
+        assert py_fit[key] == cli_fit[key], key
+    for key in ("shape", "color", "light", "translation_mm", "fitted_landmarks", "photo_pose_deg"):
+        np.testing.assert_array_equal(np.asarray(py_fit[key], np.float32), np.array(cli_fit[key], np.float32), err_msg=key)
+    assert py_fit["acceptance"] == cli_fit["acceptance"]
+
+
+def test_demo_model_default_fit_matches_the_cli(demo_model_path, astronaut, run_cli, tmp_path):
+    """The demo model, the astronaut, gpmm fit's defaults (seed 0, 5000 + 600 steps, 200 + 50 components)."""
+    img, pts = astronaut
+    run_cli("fit", demo_model_path, img, "--landmarks", pts, "--no-timing", "-o", tmp_path)
+    cli = json.loads((tmp_path / "fit.json").read_text())
+    model = gpmm.load(demo_model_path)
+    fit = model.fit(gpmm.load_image(img), gpmm.read_pts(pts))
+    assert fit["fitted_ranks"] == [200, 50] and fit["landmark_steps"] == 5000 and fit["image_steps"] == 600
+    assert_same_fit(fit, cli)
+
+
+def test_fit_matches_the_cli(py_fit, cli_fit):
+    assert_same_fit(py_fit, cli_fit)
+    assert py_fit["crop"] == cli_fit["crop"]
+
+
+def test_fit_outputs(py_fit):
+    assert py_fit["shape"].shape == (20,) and py_fit["shape"].dtype == np.float32
+    assert py_fit["light"].shape == (9, 3)
+    assert py_fit["fitted_landmarks"].shape == (68, 2)
+    assert py_fit["working_image"].shape == (128, 128, 3)
+    assert py_fit["render"].shape == (128, 128, 4)
+    assert py_fit["overlay"].ndim == 3 and py_fit["overlay"].shape[2] == 4
+    assert py_fit["landmark_rmse_original_px"] < 15.0, "the fit follows the landmarks"
+    assert py_fit["acceptance"]["image_chain"], "the image chain ran"
+
+
+def test_fit_settings_and_errors(small_model_path, astronaut):
+    model = gpmm.load(small_model_path)
+    img, pts = astronaut
+    image, points = gpmm.load_image(img), gpmm.read_pts(pts)
+    with pytest.raises(gpmm.GpmmError, match="68"):
+        model.fit(image, points[:10], landmark_steps=10, image_steps=0)
+    with pytest.raises(gpmm.GpmmError, match="outside"):
+        model.fit(image, points + 1000, landmark_steps=10, image_steps=0)
+    with pytest.raises(gpmm.GpmmError, match="no.such"):
+        model.fit(image, points, set=["no.such=1"])
+    a = model.fit(image, points, landmark_steps=200, image_steps=5, seed=1, set=["image.pixel_sigma=0.05"])
+    b = model.fit(image, points, landmark_steps=200, image_steps=5, seed=2)
+    assert a["shape"].tolist() != b["shape"].tolist(), "seeds and settings reach the fit"
