@@ -476,19 +476,23 @@ fn write_part(b: &mut FileBuilder, name: &str, part: &ModelPart, points: &[f32],
     let n = part.mean.len();
     let k = part.rank();
     let values = dense_values(part);
-    let mut basis = vec![0.0f32; 3 * n * k];
+    // Float64 columns divided by the very factor an importer computes from the stored (float32)
+    // variance: multiplied back and rounded to float32, every value is the model's own (the
+    // error of the two float64 operations is far below half a float32 ulp). HDF5 readers that
+    // ask for float32 (statismo, scalismo) get the values converted by the library.
+    let mut basis = vec![0.0f64; 3 * n * k];
     for (c, &ev) in part.eigenvalues.iter().enumerate() {
-        let s = ev.sqrt();
+        let s = f64::from(ev as f32).sqrt();
         for row in 0..3 * n {
             let v = f64::from(values[c * 3 * n + row]);
-            basis[row * k + c] = if s > 0.0 { (v / s) as f32 } else { 0.0 };
+            basis[row * k + c] = if s > 0.0 { v / s } else { 0.0 };
         }
     }
     let mut g: GroupBuilder = b.create_group(name);
     let mut model = g.create_group("model");
     let mean: Vec<f32> = part.mean.iter().flatten().copied().collect();
     model.create_dataset("mean").with_f32_data(&mean);
-    model.create_dataset("pcaBasis").with_f32_data(&basis).with_shape(&[3 * n as u64, k as u64]);
+    model.create_dataset("pcaBasis").with_f64_data(&basis).with_shape(&[3 * n as u64, k as u64]);
     let var: Vec<f32> = part.eigenvalues.iter().map(|&v| v as f32).collect();
     model.create_dataset("pcaVariance").with_f32_data(&var);
     model.create_dataset("noiseVariance").with_f32_data(&[0.0]).with_shape(&[]);
