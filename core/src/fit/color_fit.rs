@@ -12,10 +12,10 @@
 //! Visibility is a back-facing test only, as in [`super::light_fit`].
 
 use super::image::TargetImage;
+use super::light_fit::visit_facing;
 use super::FitError;
 use crate::model::basis::ModelError;
 use crate::model::morphable::MorphableModel;
-use crate::render::pose::mat_vec;
 use crate::render::shading::TriIndex;
 use crate::{Camera, Pose, ShLight, Vec3};
 
@@ -53,24 +53,10 @@ pub struct ColorScene<'s, 'i> {
 
 /// Calls `f(vertex, irradiance, target)` for every usable sampled vertex; returns their number.
 fn visit_samples(scene: &ColorScene<'_, '_>, config: &ColorSolveConfig, mut f: impl FnMut(usize, Vec3, Vec3)) -> usize {
-    let r = scene.pose.rotation();
-    let t = scene.pose.translation;
-    let mut m = 0;
-    for (v, (p, n)) in scene.positions.iter().zip(scene.normals).enumerate().step_by(config.stride.max(1)) {
-        let nc = mat_vec(&r, *n);
-        let q = mat_vec(&r, *p);
-        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
-        let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
-        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
-        if cos.is_nan() || cos < config.min_cos {
-            continue;
-        }
-        let Some(s) = scene.camera.project(pc) else { continue };
-        let Some(target) = scene.image.sample(s.x, s.y) else { continue };
-        f(v, scene.light.irradiance(nc), target);
-        m += 1;
-    }
-    m
+    let ColorScene { positions, normals, pose, camera, light, image } = *scene;
+    visit_facing(positions, normals, pose, camera, image, 0, config.stride, config.min_cos, |v, nc, target| {
+        f(v, light.irradiance(nc), target)
+    })
 }
 
 /// The rendered colour change `e ⊙ Σ_k x_k row_k` of one vertex (`row`: its basis row).

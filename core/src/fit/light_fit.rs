@@ -51,23 +51,10 @@ pub fn solve_light(
     if config.stride == 0 || !(config.lambda >= 0.0 && config.lambda.is_finite()) {
         return Err(FitError::BadConfig);
     }
-    let r = pose.rotation();
-    let t = pose.translation;
     let mut ata = [[[0.0f32; SH_COEFFS]; SH_COEFFS]; 3];
     let mut atb = [[0.0f32; SH_COEFFS]; 3];
-    let mut m = 0usize;
-    let samples = positions.iter().zip(normals).zip(albedos).skip(config.offset).step_by(config.stride);
-    for ((p, n), a) in samples {
-        let nc = mat_vec(&r, *n);
-        let q = mat_vec(&r, *p);
-        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
-        let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
-        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
-        if cos.is_nan() || cos < config.min_cos {
-            continue;
-        }
-        let Some(s) = camera.project(pc) else { continue };
-        let Some(target) = image.sample(s.x, s.y) else { continue };
+    let m = visit_facing(positions, normals, pose, camera, image, config.offset, config.stride, config.min_cos, |v, nc, target| {
+        let Some(a) = albedos.get(v) else { return };
         let b = lambert_basis(nc);
         for c in 0..3 {
             let (Some(&ac), Some(&ic), Some(mat), Some(rhs)) = (a.get(c), target.get(c), ata.get_mut(c), atb.get_mut(c)) else {
@@ -81,8 +68,7 @@ pub fn solve_light(
                 }
             }
         }
-        m += 1;
-    }
+    });
     if m < SH_COEFFS {
         return Err(FitError::Singular);
     }
@@ -107,6 +93,41 @@ pub fn solve_light(
         return Err(FitError::Singular);
     }
     Ok(light)
+}
+
+/// Calls `f(vertex, camera-space normal, target colour)` for every `stride`-th vertex from
+/// `offset` that faces the camera (cosine ≥ `min_cos`) and projects into `image`; returns their
+/// number. The sample walk of the light and colour solves (visibility is a back-facing test only).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn visit_facing(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    pose: &Pose,
+    camera: &Camera,
+    image: &TargetImage<'_>,
+    offset: usize,
+    stride: usize,
+    min_cos: f32,
+    mut f: impl FnMut(usize, Vec3, Vec3),
+) -> usize {
+    let r = pose.rotation();
+    let t = pose.translation;
+    let mut m = 0;
+    for (v, (p, n)) in positions.iter().zip(normals).enumerate().skip(offset).step_by(stride.max(1)) {
+        let nc = mat_vec(&r, *n);
+        let q = mat_vec(&r, *p);
+        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
+        let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
+        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
+        if cos.is_nan() || cos < min_cos {
+            continue;
+        }
+        let Some(s) = camera.project(pc) else { continue };
+        let Some(target) = image.sample(s.x, s.y) else { continue };
+        f(v, nc, target);
+        m += 1;
+    }
+    m
 }
 
 /// Solves `A x = b` for a symmetric positive-definite 9×9 `A` (overwritten by its Cholesky factor).

@@ -258,10 +258,10 @@ fn color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
     let every_vertex = settings.light.solve_config(settings.light.start_stride);
     for _ in 0..rounds {
         let camera = start.camera(w, h);
+        // A copy: the solve writes the coefficients while the scene borrows the pose and light.
         let mut coeffs = [0.0f32; KC];
-        let k = start.color_coeffs().len();
-        let (Some(c), Some(current)) = (coeffs.get_mut(..k), Some(start.color_coeffs())) else { break };
-        c.copy_from_slice(current);
+        let Some(c) = coeffs.get_mut(..start.color_coeffs().len()) else { break };
+        c.copy_from_slice(start.color_coeffs());
         let scene = ColorScene {
             positions: instance.positions(),
             normals: instance.normals(),

@@ -502,66 +502,6 @@ impl Basis<'_> {
         }
     }
 
-    /// Component `k`'s (scaled) vector at `vertex`; zero outside the basis.
-    pub fn component_at(&self, k: usize, vertex: usize) -> Vec3 {
-        let n = self.vertices();
-        if k >= self.rank() || vertex >= n {
-            return [0.0; 3];
-        }
-        let at = k * n + vertex;
-        let scale = |m: f32, e: &Vec3| [m * e[0], m * e[1], m * e[2]];
-        match self {
-            Basis::Factored(b) => match (b.fields.get(at), b.directions.get(k)) {
-                (Some(f), Some(e)) => scale(*f, e),
-                _ => [0.0; 3],
-            },
-            Basis::Dense(b) => match b.values.get(3 * at..3 * at + 3) {
-                Some([x, y, z]) => [*x, *y, *z],
-                _ => [0.0; 3],
-            },
-            Basis::Quantized(b) => {
-                let s = b.scales.get(k).copied().unwrap_or(0.0);
-                match b.directions.and_then(|d| d.get(k)) {
-                    Some(e) => scale(s * b.values.get(at), e),
-                    None => [s * b.values.get(3 * at), s * b.values.get(3 * at + 1), s * b.values.get(3 * at + 2)],
-                }
-            }
-        }
-    }
-
-    /// The (scaled) vectors of the first `out.len()` components at `vertex` into `out` (zero
-    /// outside the basis): one row of the basis, read with the layout matched once.
-    pub fn components_at(&self, vertex: usize, out: &mut [Vec3]) {
-        let n = self.vertices();
-        let rank = self.rank();
-        if vertex >= n {
-            out.fill([0.0; 3]);
-            return;
-        }
-        let keep = out.len().min(rank);
-        let (out, rest) = out.split_at_mut(keep);
-        rest.fill([0.0; 3]);
-        match self {
-            Basis::Factored(b) => {
-                for ((o, e), f) in out.iter_mut().zip(b.directions).zip(b.fields.iter().skip(vertex).step_by(n)) {
-                    *o = [f * e[0], f * e[1], f * e[2]];
-                }
-            }
-            Basis::Dense(b) => {
-                for (o, v) in out.iter_mut().zip(b.values.chunks_exact(3).skip(vertex).step_by(n)) {
-                    if let [x, y, z] = v {
-                        *o = [*x, *y, *z];
-                    }
-                }
-            }
-            Basis::Quantized(_) => {
-                for (k, o) in out.iter_mut().enumerate() {
-                    *o = self.component_at(k, vertex);
-                }
-            }
-        }
-    }
-
     /// Adds the linear combination of components at one vertex to `out`.
     pub fn add_vertex(&self, coeffs: &[f32], vertex: usize, out: &mut Vec3) -> Result<(), ModelError> {
         match self {
@@ -636,13 +576,15 @@ impl Basis<'_> {
     }
 }
 
+mod rows;
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn add_vertices_equals_add_vertex_for_every_layout() {
+    /// Calls `f` with one rank-2, 3-vertex basis of every layout.
+    pub(super) fn for_every_layout(mut f: impl FnMut(Basis<'_>)) {
         let fields = [1.0, 2.0, 3.0, 0.5, -1.0, 0.25];
         let dirs = [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]];
         let dense = [0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7, 0.8, -0.9, 1.0, 1.1, 1.2, 1.3, -1.4, 1.5, 1.6, 1.7, 1.8];
@@ -655,8 +597,13 @@ mod tests {
             Basis::Quantized(QuantizedBasis::new(QuantValues::I8(&q8), &scales, Some(&dirs), 3).unwrap()),
             Basis::Quantized(QuantizedBasis::new(QuantValues::I16(&q16), &scales, None, 3).unwrap()),
         ];
+        bases.into_iter().for_each(&mut f);
+    }
+
+    #[test]
+    fn add_vertices_equals_add_vertex_for_every_layout() {
         let ids = [2u32, 0, 2, 1];
-        for b in bases {
+        for_every_layout(|b| {
             let c = [0.7, -2.0];
             let mut many = [[0.5f32; 3]; 4];
             b.add_vertices(&c, &ids, &mut many).unwrap();
@@ -670,48 +617,7 @@ mod tests {
             assert_eq!(b.add_vertices(&c, &[3], &mut [[0.0; 3]]), Err(ModelError::LengthMismatch));
             assert_eq!(b.add_vertices(&c, &[0, 1], &mut [[0.0; 3]]), Err(ModelError::LengthMismatch));
             assert_eq!(b.add_vertices(&[1.0; 3], &[0], &mut [[0.0; 3]]), Err(ModelError::TooManyCoefficients));
-        }
-    }
-
-    #[test]
-    fn basis_rows_are_the_unit_coefficient_sums_for_every_layout() {
-        let fields = [1.0, 2.0, 3.0, 0.5, -1.0, 0.25];
-        let dirs = [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8]];
-        let dense = [0.1, 0.2, 0.3, -0.4, 0.5, 0.6, 0.7, 0.8, -0.9, 1.0, 1.1, 1.2, 1.3, -1.4, 1.5, 1.6, 1.7, 1.8];
-        let q8: [i8; 6] = [12, -7, 127, -128, 0, 55];
-        let q16: [i16; 18] = [1, -2, 3, 400, -500, 600, 7, 8, 9, -10, 11, 12, 13, 14, 15, 16, 17, -32767];
-        let scales = [0.01, 0.002];
-        let bases = [
-            Basis::Factored(FactoredBasis::new(&fields, &dirs, 3).unwrap()),
-            Basis::Dense(DenseBasis::new(&dense, 2, 3).unwrap()),
-            Basis::Quantized(QuantizedBasis::new(QuantValues::I8(&q8), &scales, Some(&dirs), 3).unwrap()),
-            Basis::Quantized(QuantizedBasis::new(QuantValues::I16(&q16), &scales, None, 3).unwrap()),
-        ];
-        for b in bases {
-            for v in 0..3 {
-                // Three slots for a rank-2 basis: the extra one is zero.
-                let mut row = [[9.0f32; 3]; 3];
-                b.components_at(v, &mut row);
-                for (k, r) in row.iter().enumerate() {
-                    let mut unit = [0.0f32; 2];
-                    let mut expected = [0.0f32; 3];
-                    if k < 2 {
-                        unit[k] = 1.0;
-                        b.add_vertex(&unit, v, &mut expected).unwrap();
-                    }
-                    for a in 0..3 {
-                        assert!((r[a] - expected[a]).abs() <= 1e-6 * (1.0 + expected[a].abs()), "{b:?} v{v} k{k}: {r:?} vs {expected:?}");
-                    }
-                    assert_eq!(*r, b.component_at(k, v));
-                }
-            }
-            // Outside the basis: zeros, no panic.
-            let mut row = [[9.0f32; 3]; 2];
-            b.components_at(3, &mut row);
-            assert_eq!(row, [[0.0; 3]; 2]);
-            assert_eq!(b.component_at(0, 3), [0.0; 3]);
-            assert_eq!(b.component_at(2, 0), [0.0; 3]);
-        }
+        });
     }
 
     #[test]
