@@ -14,6 +14,7 @@ pub mod error;
 pub mod fit;
 pub mod format;
 pub mod model;
+pub mod net;
 pub mod profile;
 pub mod render;
 

@@ -15,6 +15,7 @@ pub mod device;
 pub mod eval;
 pub mod fit;
 pub mod gp;
+pub mod init;
 pub mod mesh;
 pub mod photo;
 pub mod process;

@@ -45,6 +45,33 @@ pub enum EvalCommand {
     /// OUT/specgen.{md,csv,json} and OUT/specgen-shape.png, OUT/specgen-color.png. Default models:
     /// standard-full, symmetric-full and correlated-full built from the template.
     Specgen(Box<SpecgenArgs>),
+    /// The face finder and initializer of an init file against reference landmarks.
+    ///
+    /// DIR is a `gpmm synth` set (its truth.json lists the images and their yaw) or any folder of
+    /// images with a .pts of the same name (photos). Prints JSON: the fraction of faces found (box
+    /// centre within half a face size of the reference's), the median and 90th percentile of the
+    /// mean landmark error over the outer-eye-corner distance, and the median |yaw error| per
+    /// |yaw|. Writes DIR/detect.json with every image unless --no-write.
+    Detect(DetectEvalArgs),
+}
+
+/// Arguments of `gpmm eval detect`.
+#[derive(Debug, Args)]
+pub struct DetectEvalArgs {
+    /// Directory of images (see above).
+    pub dir: PathBuf,
+    /// Init file from `gpmm train-init`.
+    #[arg(long, value_name = "INIT")]
+    pub init: PathBuf,
+    /// Read the reference .pts from this directory instead of DIR.
+    #[arg(long, value_name = "DIR")]
+    pub reference_dir: Option<PathBuf>,
+    /// The reference .pts files are 1-based (300-W / menpo convention).
+    #[arg(long)]
+    pub pts_one_based: bool,
+    /// Do not write DIR/detect.json.
+    #[arg(long)]
+    pub no_write: bool,
 }
 
 /// Model selection and building options shared by the evaluations.
@@ -384,5 +411,24 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     match a.eval {
         EvalCommand::Recognition(r) => eval_recognition(*r),
         EvalCommand::Specgen(s) => eval_specgen(*s),
+        EvalCommand::Detect(d) => eval_detect(d),
     }
+}
+
+/// Runs `gpmm eval detect`.
+fn eval_detect(a: DetectEvalArgs) -> Result<()> {
+    let mut init = gpmm_host::init::InitModel::load(&a.init)?;
+    let images = gpmm_host::init::eval::list_images(&a.dir, a.reference_dir.as_deref())?;
+    if images.is_empty() {
+        bail!("{}: no image with a reference .pts found", a.dir.display());
+    }
+    let (summary, rows) = gpmm_host::init::eval::evaluate(&mut init, &images, a.pts_one_based)?;
+    if !a.no_write {
+        let path = a.dir.join("detect.json");
+        let body = serde_json::json!({ "init": a.init, "summary": summary, "images": rows });
+        std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(())
 }

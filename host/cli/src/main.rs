@@ -7,6 +7,7 @@ mod device;
 mod eval;
 mod fit;
 mod h5;
+mod init;
 mod progress;
 mod register;
 mod render;
@@ -110,6 +111,21 @@ pub enum Command {
     ImportH5(h5::ImportArgs),
     /// Export a gpmm model as a statismo .h5 file (version 0.9: dense, unscaled orthonormal bases).
     ExportH5(h5::ExportArgs),
+    /// Train the face finder and initializer of a landmark-free fit on renders of a model.
+    ///
+    /// Renders random faces of the model (shape, colour, yaw ±70°, pitch and roll ±30°, SH light,
+    /// cameras of 20-70° field of view, partial framing) over procedural backgrounds with camera
+    /// effects (blur, noise, gamma, white balance, JPEG); the labels are the model's own landmark
+    /// vertices, pose and light. Trains two small networks with candle on the CPU, quantizes them
+    /// to int8 (per-channel weight scales) and writes an init file (docs/init-format.md). Prints
+    /// the quantized networks' accuracy on held-out renders as JSON. Deterministic for a seed.
+    TrainInit(init::TrainInitArgs),
+    /// Find the face in an image and read its 68 landmarks, pose and light with an init file.
+    ///
+    /// The finder sees the whole image letterboxed to 96x96; the initializer a 64x64 crop around
+    /// the found face, then again around its own landmarks (--refine). Prints JSON (box, score,
+    /// angles, landmarks); -o writes a .pts that `gpmm fit --landmarks` reads.
+    Detect(init::DetectArgs),
 }
 
 /// Runs the program and maps errors to a message and exit code 1.
@@ -142,6 +158,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::DeviceFit(a) => device::device_fit(a),
         Command::ImportH5(a) => h5::import_h5(a),
         Command::ExportH5(a) => h5::export_h5(a),
+        Command::TrainInit(a) => init::train_init(a),
+        Command::Detect(a) => init::detect(a),
         Command::Render(a) => render::render(a),
         Command::Figure(a) => render::figure(a),
     }

@@ -1,0 +1,277 @@
+//! The init file (`GPMI`, `docs/init-format.md`) and the landmark-free start of a fit: the finder
+//! locates the face in the whole frame, the initializer reads the 68 landmarks, the head pose and
+//! the low-order light from a crop around it.
+
+use super::resample::{sample_rgb, Window};
+use super::{NetError, NetScratch, Network};
+use crate::format::bytes::{check_crc, Reader, Writer};
+use crate::format::FormatError;
+use heapless::Vec;
+
+/// The init file's magic.
+pub const INIT_MAGIC: [u8; 4] = *b"GPMI";
+/// The init file's format version.
+pub const INIT_VERSION: u32 = 1;
+/// Bytes of the init file's header.
+pub const INIT_HEADER_BYTES: usize = 32;
+/// Values per finder cell: face logit, centre x and y within the cell (0..1), log of the face size
+/// over the finder's side.
+pub const FINDER_CHANNELS: usize = 4;
+/// Most landmarks an initializer reads.
+pub const MAX_INIT_LANDMARKS: usize = 68;
+/// Most light coefficients an initializer reads (9 SH coefficients × RGB).
+pub const MAX_INIT_LIGHT: usize = 27;
+/// Largest network output a detection holds (`f32` values).
+pub const MAX_NET_OUTPUT: usize = 1024;
+
+/// The finder, the initializer and what their outputs mean.
+#[derive(Debug, Clone, Copy)]
+pub struct InitFile<'a> {
+    /// Whole frame (letterboxed) → per-cell face score, centre and size.
+    pub finder: Network<'a>,
+    /// Face crop → landmarks, pose, light.
+    pub initializer: Network<'a>,
+    /// Side of the initializer's square crop, in face sizes (the face size being the larger side
+    /// of the landmarks' bounding box).
+    pub crop_margin: f32,
+    /// Number of landmarks the initializer reads.
+    pub landmarks: usize,
+    /// Number of light coefficients the initializer reads.
+    pub light: usize,
+    /// UTF-8 JSON written by the trainer (what it was trained on); readers do not depend on it.
+    pub metadata: &'a str,
+}
+
+impl<'a> InitFile<'a> {
+    /// Reads and checks an init file (magic, version, sizes, CRC, both networks, output sizes).
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, NetError> {
+        let mut r = Reader::after_header(bytes, INIT_MAGIC, INIT_VERSION)?;
+        let body = r.u32()? as usize;
+        if body < INIT_HEADER_BYTES {
+            return Err(FormatError::BadField("body_len").into());
+        }
+        check_crc(bytes, body)?;
+        let landmarks = usize::from(r.u16()?);
+        let light = usize::from(r.u16()?);
+        let crop_margin = r.f32()?;
+        let finder_len = r.u32()? as usize;
+        let init_len = r.u32()? as usize;
+        let meta_len = r.u32()? as usize;
+        if landmarks == 0 || landmarks > MAX_INIT_LANDMARKS {
+            return Err(FormatError::BadField("landmarks").into());
+        }
+        if light > MAX_INIT_LIGHT {
+            return Err(FormatError::BadField("light").into());
+        }
+        if !(crop_margin.is_finite() && (1.0..=4.0).contains(&crop_margin)) {
+            return Err(FormatError::BadField("crop_margin").into());
+        }
+        let section = |r: &mut Reader<'a>, len: usize| -> Result<Network<'a>, NetError> {
+            let bytes = r.take(len)?;
+            let (net, used) = Network::parse(bytes)?;
+            if used != len {
+                return Err(NetError::Layer("a network's length differs from the header's"));
+            }
+            r.align4()?;
+            Ok(net)
+        };
+        let finder = section(&mut r, finder_len)?;
+        let initializer = section(&mut r, init_len)?;
+        let metadata = core::str::from_utf8(r.take(meta_len)?).map_err(|_| FormatError::BadField("metadata"))?;
+        r.align4()?;
+        if r.position() != body {
+            return Err(FormatError::BadField("body_len").into());
+        }
+        let (fi, ii, fo, io) = (finder.input(), initializer.input(), finder.output(), initializer.output());
+        if fi.c != 3 || ii.c != 3 || fi.h != fi.w || ii.h != ii.w {
+            return Err(NetError::Layer("the networks' inputs must be square RGB images"));
+        }
+        if fo.c != FINDER_CHANNELS || fo.h != fo.w || fo.len() > MAX_NET_OUTPUT {
+            return Err(NetError::Layer("the finder's output is not a square grid of 4 values per cell"));
+        }
+        if io.len() != 2 * landmarks + 3 + light {
+            return Err(NetError::Layer("the initializer's output length is not 2 × landmarks + 3 + light"));
+        }
+        Ok(Self { finder, initializer, crop_margin, landmarks, light, metadata })
+    }
+
+    /// Bytes each scratch buffer needs for both networks.
+    pub fn scratch_bytes(&self) -> usize {
+        self.finder.scratch_bytes().max(self.initializer.scratch_bytes())
+    }
+}
+
+/// Writes an init file around two encoded networks into `out`; returns its length.
+pub fn write_init_file(
+    out: &mut [u8],
+    finder: &[u8],
+    initializer: &[u8],
+    crop_margin: f32,
+    landmarks: u16,
+    light: u16,
+    metadata: &str,
+) -> Result<usize, FormatError> {
+    let pad = |n: usize| n.next_multiple_of(4);
+    let body = INIT_HEADER_BYTES + pad(finder.len()) + pad(initializer.len()) + pad(metadata.len());
+    let mut w = Writer::new(out);
+    w.bytes(&INIT_MAGIC)?;
+    w.u32(INIT_VERSION)?;
+    w.u32(u32::try_from(body).map_err(|_| FormatError::BadField("body_len"))?)?;
+    w.u16(landmarks)?;
+    w.u16(light)?;
+    w.f32(crop_margin)?;
+    for len in [finder.len(), initializer.len(), metadata.len()] {
+        w.u32(u32::try_from(len).map_err(|_| FormatError::BadField("section length"))?)?;
+    }
+    for part in [finder, initializer, metadata.as_bytes()] {
+        w.bytes(part)?;
+        w.align4()?;
+    }
+    w.finish_crc()
+}
+
+/// A face found in a frame: a square box in frame pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FaceBox {
+    /// Centre, x (px).
+    pub cx: f32,
+    /// Centre, y (px).
+    pub cy: f32,
+    /// Side: the larger side of the landmarks' bounding box (px).
+    pub size: f32,
+    /// The finder's confidence, 0..1.
+    pub score: f32,
+}
+
+/// What the initializer read from a face.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Detection {
+    /// The finder's box (before refinement).
+    pub face: FaceBox,
+    /// Landmarks in frame pixels, `(x, y)`.
+    pub landmarks: Vec<[f32; 2], MAX_INIT_LANDMARKS>,
+    /// Yaw, pitch, roll (radians, the fit's pose convention).
+    pub angles: [f32; 3],
+    /// Light coefficients as trained (`docs/init-format.md`).
+    pub light: Vec<f32, MAX_INIT_LIGHT>,
+}
+
+fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + libm::expf(-x))
+}
+
+/// Runs the finder on an RGB frame (`w × h`); the best cell's box, whatever its score.
+pub fn find_face<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    scratch: &mut NetScratch<A>,
+) -> Result<FaceBox, NetError> {
+    let net = &init.finder;
+    let side = net.input().w;
+    let window = Window::letterbox(w, h, side);
+    sample_rgb(rgb, w, h, window, side, scratch.input_mut(net.input().len())?)?;
+    let mut out = [0f32; MAX_NET_OUTPUT];
+    let grid = net.output();
+    let out = out.get_mut(..grid.len()).ok_or(NetError::LengthMismatch)?;
+    net.run(scratch, out)?;
+    let cell = side as f32 / grid.w as f32;
+    let mut best: Option<(usize, f32)> = None;
+    for (i, v) in out.chunks_exact(FINDER_CHANNELS).enumerate() {
+        let logit = v.first().copied().unwrap_or(f32::NEG_INFINITY);
+        if best.is_none_or(|(_, b)| logit > b) {
+            best = Some((i, logit));
+        }
+    }
+    let (i, logit) = best.ok_or(NetError::LengthMismatch)?;
+    let v = out.get(i * FINDER_CHANNELS..(i + 1) * FINDER_CHANNELS).ok_or(NetError::LengthMismatch)?;
+    let (dx, dy, log_size) = match v {
+        [_, dx, dy, s] => (dx.clamp(0.0, 1.0), dy.clamp(0.0, 1.0), s.clamp(-6.0, 2.0)),
+        _ => return Err(NetError::LengthMismatch),
+    };
+    let (u, vv) = (((i % grid.w) as f32 + dx) * cell, ((i / grid.w) as f32 + dy) * cell);
+    let (cx, cy) = window.to_source(u, vv);
+    let size = libm::expf(log_size) * side as f32 * window.step;
+    Ok(FaceBox { cx, cy, size, score: sigmoid(logit) })
+}
+
+/// Runs the initializer on the crop around `(cx, cy, size)`; fills `det` (landmarks in frame px).
+fn read_face<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    (cx, cy, size): (f32, f32, f32),
+    scratch: &mut NetScratch<A>,
+    det: &mut Detection,
+) -> Result<(), NetError> {
+    let net = &init.initializer;
+    let side = net.input().w;
+    let window = Window::square(cx, cy, size * init.crop_margin, side);
+    sample_rgb(rgb, w, h, window, side, scratch.input_mut(net.input().len())?)?;
+    let mut out = [0f32; MAX_NET_OUTPUT];
+    let out = out.get_mut(..net.output().len()).ok_or(NetError::LengthMismatch)?;
+    net.run(scratch, out)?;
+    det.landmarks.clear();
+    let half = side as f32 * 0.5;
+    let (points, rest) = out.split_at(2 * init.landmarks);
+    for p in points.chunks_exact(2) {
+        if let [x, y] = p {
+            let _ = det.landmarks.push(window.to_source((x + 1.0) * half, (y + 1.0) * half).into());
+        }
+    }
+    let (angles, light) = rest.split_at(3);
+    det.angles.iter_mut().zip(angles).for_each(|(a, &v)| *a = v);
+    det.light.clear();
+    light.iter().for_each(|&v| {
+        let _ = det.light.push(v);
+    });
+    Ok(())
+}
+
+/// The larger side of the points' bounding box and its centre.
+pub fn landmark_box(points: &[[f32; 2]]) -> (f32, f32, f32) {
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for p in points {
+        for ((l, h), v) in lo.iter_mut().zip(hi.iter_mut()).zip(p) {
+            *l = l.min(*v);
+            *h = h.max(*v);
+        }
+    }
+    let [lx, ly] = lo;
+    let [hx, hy] = hi;
+    ((lx + hx) * 0.5, (ly + hy) * 0.5, (hx - lx).max(hy - ly))
+}
+
+/// Finds the face and reads it: finder, then the initializer `1 + refine` times, each time on a
+/// crop re-centred on the previous pass's landmarks. `None` when the finder's score is below
+/// `min_score`.
+pub fn detect<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    min_score: f32,
+    refine: usize,
+    scratch: &mut NetScratch<A>,
+) -> Result<Option<Detection>, NetError> {
+    let face = find_face(init, rgb, w, h, scratch)?;
+    if face.score.is_nan() || face.score < min_score {
+        return Ok(None);
+    }
+    let mut det = Detection { face, landmarks: Vec::new(), angles: [0.0; 3], light: Vec::new() };
+    let mut crop = (face.cx, face.cy, face.size);
+    for pass in 0..=refine {
+        read_face(init, rgb, w, h, crop, scratch, &mut det)?;
+        if pass < refine {
+            let (cx, cy, size) = landmark_box(&det.landmarks);
+            // Only move to a plausible box (a broken read keeps the finder's).
+            if cx.is_finite() && cy.is_finite() && size.is_finite() && size > 1.0 {
+                crop = (cx, cy, size);
+            }
+        }
+    }
+    Ok(Some(det))
+}

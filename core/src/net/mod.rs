@@ -1,0 +1,420 @@
+//! Small int8 convolutional networks evaluated in fixed memory: the face finder and the
+//! initializer of a landmark-free fit (`docs/init-format.md`).
+//!
+//! A [`Network`] is a validated view of one network's bytes inside an init file (read in place,
+//! nothing copied). Activations are `i8` with one scale per tensor (zero point 0); weights are `i8`
+//! with one scale per output channel, folded with the input's scale into one `f32` multiplier per
+//! output channel. A layer computes, per output value, an `i32` sum of `i8 × i8` products, then
+//! `y = sum × multiplier + bias`, optionally `max(y, 0)`, and stores `round(y / out_scale)` clamped
+//! to `-128..=127`, or, in the last layer, `y` itself as `f32`. Every operation is integer or IEEE
+//! single precision without fused multiply-add, so the host and a Cortex-M4F compute the same bits.
+//!
+//! Two layer kinds: a 2-D convolution over an `H×W×C` (channel-last) tensor with a square kernel
+//! (1, 3 or 5), stride 1 or 2 and zero padding `kernel / 2` (output side `(in + 2·pad − k) / s + 1`),
+//! and a dense layer over the whole flattened tensor (`(y·W + x)·C + c` order).
+
+pub mod face;
+pub mod resample;
+
+use crate::format::bytes::Reader;
+use crate::format::FormatError;
+use core::fmt;
+
+/// Largest number of layers of one network.
+pub const MAX_LAYERS: usize = 32;
+
+/// Why a network or an init file was refused, or a run could not be done. Small and `Copy`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NetError {
+    /// The bytes are not a well-formed network or init file.
+    Format(FormatError),
+    /// A layer's description is inconsistent (the text says what).
+    Layer(&'static str),
+    /// A multiplier, bias or scale is NaN, infinite or (for a scale) not positive.
+    NonFinite,
+    /// The scratch buffers are smaller than the network's largest activation.
+    ScratchTooSmall {
+        /// Bytes each of the two buffers needs.
+        needed: usize,
+    },
+    /// The caller's input or output slice does not have the network's size.
+    LengthMismatch,
+    /// The input image is empty or its pixel slice does not match its size.
+    BadImage,
+}
+
+impl From<FormatError> for NetError {
+    fn from(e: FormatError) -> Self {
+        NetError::Format(e)
+    }
+}
+
+impl fmt::Display for NetError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            NetError::Format(e) => write!(f, "{e}"),
+            NetError::Layer(what) => write!(f, "a network layer is inconsistent: {what}"),
+            NetError::NonFinite => write!(f, "a network multiplier, bias or scale is not a finite (positive) number"),
+            NetError::ScratchTooSmall { needed } => write!(f, "the network scratch is too small ({needed} bytes per buffer needed)"),
+            NetError::LengthMismatch => write!(f, "the network's input or output slice has the wrong length"),
+            NetError::BadImage => write!(f, "the image is empty or its pixels do not match its size"),
+        }
+    }
+}
+
+impl core::error::Error for NetError {}
+
+/// What a layer computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LayerKind {
+    /// 2-D convolution, channel-last, zero padding `kernel / 2`.
+    Conv,
+    /// Dense layer over the flattened input.
+    Dense,
+}
+
+impl LayerKind {
+    /// The kind's code in the file.
+    pub fn code(self) -> u8 {
+        match self {
+            LayerKind::Conv => 1,
+            LayerKind::Dense => 2,
+        }
+    }
+
+    /// The kind of a code, if any.
+    pub fn from_code(code: u8) -> Option<Self> {
+        match code {
+            1 => Some(LayerKind::Conv),
+            2 => Some(LayerKind::Dense),
+            _ => None,
+        }
+    }
+}
+
+/// A tensor's shape: height, width, channels (channel-last).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Shape {
+    /// Rows.
+    pub h: usize,
+    /// Columns.
+    pub w: usize,
+    /// Channels.
+    pub c: usize,
+}
+
+impl Shape {
+    /// Number of values.
+    pub fn len(&self) -> usize {
+        self.h.saturating_mul(self.w).saturating_mul(self.c)
+    }
+
+    /// Whether it holds no value.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// One layer read from the file: its description and its parameters in place.
+#[derive(Debug, Clone, Copy)]
+pub struct Layer<'a> {
+    /// Convolution or dense.
+    pub kind: LayerKind,
+    /// Kernel side (1 for dense).
+    pub kernel: usize,
+    /// Stride (1 for dense).
+    pub stride: usize,
+    /// Whether `max(y, 0)` is applied.
+    pub relu: bool,
+    /// Input channels (dense: the flattened input length).
+    pub cin: usize,
+    /// Output channels.
+    pub cout: usize,
+    /// Scale of the stored output (`0` in the last layer: `f32` output).
+    pub out_scale: f32,
+    /// Weights `[cout][kernel][kernel][cin]`.
+    pub weights: &'a [i8],
+    /// Per output channel multipliers, little-endian `f32`.
+    multipliers: &'a [u8],
+    /// Per output channel biases, little-endian `f32`.
+    biases: &'a [u8],
+}
+
+fn f32_at(bytes: &[u8], i: usize) -> f32 {
+    let mut b = [0u8; 4];
+    if let Some(s) = bytes.get(i * 4..i * 4 + 4) {
+        b.copy_from_slice(s);
+    }
+    f32::from_le_bytes(b)
+}
+
+impl Layer<'_> {
+    /// Multiplier of output channel `o`.
+    pub fn multiplier(&self, o: usize) -> f32 {
+        f32_at(self.multipliers, o)
+    }
+
+    /// Bias of output channel `o`.
+    pub fn bias(&self, o: usize) -> f32 {
+        f32_at(self.biases, o)
+    }
+
+    /// The output shape for an input of shape `input`.
+    pub fn output_shape(&self, input: Shape) -> Result<Shape, NetError> {
+        match self.kind {
+            LayerKind::Dense => {
+                if input.len() != self.cin {
+                    return Err(NetError::Layer("a dense layer's input length differs from the tensor before it"));
+                }
+                Ok(Shape { h: 1, w: 1, c: self.cout })
+            }
+            LayerKind::Conv => {
+                if input.c != self.cin {
+                    return Err(NetError::Layer("a convolution's input channels differ from the tensor before it"));
+                }
+                let pad = self.kernel / 2;
+                let side = |n: usize| (n + 2 * pad).checked_sub(self.kernel).map(|m| m / self.stride + 1);
+                match (side(input.h), side(input.w)) {
+                    (Some(h), Some(w)) => Ok(Shape { h, w, c: self.cout }),
+                    _ => Err(NetError::Layer("a convolution's input is smaller than its kernel")),
+                }
+            }
+        }
+    }
+
+    fn read<'a>(r: &mut Reader<'a>) -> Result<Layer<'a>, NetError> {
+        let kind = LayerKind::from_code(r.array::<1>()?[0]).ok_or(NetError::Layer("unknown layer kind"))?;
+        let [kernel, stride, flags] = r.array::<3>()?;
+        let cin = usize::from(r.u16()?);
+        let cout = usize::from(r.u16()?);
+        let out_scale = r.f32()?;
+        let (kernel, stride) = (usize::from(kernel), usize::from(stride));
+        let shape_ok = match kind {
+            LayerKind::Conv => matches!(kernel, 1 | 3 | 5) && matches!(stride, 1 | 2),
+            LayerKind::Dense => kernel == 1 && stride == 1,
+        };
+        if !shape_ok || cin == 0 || cout == 0 || flags > 1 {
+            return Err(NetError::Layer("kernel, stride, channels or flags out of range"));
+        }
+        if !(out_scale.is_finite() && out_scale >= 0.0) {
+            return Err(NetError::NonFinite);
+        }
+        let count = cout * kernel * kernel * cin;
+        let weights: &[i8] = bytemuck::cast_slice(r.take(count)?);
+        r.align4()?;
+        let multipliers = r.take(cout * 4)?;
+        let biases = r.take(cout * 4)?;
+        let layer = Layer { kind, kernel, stride, relu: flags == 1, cin, cout, out_scale, weights, multipliers, biases };
+        if (0..cout).any(|o| !layer.multiplier(o).is_finite() || !layer.bias(o).is_finite()) {
+            return Err(NetError::NonFinite);
+        }
+        Ok(layer)
+    }
+}
+
+/// A validated network inside a byte slice (`docs/init-format.md`, "Network").
+#[derive(Debug, Clone, Copy)]
+pub struct Network<'a> {
+    bytes: &'a [u8],
+    layers: usize,
+    input: Shape,
+    output: Shape,
+    largest: usize,
+}
+
+impl<'a> Network<'a> {
+    /// Reads and checks the network at the start of `bytes`; returns it and its length in bytes.
+    pub fn parse(bytes: &'a [u8]) -> Result<(Self, usize), NetError> {
+        let mut r = Reader::new(bytes);
+        let layers = usize::from(r.u16()?);
+        let _reserved = r.u16()?;
+        let input = Shape { h: usize::from(r.u16()?), w: usize::from(r.u16()?), c: usize::from(r.u16()?) };
+        let _reserved = r.u16()?;
+        if layers == 0 || layers > MAX_LAYERS || input.is_empty() {
+            return Err(NetError::Layer("layer count or input shape out of range"));
+        }
+        let mut shape = input;
+        let mut largest = input.len();
+        for i in 0..layers {
+            let layer = Layer::read(&mut r)?;
+            let last = i + 1 == layers;
+            if last != (layer.out_scale == 0.0) {
+                return Err(NetError::Layer("only the last layer has an f32 output (out_scale 0)"));
+            }
+            shape = layer.output_shape(shape)?;
+            largest = largest.max(shape.len());
+        }
+        let len = r.position();
+        let body = bytes.get(..len).ok_or(FormatError::Truncated { needed: len, available: bytes.len() })?;
+        Ok((Self { bytes: body, layers, input, output: shape, largest }, len))
+    }
+
+    /// Shape of the input tensor.
+    pub fn input(&self) -> Shape {
+        self.input
+    }
+
+    /// Shape of the output tensor (`f32`).
+    pub fn output(&self) -> Shape {
+        self.output
+    }
+
+    /// Bytes each of the two scratch buffers needs (the largest `i8` activation).
+    pub fn scratch_bytes(&self) -> usize {
+        self.largest
+    }
+
+    /// Number of layers.
+    pub fn layer_count(&self) -> usize {
+        self.layers
+    }
+
+    /// Multiply-accumulates of one run (for budgets and reports).
+    pub fn macs(&self) -> usize {
+        let mut shape = self.input;
+        let mut total = 0usize;
+        for layer in self.layers_iter() {
+            let Ok(next) = layer.output_shape(shape) else { break };
+            total = total.saturating_add(next.len().saturating_mul(layer.kernel * layer.kernel * layer.cin));
+            shape = next;
+        }
+        total
+    }
+
+    /// The layers in order.
+    pub fn layers_iter(&self) -> impl Iterator<Item = Layer<'a>> + 'a {
+        let mut r = Reader::new(self.bytes);
+        let skip = r.take(12).is_ok();
+        let mut left = if skip { self.layers } else { 0 };
+        core::iter::from_fn(move || {
+            if left == 0 {
+                return None;
+            }
+            left -= 1;
+            Layer::read(&mut r).ok()
+        })
+    }
+
+    /// Runs the network on the `i8` input held in `scratch.input_mut(..)`; writes the `f32` output.
+    pub fn run<const A: usize>(&self, scratch: &mut NetScratch<A>, out: &mut [f32]) -> Result<(), NetError> {
+        if self.largest > A {
+            return Err(NetError::ScratchTooSmall { needed: self.largest });
+        }
+        if out.len() != self.output.len() {
+            return Err(NetError::LengthMismatch);
+        }
+        let mut shape = self.input;
+        let mut in_a = true;
+        for layer in self.layers_iter() {
+            let next = layer.output_shape(shape)?;
+            let (src, dst) = if in_a { (&scratch.a, &mut scratch.b) } else { (&scratch.b, &mut scratch.a) };
+            let src = src.get(..shape.len()).ok_or(NetError::LengthMismatch)?;
+            if layer.out_scale == 0.0 {
+                layer_forward(&layer, src, shape, next, |i, y| {
+                    if let Some(o) = out.get_mut(i) {
+                        *o = y;
+                    }
+                });
+            } else {
+                let dst = dst.get_mut(..next.len()).ok_or(NetError::LengthMismatch)?;
+                let s = layer.out_scale;
+                layer_forward(&layer, src, shape, next, |i, y| {
+                    if let Some(o) = dst.get_mut(i) {
+                        *o = quantize(y, s);
+                    }
+                });
+            }
+            in_a = !in_a;
+            shape = next;
+        }
+        Ok(())
+    }
+}
+
+/// `round(y / scale)` clamped to `i8` (NaN gives 0).
+pub fn quantize(y: f32, scale: f32) -> i8 {
+    let q = libm::roundf(y / scale);
+    // `as` saturates and maps NaN to 0.
+    q.clamp(-128.0, 127.0) as i8
+}
+
+/// The value of one layer output before quantization, for every output index in order.
+fn layer_forward(layer: &Layer<'_>, src: &[i8], input: Shape, output: Shape, mut emit: impl FnMut(usize, f32)) {
+    let k = layer.kernel;
+    let finish = |acc: i32, o: usize| {
+        let y = acc as f32 * layer.multiplier(o) + layer.bias(o);
+        if layer.relu {
+            y.max(0.0)
+        } else {
+            y
+        }
+    };
+    match layer.kind {
+        LayerKind::Dense => {
+            for (o, w) in layer.weights.chunks_exact(layer.cin).enumerate() {
+                emit(o, finish(dot(src, w), o));
+            }
+        }
+        LayerKind::Conv => {
+            let pad = k / 2;
+            let taps = k * layer.cin;
+            let mut i = 0;
+            for oy in 0..output.h {
+                for ox in 0..output.w {
+                    // The kernel window clipped to the image (zero padding contributes nothing).
+                    let y0 = (oy * layer.stride).saturating_sub(pad);
+                    let y1 = (oy * layer.stride + k - pad).min(input.h);
+                    let x0 = (ox * layer.stride).saturating_sub(pad);
+                    let x1 = (ox * layer.stride + k - pad).min(input.w);
+                    let ky0 = y0 + pad - oy * layer.stride;
+                    let kx0 = x0 + pad - ox * layer.stride;
+                    let run = (x1.saturating_sub(x0)) * layer.cin;
+                    for (o, w) in layer.weights.chunks_exact(k * taps).enumerate() {
+                        let mut acc = 0i32;
+                        for (dy, iy) in (y0..y1).enumerate() {
+                            let a = src.get((iy * input.w + x0) * layer.cin..).unwrap_or(&[]);
+                            let wr = w.get((ky0 + dy) * taps + kx0 * layer.cin..).unwrap_or(&[]);
+                            acc += dot(a.get(..run).unwrap_or(&[]), wr);
+                        }
+                        emit(i, finish(acc, o));
+                        i += 1;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `Σ a_i·b_i` in `i32` over the shorter of the two.
+fn dot(a: &[i8], b: &[i8]) -> i32 {
+    a.iter().zip(b).map(|(&x, &y)| i32::from(x) * i32::from(y)).sum()
+}
+
+/// The two ping-pong activation buffers of a run, `A` bytes each (size them with
+/// [`Network::scratch_bytes`]).
+#[derive(Debug, Clone)]
+pub struct NetScratch<const A: usize> {
+    a: [i8; A],
+    b: [i8; A],
+}
+
+impl<const A: usize> Default for NetScratch<A> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const A: usize> NetScratch<A> {
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        Self { a: [0; A], b: [0; A] }
+    }
+
+    /// The first `len` bytes of the input buffer, to fill before [`Network::run`].
+    pub fn input_mut(&mut self, len: usize) -> Result<&mut [i8], NetError> {
+        self.a.get_mut(..len).ok_or(NetError::ScratchTooSmall { needed: len })
+    }
+}

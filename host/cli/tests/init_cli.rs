@@ -1,0 +1,136 @@
+//! `gpmm train-init`, `gpmm detect`, `gpmm eval detect` and `gpmm fit --init` end to end on a
+//! small model: training is deterministic for a seed, the outputs are well-formed, corrupted or
+//! missing init files are refused with the file's name.
+
+mod common;
+use common::{fails, gpmm, ok};
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+struct Fixture {
+    dir: tempfile::TempDir,
+    model: PathBuf,
+    init: PathBuf,
+    synth: PathBuf,
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A small model, a quick init file trained on it, and two synthetic faces.
+fn fixture() -> Option<&'static Fixture> {
+    static F: OnceLock<Option<Fixture>> = OnceLock::new();
+    F.get_or_init(|| {
+        let data = gpmm_host::data::data_dir_for_tests()?;
+        let dir = tempfile::tempdir().unwrap();
+        let t = data.join("template/lee-perry-smith");
+        let model = dir.path().join("small.gpmm");
+        let (ply, lm) = (t.join("lee-perry-smith.ply"), t.join("landmarks_ibug68.json"));
+        ok(&gpmm(&[
+            "build",
+            "--template",
+            s(&ply),
+            "--landmarks",
+            s(&lm),
+            "--vertices",
+            "1500",
+            "--rank-shape",
+            "20",
+            "--rank-color",
+            "20",
+            "--nystrom-points",
+            "500",
+            "-o",
+            s(&model),
+        ]));
+        let init = dir.path().join("quick.init");
+        let report = ok(&gpmm(&["train-init", s(&model), "-o", s(&init), "--quick", "--seed", "7"]));
+        let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+        assert!(report["steps"].as_u64().unwrap() > 0);
+        assert_eq!(report["macs"].as_array().unwrap().len(), 2);
+        let synth = dir.path().join("synth");
+        let ict = data.join("ict");
+        ok(&gpmm(&["synth", "--ict", s(&ict), "--template-dir", s(&t), "--count", "1", "--yaws", "30,0", "--seed", "3", "-o", s(&synth)]));
+        Some(Fixture { dir, model, init, synth })
+    })
+    .as_ref()
+}
+
+#[test]
+fn training_twice_with_one_seed_gives_the_same_file() {
+    let Some(f) = fixture() else { return };
+    let again = f.dir.path().join("again.init");
+    ok(&gpmm(&["train-init", s(&f.model), "-o", s(&again), "--quick", "--seed", "7"]));
+    assert_eq!(std::fs::read(&f.init).unwrap(), std::fs::read(&again).unwrap());
+    let other = f.dir.path().join("other.init");
+    ok(&gpmm(&["train-init", s(&f.model), "-o", s(&other), "--quick", "--seed", "8"]));
+    assert_ne!(std::fs::read(&f.init).unwrap(), std::fs::read(&other).unwrap());
+}
+
+#[test]
+fn detect_writes_68_landmarks_and_a_picture() {
+    let Some(f) = fixture() else { return };
+    let image = f.synth.join("0000_yaw30.png");
+    let (pts, png) = (f.dir.path().join("d.pts"), f.dir.path().join("d.png"));
+    let out = ok(&gpmm(&["detect", s(&image), "--init", s(&f.init), "-o", s(&pts), "--draw", s(&png)]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(json["landmarks"].as_array().unwrap().len(), 68);
+    assert!(json["box"]["score"].as_f64().unwrap() >= 0.0);
+    let read = gpmm_host::photo::pts::read_pts(&pts, false).unwrap();
+    assert_eq!(read.points.len(), 68);
+    assert_eq!(image::image_dimensions(&png).unwrap(), image::image_dimensions(&image).unwrap());
+    // A finder score no face reaches: a clear error, no output.
+    let err = fails(&gpmm(&["detect", s(&image), "--init", s(&f.init), "--min-score", "1.5"]));
+    assert!(err.contains("no face found"), "{err}");
+}
+
+#[test]
+fn eval_detect_reports_every_image() {
+    let Some(f) = fixture() else { return };
+    let out = ok(&gpmm(&["eval", "detect", s(&f.synth), "--init", s(&f.init)]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(json["images"].as_u64(), Some(2));
+    let found = json["found"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&found));
+    assert_eq!(json["per_yaw"].as_array().unwrap().len(), 2);
+    let written: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(f.synth.join("detect.json")).unwrap()).unwrap();
+    assert_eq!(written["images"].as_array().unwrap().len(), 2);
+}
+
+#[test]
+fn fit_without_landmarks_detects_them_first() {
+    let Some(f) = fixture() else { return };
+    let image = f.synth.join("0000_yaw00.png");
+    let out = f.dir.path().join("fit-init");
+    ok(&gpmm(&["fit", s(&f.model), s(&image), "--init", s(&f.init), "-o", s(&out), "--landmark-steps", "500", "--image-steps", "20"]));
+    for name in ["detected.pts", "detected.png", "fit.json", "overlay.png"] {
+        assert!(out.join(name).exists(), "{name} missing");
+    }
+    // Neither landmarks nor an init file: clap says what is missing.
+    let err = fails(&gpmm(&["fit", s(&f.model), s(&image), "-o", s(&out)]));
+    assert!(err.contains("--landmarks") && err.contains("--init"), "{err}");
+}
+
+#[test]
+fn corrupted_or_missing_init_files_are_refused_by_name() {
+    let Some(f) = fixture() else { return };
+    let image = f.synth.join("0000_yaw00.png");
+    let mut bytes = std::fs::read(&f.init).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0xFF;
+    let bad = f.dir.path().join("bad.init");
+    std::fs::write(&bad, &bytes).unwrap();
+    let err = fails(&gpmm(&["detect", s(&image), "--init", s(&bad)]));
+    assert!(err.contains("bad.init") && err.contains("CRC"), "{err}");
+    let short = f.dir.path().join("short.init");
+    std::fs::write(&short, &bytes[..100]).unwrap();
+    let err = fails(&gpmm(&["detect", s(&image), "--init", s(&short)]));
+    assert!(err.contains("short.init"), "{err}");
+    let err = fails(&gpmm(&["detect", s(&image), "--init", "/nonexistent.init"]));
+    assert!(err.contains("/nonexistent.init"), "{err}");
+    // A model file is not an init file.
+    let err = fails(&gpmm(&["detect", s(&image), "--init", s(&f.model)]));
+    assert!(err.contains("GPMI"), "{err}");
+}

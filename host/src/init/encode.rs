@@ -1,0 +1,108 @@
+//! Float networks (as trained) quantized into the core's int8 network encoding
+//! (`docs/init-format.md`): per-output-channel weight scales, one activation scale per tensor.
+
+use gpmm_core::format::bytes::Writer;
+use gpmm_core::net::{LayerKind, Network, Shape};
+
+/// One trained layer in `f32`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FloatLayer {
+    /// Convolution or dense.
+    pub kind: LayerKind,
+    /// Kernel side (1 for dense).
+    pub kernel: usize,
+    /// Stride (1 for dense).
+    pub stride: usize,
+    /// Whether `max(y, 0)` follows.
+    pub relu: bool,
+    /// Input channels (dense: flattened input length, in `(y·W + x)·C + c` order).
+    pub cin: usize,
+    /// Output channels.
+    pub cout: usize,
+    /// Weights `[cout][kernel][kernel][cin]`.
+    pub weights: Vec<f32>,
+    /// Biases `[cout]`.
+    pub bias: Vec<f32>,
+    /// Largest |output| seen on calibration data (sets the output's scale; unused in the last layer).
+    pub out_max: f32,
+}
+
+/// A trained network: its input shape and layers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FloatNet {
+    /// Input tensor shape (the input is `(pixel − 128) / 128`).
+    pub input: Shape,
+    /// Layers in order.
+    pub layers: Vec<FloatLayer>,
+}
+
+/// Scale of the input tensor: `i8` value `pixel − 128` stands for `(pixel − 128) / 128`.
+pub const INPUT_SCALE: f32 = 1.0 / 128.0;
+
+/// Why a network could not be encoded.
+#[derive(Debug, thiserror::Error)]
+pub enum EncodeError {
+    /// Sizes do not agree or are out of the format's range.
+    #[error("network layer {layer}: {what}")]
+    Layer {
+        /// Layer index.
+        layer: usize,
+        /// What is wrong.
+        what: &'static str,
+    },
+    /// A weight, bias or calibration maximum is NaN or infinite.
+    #[error("network layer {0}: a weight, bias or calibration value is not finite")]
+    NonFinite(usize),
+    /// The encoder's own output did not read back (a bug).
+    #[error("the encoded network does not read back: {0}")]
+    Readback(gpmm_core::net::NetError),
+}
+
+/// Quantizes and encodes `net`.
+pub fn encode_network(net: &FloatNet) -> Result<Vec<u8>, EncodeError> {
+    let mut out = Vec::new();
+    let u16_of = |v: usize, layer: usize, what: &'static str| u16::try_from(v).map_err(|_| EncodeError::Layer { layer, what });
+    let mut head = [0u8; 12];
+    {
+        let mut w = Writer::new(&mut head);
+        let fields = [net.layers.len(), 0, net.input.h, net.input.w, net.input.c, 0];
+        for (i, v) in fields.into_iter().enumerate() {
+            w.u16(u16_of(v, 0, if i == 0 { "too many layers" } else { "input shape too large" })?)
+                .map_err(|_| EncodeError::Layer { layer: 0, what: "header" })?;
+        }
+    }
+    out.extend_from_slice(&head);
+    let mut in_scale = INPUT_SCALE;
+    let last = net.layers.len().saturating_sub(1);
+    for (li, l) in net.layers.iter().enumerate() {
+        let per = l.kernel * l.kernel * l.cin;
+        if l.weights.len() != l.cout * per || l.bias.len() != l.cout {
+            return Err(EncodeError::Layer { layer: li, what: "weight or bias count differs from the shape" });
+        }
+        if !l.weights.iter().chain(&l.bias).all(|v| v.is_finite()) || !l.out_max.is_finite() {
+            return Err(EncodeError::NonFinite(li));
+        }
+        let out_scale = if li == last { 0.0 } else { l.out_max.max(1e-6) / 127.0 };
+        out.push(l.kind.code());
+        out.push(u8::try_from(l.kernel).map_err(|_| EncodeError::Layer { layer: li, what: "kernel" })?);
+        out.push(u8::try_from(l.stride).map_err(|_| EncodeError::Layer { layer: li, what: "stride" })?);
+        out.push(u8::from(l.relu));
+        out.extend_from_slice(&u16_of(l.cin, li, "input channels")?.to_le_bytes());
+        out.extend_from_slice(&u16_of(l.cout, li, "output channels")?.to_le_bytes());
+        out.extend_from_slice(&out_scale.to_le_bytes());
+        let mut mults = Vec::with_capacity(l.cout);
+        for w in l.weights.chunks_exact(per.max(1)) {
+            let scale = w.iter().fold(0.0f32, |m, v| m.max(v.abs())) / 127.0;
+            let scale = if scale > 0.0 { scale } else { 1.0 };
+            out.extend(w.iter().map(|v| (v / scale).round().clamp(-127.0, 127.0) as i8 as u8));
+            mults.push(scale * in_scale);
+        }
+        while out.len() % 4 != 0 {
+            out.push(0);
+        }
+        mults.iter().chain(&l.bias).for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        in_scale = out_scale;
+    }
+    Network::parse(&out).map_err(EncodeError::Readback)?;
+    Ok(out)
+}

@@ -1,0 +1,157 @@
+//! The finder and initializer measured on images with reference landmarks (a `gpmm synth` set,
+//! an independent renderer's set, or photos with .pts files): found rate, landmark error over
+//! the inter-ocular distance, yaw error per |yaw| where a truth.json gives the yaw.
+
+use super::{InitError, InitModel};
+use crate::photo::pts::read_pts;
+use gpmm_core::net::face::landmark_box;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// One image's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetectImage {
+    /// Image file name.
+    pub image: String,
+    /// The box's centre lies within half a face size of the reference landmarks' box centre.
+    pub found: bool,
+    /// Finder score.
+    pub score: f32,
+    /// Mean landmark distance over the reference's outer-eye-corner distance (points 36, 45).
+    pub landmark_error: Option<f64>,
+    /// The truth's yaw (degrees), if known.
+    pub yaw_deg: Option<f64>,
+    /// Initializer's yaw minus the truth's (degrees).
+    pub yaw_error_deg: Option<f64>,
+}
+
+/// Per-|yaw| medians.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetectYawRow {
+    /// |yaw| (degrees).
+    pub abs_yaw_deg: f64,
+    /// Images.
+    pub images: usize,
+    /// Median landmark error / IOD.
+    pub median_landmark_error: f64,
+    /// Median |yaw error| (degrees).
+    pub median_abs_yaw_error_deg: f64,
+}
+
+/// Summary over a directory.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetectSummary {
+    /// Images measured.
+    pub images: usize,
+    /// Fraction where the face was found.
+    pub found: f64,
+    /// Median landmark error / IOD over found faces.
+    pub median_landmark_error: f64,
+    /// 90th percentile of it.
+    pub p90_landmark_error: f64,
+    /// Median |yaw error| (degrees) where the yaw is known.
+    pub median_abs_yaw_error_deg: f64,
+    /// Per |yaw| (sets with a truth.json).
+    pub per_yaw: Vec<DetectYawRow>,
+}
+
+fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// The (image, reference .pts, truth yaw) triples of a directory: from its truth.json (a `gpmm
+/// synth` set), else every image with a .pts of the same stem (`NAME.pts` or `NAME_0.pts`).
+pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<(PathBuf, PathBuf, Option<f64>)>, InitError> {
+    let io = |source| InitError::Io { path: dir.to_owned(), source };
+    let refdir = reference_dir.unwrap_or(dir);
+    let truth = dir.join("truth.json");
+    if let Ok(text) = std::fs::read_to_string(&truth) {
+        let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| io(std::io::Error::other(format!("truth.json: {e}"))))?;
+        let images = json["images"].as_array().cloned().unwrap_or_default();
+        return Ok(images
+            .iter()
+            .filter_map(|im| {
+                let name = im["image"].as_str()?;
+                let pts = refdir.join(Path::new(name).with_extension("pts"));
+                Some((dir.join(name), pts, im["yaw_deg"].as_f64()))
+            })
+            .collect());
+    }
+    let mut out = Vec::new();
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir).map_err(io)?.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    entries.sort();
+    for p in entries {
+        let ext = p.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        if !matches!(ext.as_str(), "png" | "jpg" | "jpeg" | "ppm") {
+            continue;
+        }
+        let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+        let pts = [refdir.join(format!("{stem}.pts")), refdir.join(format!("{stem}_0.pts"))].into_iter().find(|q| q.exists());
+        if let Some(pts) = pts {
+            out.push((p, pts, None));
+        }
+    }
+    Ok(out)
+}
+
+/// Detects every listed image and compares with its reference.
+pub fn evaluate(
+    init: &mut InitModel,
+    images: &[(PathBuf, PathBuf, Option<f64>)],
+    one_based: bool,
+) -> Result<(DetectSummary, Vec<DetectImage>), InitError> {
+    let mut rows = Vec::new();
+    for (image, pts, yaw) in images {
+        let img = image::open(image).map_err(|e| InitError::Io { path: image.clone(), source: std::io::Error::other(e) })?.to_rgb8();
+        let reference =
+            read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), source: std::io::Error::other(e.to_string()) })?;
+        let refs: Vec<[f32; 2]> = reference.points.iter().map(|p| [p[0], p[1]]).collect();
+        let det = init.detect(&img, 0.0, 1)?;
+        let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let Some(det) = det else {
+            rows.push(DetectImage { image: name, found: false, score: 0.0, landmark_error: None, yaw_deg: *yaw, yaw_error_deg: None });
+            continue;
+        };
+        let (cx, cy, size) = landmark_box(&refs);
+        let found = (det.face.cx - cx).hypot(det.face.cy - cy) < 0.5 * size;
+        let iod = refs.get(36).zip(refs.get(45)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).unwrap_or(size).max(1e-3);
+        let landmark_error = (det.landmarks.len() == refs.len()).then(|| {
+            det.landmarks.iter().zip(&refs).map(|(a, b)| f64::from((a[0] - b[0]).hypot(a[1] - b[1]))).sum::<f64>()
+                / refs.len() as f64
+                / f64::from(iod)
+        });
+        let yaw_error_deg = yaw.map(|y| f64::from(det.angles[0].to_degrees()) - y);
+        rows.push(DetectImage { image: name, found, score: det.face.score, landmark_error, yaw_deg: *yaw, yaw_error_deg });
+    }
+    let found: Vec<&DetectImage> = rows.iter().filter(|r| r.found).collect();
+    let errs: Vec<f64> = found.iter().filter_map(|r| r.landmark_error).collect();
+    let mut yaws: Vec<f64> = rows.iter().filter_map(|r| r.yaw_deg.map(f64::abs)).collect();
+    yaws.sort_by(f64::total_cmp);
+    yaws.dedup();
+    let per_yaw = yaws
+        .iter()
+        .map(|&a| {
+            let at: Vec<&&DetectImage> = found.iter().filter(|r| r.yaw_deg.map(f64::abs) == Some(a)).collect();
+            DetectYawRow {
+                abs_yaw_deg: a,
+                images: at.len(),
+                median_landmark_error: quantile(at.iter().filter_map(|r| r.landmark_error).collect(), 0.5),
+                median_abs_yaw_error_deg: quantile(at.iter().filter_map(|r| r.yaw_error_deg.map(f64::abs)).collect(), 0.5),
+            }
+        })
+        .collect();
+    let summary = DetectSummary {
+        images: rows.len(),
+        found: found.len() as f64 / rows.len().max(1) as f64,
+        median_landmark_error: quantile(errs.clone(), 0.5),
+        p90_landmark_error: quantile(errs, 0.9),
+        median_abs_yaw_error_deg: quantile(found.iter().filter_map(|r| r.yaw_error_deg.map(f64::abs)).collect(), 0.5),
+        per_yaw,
+    };
+    Ok((summary, rows))
+}

@@ -1,0 +1,108 @@
+//! Landmark-free fitting on the host: training scenes rendered from the model ([`scene`]), the
+//! trained networks quantized into an init file ([`encode`]), and the core's finder and
+//! initializer run on an image ([`InitModel`]). Training itself (candle) lives in `gpmm-train`.
+
+pub mod encode;
+pub mod eval;
+pub mod scene;
+
+use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile};
+use gpmm_core::net::{NetError, NetScratch};
+use image::RgbImage;
+use std::path::{Path, PathBuf};
+
+/// Bytes of each activation buffer the host gives the networks.
+pub const HOST_NET_SCRATCH: usize = 64 * 1024;
+
+/// Why an init file could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum InitError {
+    /// The file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The IO error.
+        source: std::io::Error,
+    },
+    /// The bytes are not a valid init file.
+    #[error("{path}: not a valid init file: {source}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What the core's reader refused.
+        source: NetError,
+    },
+    /// A run of the networks failed.
+    #[error("the face networks refused the image: {0}")]
+    Run(NetError),
+    /// The networks could not be encoded.
+    #[error(transparent)]
+    Encode(#[from] encode::EncodeError),
+}
+
+/// An init file loaded into a 4-aligned buffer, with scratch for its networks.
+#[derive(Debug)]
+pub struct InitModel {
+    words: Vec<u32>,
+    len: usize,
+    scratch: Box<NetScratch<HOST_NET_SCRATCH>>,
+}
+
+impl InitModel {
+    /// Reads and validates an init file.
+    pub fn load(path: &Path) -> Result<Self, InitError> {
+        let bytes = std::fs::read(path).map_err(|source| InitError::Io { path: path.to_owned(), source })?;
+        Self::from_bytes(&bytes).map_err(|source| InitError::Invalid { path: path.to_owned(), source })
+    }
+
+    /// Validates init-file bytes (copied into an aligned buffer).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetError> {
+        let mut words = vec![0u32; bytes.len().div_ceil(4)];
+        bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
+        let model = Self { words, len: bytes.len(), scratch: Box::new(NetScratch::new()) };
+        let file = model.file()?;
+        if file.scratch_bytes() > HOST_NET_SCRATCH {
+            return Err(NetError::ScratchTooSmall { needed: file.scratch_bytes() });
+        }
+        Ok(model)
+    }
+
+    /// The file's bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice::<u32, u8>(&self.words)[..self.len]
+    }
+
+    /// The parsed file.
+    pub fn file(&self) -> Result<InitFile<'_>, NetError> {
+        InitFile::parse(self.bytes())
+    }
+
+    /// Finds and reads the face in `image` (refining the crop `refine` times); `None` if the
+    /// finder's score is below `min_score`.
+    pub fn detect(&mut self, image: &RgbImage, min_score: f32, refine: usize) -> Result<Option<Detection>, InitError> {
+        let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
+        let file = InitFile::parse(bytes).map_err(InitError::Run)?;
+        let (w, h) = image.dimensions();
+        detect(&file, image.as_raw(), w as usize, h as usize, min_score, refine, &mut self.scratch).map_err(InitError::Run)
+    }
+}
+
+/// Encodes a finder and an initializer into init-file bytes.
+pub fn init_file_bytes(
+    finder: &encode::FloatNet,
+    initializer: &encode::FloatNet,
+    crop_margin: f32,
+    landmarks: u16,
+    light: u16,
+    metadata: &str,
+) -> Result<Vec<u8>, InitError> {
+    let f = encode::encode_network(finder)?;
+    let i = encode::encode_network(initializer)?;
+    let mut out = vec![0u8; 64 + f.len() + i.len() + metadata.len() + 16];
+    let len =
+        write_init_file(&mut out, &f, &i, crop_margin, landmarks, light, metadata).map_err(|e| InitError::Run(NetError::Format(e)))?;
+    out.truncate(len);
+    InitModel::from_bytes(&out).map_err(InitError::Run)?;
+    Ok(out)
+}

@@ -1,0 +1,216 @@
+//! Training scenes for the finder and the initializer, rendered from the morphable model itself:
+//! a random face (shape, colour, pose, light, camera, framing) over a procedural background, with
+//! camera effects. Labels come from the model (landmark vertices, pose, light); nothing is
+//! labelled by hand. One scene is a pure function of `(seed, index)`.
+
+use crate::gp::model::GpModel;
+use crate::render::{Background, Instance, RenderSettings, Renderer, View};
+use gpmm_core::light::SH_COEFFS;
+use gpmm_core::net::face::landmark_box;
+use gpmm_core::{Cull, Pose, ShLight};
+use image::{Rgb, RgbImage, RgbaImage};
+use rand::{Rng, RngExt, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// The ranges scenes are drawn from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SceneRanges {
+    /// Largest |yaw| (degrees).
+    pub yaw: f32,
+    /// Largest |pitch| (degrees).
+    pub pitch: f32,
+    /// Largest |roll| (degrees).
+    pub roll: f32,
+    /// Horizontal field of view range (degrees), as common cameras have.
+    pub fov: (f32, f32),
+    /// Longer frame side range (px).
+    pub frame_side: (u32, u32),
+    /// Face size (larger side of the landmarks' box) over the shorter frame side.
+    pub face_fraction: (f32, f32),
+    /// Shape and colour components drawn (standard normal; the rest zero).
+    pub components: usize,
+}
+
+impl Default for SceneRanges {
+    fn default() -> Self {
+        Self { yaw: 70.0, pitch: 30.0, roll: 30.0, fov: (20.0, 70.0), frame_side: (128, 256), face_fraction: (0.15, 0.8), components: 60 }
+    }
+}
+
+/// One rendered scene and its labels.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    /// The frame (8-bit RGB, gamma-encoded like a camera's).
+    pub frame: RgbImage,
+    /// Landmarks in frame pixels (the model's landmark vertices projected).
+    pub landmarks: Vec<[f32; 2]>,
+    /// Yaw, pitch, roll (radians).
+    pub angles: [f32; 3],
+    /// The light's bands 0 and 1 (4 coefficients × RGB, coefficient-major).
+    pub light: Vec<f32>,
+}
+
+/// Number of light values a scene labels (SH bands 0 and 1, RGB).
+pub const LIGHT_LABELS: usize = 12;
+
+fn random_light(rng: &mut impl Rng) -> ShLight {
+    // Indoor to outdoor: a tinted ambient part and one directional light from anywhere in front.
+    let level = rng.random_range(0.35f32..1.1);
+    let tint = [rng.random_range(0.8f32..1.2), 1.0, rng.random_range(0.8f32..1.2)];
+    let ambient = tint.map(|t| level * t * rng.random_range(0.3f32..0.9));
+    let strength = level * rng.random_range(0.0f32..0.9);
+    let diffuse = tint.map(|t| t * strength);
+    let dir = [rng.random_range(-1.0f32..1.0), rng.random_range(-1.0f32..1.0), rng.random_range(0.0f32..1.0)];
+    let mut light = ShLight::from_ambient_diffuse(ambient, diffuse, dir);
+    // A little of band 2, as real light has.
+    for c in light.coeffs.iter_mut().skip(4).take(SH_COEFFS - 4) {
+        *c = [rng.random_range(-0.08f32..0.08); 3];
+    }
+    light
+}
+
+/// A procedural background: a gradient, value noise at a random scale, and a few shapes.
+fn background(w: u32, h: u32, rng: &mut impl Rng) -> RgbImage {
+    // Colours as rooms and streets have them: mostly greyish, some saturated.
+    let saturation = rng.random_range(0.0f32..1.0).powi(2);
+    let colour = |rng: &mut dyn rand::Rng| -> [f32; 3] {
+        let c: [f32; 3] = [rng.random(), rng.random(), rng.random()];
+        let g = (c[0] + c[1] + c[2]) / 3.0;
+        c.map(|v| g + (v - g) * saturation)
+    };
+    let base = colour(rng);
+    let grad: [f32; 3] = [rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)];
+    let cells = rng.random_range(2u32..24);
+    let grid: Vec<[f32; 3]> = (0..(cells + 2) * (cells + 2)).map(|_| colour(rng)).collect();
+    let noise_amount = rng.random_range(0.0f32..0.6);
+    let cell = w.max(h) as f32 / cells as f32;
+    let shapes: Vec<(f32, f32, f32, f32, [f32; 3], bool)> = (0..rng.random_range(0..8))
+        .map(|_| {
+            let (x, y) = (rng.random_range(0.0..w as f32), rng.random_range(0.0..h as f32));
+            let (a, b) = (rng.random_range(3.0..w as f32 * 0.4), rng.random_range(3.0..h as f32 * 0.4));
+            (x, y, a, b, colour(rng), rng.random_bool(0.5))
+        })
+        .collect();
+    RgbImage::from_fn(w, h, |x, y| {
+        let (fx, fy) = (x as f32 / cell, y as f32 / cell);
+        let (ix, iy) = (fx as usize, fy as usize);
+        let (ax, ay) = (fx - ix as f32, fy - iy as f32);
+        let g = |i: usize, j: usize| grid[(j.min(cells as usize + 1)) * (cells as usize + 2) + i.min(cells as usize + 1)];
+        let mut c = [0.0f32; 3];
+        for (k, v) in c.iter_mut().enumerate() {
+            let n = (g(ix, iy)[k] * (1.0 - ax) + g(ix + 1, iy)[k] * ax) * (1.0 - ay)
+                + (g(ix, iy + 1)[k] * (1.0 - ax) + g(ix + 1, iy + 1)[k] * ax) * ay;
+            let t = (x as f32 / w as f32 - 0.5) * grad[k] + (y as f32 / h as f32 - 0.5) * grad[(k + 1) % 3];
+            *v = base[k] * (1.0 - noise_amount) + n * noise_amount + t;
+        }
+        for &(sx, sy, a, b, col, ellipse) in &shapes {
+            let (dx, dy) = ((x as f32 - sx) / a, (y as f32 - sy) / b);
+            let inside = if ellipse { dx * dx + dy * dy < 1.0 } else { dx.abs() < 1.0 && dy.abs() < 1.0 };
+            if inside {
+                c = col;
+            }
+        }
+        Rgb(c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))
+    })
+}
+
+/// Camera effects on a linear render composited over its background: blur, white balance, gamma,
+/// sensor noise, 8 bits, sometimes JPEG.
+fn camera_effects(render: &RgbaImage, back: &RgbImage, rng: &mut impl Rng) -> RgbImage {
+    let (w, h) = render.dimensions();
+    let gamma = if rng.random_bool(0.8) { 1.0 / rng.random_range(1.8f32..2.5) } else { 1.0 };
+    let wb = [rng.random_range(0.85f32..1.15), 1.0, rng.random_range(0.85f32..1.15)];
+    let gain = rng.random_range(0.7f32..1.3);
+    let noise = Normal::new(0.0f32, rng.random_range(0.0f32..0.03)).unwrap_or_else(|_| Normal::new(0.0, 0.01).expect("valid"));
+    let mut out = RgbImage::from_fn(w, h, |x, y| {
+        let p = render.get_pixel(x, y);
+        let b = back.get_pixel(x, y);
+        let c: [f32; 3] = std::array::from_fn(|k| {
+            if p[3] > 0 {
+                let lin = (p[k] as f32 / 255.0 * wb[k] * gain).clamp(0.0, 1.0);
+                lin.powf(gamma)
+            } else {
+                b[k] as f32 / 255.0
+            }
+        });
+        Rgb(c.map(|v| ((v + noise.sample(rng)).clamp(0.0, 1.0) * 255.0).round() as u8))
+    });
+    let sigma = rng.random_range(0.0f32..1.3);
+    if sigma > 0.3 {
+        out = image::imageops::blur(&out, sigma);
+    }
+    if rng.random_bool(0.4) {
+        let quality = rng.random_range(30u8..90);
+        let mut bytes = Vec::new();
+        let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality);
+        if out.write_with_encoder(enc).is_ok() {
+            if let Ok(img) = image::load_from_memory(&bytes) {
+                out = img.to_rgb8();
+            }
+        }
+    }
+    out
+}
+
+/// Renders scene `index` of the set drawn with `seed`.
+pub fn render_scene(model: &GpModel, ranges: &SceneRanges, seed: u64, index: u64, renderer: &mut Renderer) -> Option<Scene> {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let normal = Normal::new(0.0f32, 1.0).ok()?;
+    let k = ranges.components;
+    let shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
+    let color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
+    let instance = Instance::of_model(model, &shape, &color).ok()?;
+    let view = View {
+        yaw: rng.random_range(-ranges.yaw..=ranges.yaw),
+        pitch: rng.random_range(-ranges.pitch..=ranges.pitch),
+        roll: rng.random_range(-ranges.roll..=ranges.roll),
+    };
+    let long = rng.random_range(ranges.frame_side.0..=ranges.frame_side.1);
+    let aspect = [1.0f32, 4.0 / 3.0, 3.0 / 4.0, 16.0 / 9.0][rng.random_range(0..4)];
+    let (w, h) = if aspect >= 1.0 { (long, (long as f32 / aspect).round() as u32) } else { ((long as f32 * aspect).round() as u32, long) };
+    let fov_h = rng.random_range(ranges.fov.0..=ranges.fov.1);
+    // The settings' field of view is across the shorter side.
+    let fov_short = 2.0 * ((fov_h.to_radians() * 0.5).tan() * w.min(h) as f32 / w as f32).atan().to_degrees();
+    let settings = RenderSettings {
+        width: w,
+        height: h,
+        light: random_light(&mut rng),
+        background: Background::Transparent,
+        fov_deg: fov_short,
+        margin: 0.0,
+        cull: Cull::Clockwise,
+    };
+    let camera = settings.camera();
+    // Place the head: the landmark box's size is a random fraction of the shorter side, the
+    // centre anywhere that keeps the box's centre inside the frame.
+    let lm_model: Vec<[f32; 3]> = model.landmarks.iter().filter_map(|&i| instance.positions.get(i as usize).copied()).collect();
+    let centre =
+        lm_model.iter().fold([0.0f32; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]).map(|v| v / lm_model.len().max(1) as f32);
+    let mut pose = view.rotation();
+    let rc = pose.transform_point(centre);
+    let face_mm = {
+        let pts: Vec<[f32; 2]> = lm_model.iter().map(|p| pose.transform_point(*p)).map(|q| [q[0], q[1]]).collect();
+        landmark_box(&pts).2
+    };
+    let want = rng.random_range(ranges.face_fraction.0..ranges.face_fraction.1) * w.min(h) as f32;
+    let depth = camera.focal * face_mm / want.max(1.0);
+    let (px, py) = (rng.random_range(0.15f32..0.85) * w as f32, rng.random_range(0.15f32..0.85) * h as f32);
+    let (ox, oy) = ((px - camera.principal[0]) / camera.focal * depth, -(py - camera.principal[1]) / camera.focal * depth);
+    pose.translation = [ox - rc[0], oy - rc[1], -depth - rc[2]];
+    let (render, _) = renderer.render(&instance, &model.triangles, &pose, &settings).ok()?;
+    let landmarks: Vec<[f32; 2]> =
+        model.landmarks.iter().filter_map(|&i| renderer.projected().get(i as usize)).map(|p| [p.x, p.y]).collect();
+    if landmarks.len() != model.landmarks.len() || landmarks.iter().flatten().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let back = background(w, h, &mut rng);
+    let frame = camera_effects(&render, &back, &mut rng);
+    let light = settings.light.coeffs.iter().take(4).flat_map(|c| c.iter().copied()).collect();
+    Some(Scene { frame, landmarks, angles: [view.yaw.to_radians(), view.pitch.to_radians(), view.roll.to_radians()], light })
+}
+
+/// The pose convention of the labels: the rotation part of the model-to-camera pose.
+pub fn label_angles(pose: &Pose) -> [f32; 3] {
+    [pose.yaw, pose.pitch, pose.roll]
+}

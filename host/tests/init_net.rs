@@ -1,0 +1,198 @@
+//! The int8 networks and the init file: the core's quantized run against a float reference,
+//! corrupted and truncated files refused, and the detector's outputs on any image.
+
+use gpmm_core::format::FormatError;
+use gpmm_core::net::face::{FINDER_CHANNELS, INIT_MAGIC};
+use gpmm_core::net::{LayerKind, NetError, NetScratch, Network, Shape};
+use gpmm_host::init::encode::{encode_network, FloatLayer, FloatNet};
+use gpmm_host::init::{init_file_bytes, InitModel};
+use image::RgbImage;
+use rand::{RngExt, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+fn layer(rng: &mut Xoshiro256PlusPlus, kind: LayerKind, kernel: usize, stride: usize, relu: bool, cin: usize, cout: usize) -> FloatLayer {
+    let n = cout * kernel * kernel * cin;
+    let scale = (2.0 / (kernel * kernel * cin) as f32).sqrt();
+    FloatLayer {
+        kind,
+        kernel,
+        stride,
+        relu,
+        cin,
+        cout,
+        weights: (0..n).map(|_| rng.random_range(-1.0f32..1.0) * scale).collect(),
+        bias: (0..cout).map(|_| rng.random_range(-0.1f32..0.1)).collect(),
+        out_max: 0.0,
+    }
+}
+
+/// Float forward pass, channel-last, zero padding `k / 2` (the reference the core approximates).
+fn reference(net: &FloatNet, input: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let mut x = input.to_vec();
+    let mut shape = net.input;
+    let mut maxima = Vec::new();
+    for l in &net.layers {
+        let y = match l.kind {
+            LayerKind::Dense => {
+                shape = Shape { h: 1, w: 1, c: l.cout };
+                l.weights
+                    .chunks(l.cin)
+                    .zip(&l.bias)
+                    .map(|(w, b)| w.iter().zip(&x).map(|(a, b)| a * b).sum::<f32>() + b)
+                    .collect::<Vec<f32>>()
+            }
+            LayerKind::Conv => {
+                let (k, s, p) = (l.kernel, l.stride, l.kernel / 2);
+                let (oh, ow) = ((shape.h + 2 * p - k) / s + 1, (shape.w + 2 * p - k) / s + 1);
+                let mut y = vec![0.0; oh * ow * l.cout];
+                for oy in 0..oh {
+                    for ox in 0..ow {
+                        for o in 0..l.cout {
+                            let mut acc = l.bias[o];
+                            for ky in 0..k {
+                                for kx in 0..k {
+                                    let (iy, ix) = ((oy * s + ky) as isize - p as isize, (ox * s + kx) as isize - p as isize);
+                                    if iy < 0 || ix < 0 || iy >= shape.h as isize || ix >= shape.w as isize {
+                                        continue;
+                                    }
+                                    for c in 0..l.cin {
+                                        acc += l.weights[((o * k + ky) * k + kx) * l.cin + c]
+                                            * x[(iy as usize * shape.w + ix as usize) * l.cin + c];
+                                    }
+                                }
+                            }
+                            y[(oy * ow + ox) * l.cout + o] = acc;
+                        }
+                    }
+                }
+                shape = Shape { h: oh, w: ow, c: l.cout };
+                y
+            }
+        };
+        x = if l.relu { y.into_iter().map(|v| v.max(0.0)).collect() } else { y };
+        maxima.push(x.iter().fold(0.0f32, |m, v| m.max(v.abs())));
+    }
+    (x, maxima)
+}
+
+fn small_net(rng: &mut Xoshiro256PlusPlus) -> FloatNet {
+    FloatNet {
+        input: Shape { h: 9, w: 7, c: 3 },
+        layers: vec![
+            layer(rng, LayerKind::Conv, 3, 2, true, 3, 6),
+            layer(rng, LayerKind::Conv, 3, 1, true, 6, 8),
+            layer(rng, LayerKind::Conv, 1, 1, true, 8, 4),
+            layer(rng, LayerKind::Dense, 1, 1, false, 5 * 4 * 4, 5),
+        ],
+    }
+}
+
+#[test]
+fn quantized_run_follows_the_float_network() {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+    let mut net = small_net(&mut rng);
+    let input_q: Vec<i8> = (0..9 * 7 * 3).map(|_| rng.random_range(-128i32..128) as i8).collect();
+    let input: Vec<f32> = input_q.iter().map(|&q| f32::from(q) / 128.0).collect();
+    let (want, maxima) = reference(&net, &input);
+    for (l, m) in net.layers.iter_mut().zip(&maxima) {
+        l.out_max = *m;
+    }
+    let bytes = encode_network(&net).unwrap();
+    let (parsed, len) = Network::parse(&bytes).unwrap();
+    assert_eq!(len, bytes.len());
+    assert_eq!(parsed.output(), Shape { h: 1, w: 1, c: 5 });
+    assert_eq!(parsed.macs(), 5 * 4 * 6 * 27 + 5 * 4 * 8 * 54 + 5 * 4 * 4 * 8 + 5 * 80);
+    let mut scratch = NetScratch::<512>::new();
+    scratch.input_mut(input_q.len()).unwrap().copy_from_slice(&input_q);
+    let mut got = [0.0f32; 5];
+    parsed.run(&mut scratch, &mut got).unwrap();
+    let range = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 0.08 * range + 0.02, "quantized {g} vs float {w} (range {range})");
+    }
+    // A scratch smaller than the largest activation is refused, not overrun.
+    let mut tiny = NetScratch::<64>::new();
+    assert!(matches!(parsed.run(&mut tiny, &mut got), Err(NetError::ScratchTooSmall { .. })));
+    // So is an output slice of the wrong length.
+    assert_eq!(parsed.run(&mut scratch, &mut [0.0; 4]), Err(NetError::LengthMismatch));
+}
+
+fn init_bytes(seed: u64) -> Vec<u8> {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let finder = FloatNet {
+        input: Shape { h: 32, w: 32, c: 3 },
+        layers: vec![
+            {
+                let mut l = layer(&mut rng, LayerKind::Conv, 3, 2, true, 3, 4);
+                l.out_max = 2.0;
+                l
+            },
+            {
+                let mut l = layer(&mut rng, LayerKind::Conv, 3, 2, true, 4, 4);
+                l.out_max = 2.0;
+                l
+            },
+            layer(&mut rng, LayerKind::Conv, 1, 1, false, 4, FINDER_CHANNELS),
+        ],
+    };
+    let outputs = 2 * 68 + 3 + 12;
+    let initializer = FloatNet {
+        input: Shape { h: 16, w: 16, c: 3 },
+        layers: vec![
+            {
+                let mut l = layer(&mut rng, LayerKind::Conv, 3, 2, true, 3, 4);
+                l.out_max = 2.0;
+                l
+            },
+            layer(&mut rng, LayerKind::Dense, 1, 1, false, 8 * 8 * 4, outputs),
+        ],
+    };
+    init_file_bytes(&finder, &initializer, 1.4, 68, 12, "{\"format\":\"gpmm-init\"}").unwrap()
+}
+
+#[test]
+fn init_file_reads_back_and_detects_on_any_image() {
+    let bytes = init_bytes(5);
+    assert_eq!(&bytes[..4], &INIT_MAGIC);
+    let mut init = InitModel::from_bytes(&bytes).unwrap();
+    let file = init.file().unwrap();
+    assert_eq!((file.landmarks, file.light), (68, 12));
+    assert_eq!(file.metadata, "{\"format\":\"gpmm-init\"}");
+    // Any image, any aspect: a detection with finite landmarks (random weights: no meaning).
+    for (w, h) in [(40u32, 30u32), (17, 50), (1, 1)] {
+        let img = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7) as u8, (y * 5) as u8, 100]));
+        let det = init.detect(&img, 0.0, 2).unwrap().expect("min score 0 always finds");
+        assert_eq!(det.landmarks.len(), 68);
+        assert!(det.landmarks.iter().flatten().chain(&det.angles).all(|v| v.is_finite()));
+        assert!((0.0..=1.0).contains(&det.face.score));
+    }
+    // A finder score threshold above 1 finds nothing.
+    let img = RgbImage::new(20, 20);
+    assert!(init.detect(&img, 1.5, 0).unwrap().is_none());
+    // The same bytes always give the same detection.
+    let a = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, 1).unwrap();
+    let b = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, 1).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn corrupted_or_truncated_init_files_are_refused() {
+    let bytes = init_bytes(6);
+    for at in [20, 40, bytes.len() / 2, bytes.len() - 8] {
+        let mut bad = bytes.clone();
+        bad[at] ^= 0x10;
+        assert!(matches!(InitModel::from_bytes(&bad), Err(NetError::Format(FormatError::Crc { .. }))), "flip at {at}");
+    }
+    for len in [0, 3, 12, 31, bytes.len() - 1] {
+        assert!(InitModel::from_bytes(&bytes[..len]).is_err(), "truncated to {len}");
+    }
+    let mut other = bytes.clone();
+    other[0] = b'X';
+    assert!(matches!(InitModel::from_bytes(&other), Err(NetError::Format(FormatError::BadMagic { .. }))));
+    let mut version = bytes.clone();
+    version[4] = 2;
+    assert!(matches!(InitModel::from_bytes(&version), Err(NetError::Format(FormatError::BadVersion { .. }))));
+    // A missing file names the path.
+    let err = InitModel::load(std::path::Path::new("/nonexistent/x.init")).unwrap_err().to_string();
+    assert!(err.contains("/nonexistent/x.init"), "{err}");
+}

@@ -1,0 +1,98 @@
+//! Training samples: a rendered scene cut into the finder's letterboxed frame and the
+//! initializer's crop exactly as the core cuts them at run time, with their targets.
+
+use gpmm_core::net::face::landmark_box;
+use gpmm_core::net::resample::{sample_rgb, Window};
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::init::scene::{render_scene, Scene, SceneRanges};
+use gpmm_host::render::Renderer;
+use rand::{RngExt, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rayon::prelude::*;
+
+/// Sizes of the two networks' inputs and outputs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Geometry {
+    /// Side of the finder's square input (px).
+    pub frame_side: usize,
+    /// Side of the finder's output grid (cells).
+    pub grid: usize,
+    /// Side of the initializer's crop (px).
+    pub crop_side: usize,
+    /// Crop side in face sizes.
+    pub crop_margin: f32,
+    /// Landmarks read.
+    pub landmarks: usize,
+    /// Light values read.
+    pub light: usize,
+}
+
+impl Geometry {
+    /// Length of the initializer's output.
+    pub fn init_outputs(&self) -> usize {
+        2 * self.landmarks + 3 + self.light
+    }
+}
+
+/// One training sample.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    /// Finder input, `frame_side² × 3`, channel-last, `pixel − 128`.
+    pub frame: Vec<i8>,
+    /// The grid cell holding the face's centre.
+    pub cell: usize,
+    /// Centre within that cell (x, y in 0..1) and ln(face size / frame side).
+    pub place: [f32; 3],
+    /// Initializer input, `crop_side² × 3`.
+    pub crop: Vec<i8>,
+    /// Initializer targets: landmarks in crop coordinates (−1..1), yaw/pitch/roll, light.
+    pub target: Vec<f32>,
+}
+
+/// Cuts a scene into a sample; `jitter` draws the crop's error around the true face box.
+pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rng) -> Option<Sample> {
+    let (w, h) = (scene.frame.width() as usize, scene.frame.height() as usize);
+    let window = Window::letterbox(w, h, geo.frame_side);
+    let mut frame = vec![0i8; geo.frame_side * geo.frame_side * 3];
+    sample_rgb(scene.frame.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
+    let (cx, cy, size) = landmark_box(&scene.landmarks);
+    let (u, v) = window.from_source(cx, cy);
+    let cell_px = geo.frame_side as f32 / geo.grid as f32;
+    let (gx, gy) = ((u / cell_px).floor(), (v / cell_px).floor());
+    if !(gx >= 0.0 && gy >= 0.0 && gx < geo.grid as f32 && gy < geo.grid as f32 && size > 2.0) {
+        return None;
+    }
+    let place = [u / cell_px - gx, v / cell_px - gy, (size / window.step / geo.frame_side as f32).ln()];
+    let cell = gy as usize * geo.grid + gx as usize;
+    // The crop the initializer sees at run time comes from an imperfect box: jitter it.
+    let n = Normal::new(0.0f32, 1.0).ok()?;
+    let (jx, jy, js) = (n.sample(jitter) * 0.06 * size, n.sample(jitter) * 0.06 * size, (n.sample(jitter) * 0.08).exp());
+    let crop_window = Window::square(cx + jx, cy + jy, size * js * geo.crop_margin, geo.crop_side);
+    let mut crop = vec![0i8; geo.crop_side * geo.crop_side * 3];
+    sample_rgb(scene.frame.as_raw(), w, h, crop_window, geo.crop_side, &mut crop).ok()?;
+    let half = geo.crop_side as f32 * 0.5;
+    let mut target = Vec::with_capacity(geo.init_outputs());
+    for p in scene.landmarks.iter().take(geo.landmarks) {
+        let (a, b) = crop_window.from_source(p[0], p[1]);
+        target.extend([a / half - 1.0, b / half - 1.0]);
+    }
+    target.extend(scene.angles);
+    target.extend(scene.light.iter().take(geo.light));
+    (target.len() == geo.init_outputs()).then_some(Sample { frame, cell, place, crop, target })
+}
+
+/// Samples `start..start + count` of the stream drawn with `seed` (rendered in parallel; the
+/// result depends on the seed and the indices only). Scenes that cannot be cut are skipped.
+pub fn samples(model: &GpModel, ranges: &SceneRanges, geo: &Geometry, seed: u64, start: u64, count: u64) -> Vec<Sample> {
+    (start..start + count)
+        .into_par_iter()
+        .map_init(Renderer::new, |renderer, i| {
+            let scene = render_scene(model, ranges, seed, i, renderer)?;
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(0x5EED) ^ i.wrapping_mul(0xA24B_AED4_963E_E407));
+            let _: u32 = rng.random();
+            sample_of_scene(&scene, geo, &mut rng)
+        })
+        .filter_map(|s| s)
+        .collect()
+}

@@ -1,0 +1,304 @@
+//! The training loop: fresh chunks of rendered samples, AdamW with a cosine learning rate, then
+//! calibration, quantization and a check of the quantized networks through the core's detector.
+
+use crate::data::{samples, Geometry, Sample};
+use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
+use candle_core::{Device, Tensor, D};
+use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use gpmm_core::net::face::landmark_box;
+use gpmm_core::net::Shape;
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::init::scene::{render_scene, SceneRanges, LIGHT_LABELS};
+use gpmm_host::init::{init_file_bytes, InitModel};
+use gpmm_host::render::Renderer;
+use serde::Serialize;
+
+/// How long and on what to train.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainOptions {
+    /// Seed of the scenes, the initial weights and the sample order.
+    pub seed: u64,
+    /// Chunks of fresh scenes.
+    pub chunks: usize,
+    /// Scenes rendered per chunk.
+    pub chunk_scenes: usize,
+    /// Passes over each chunk.
+    pub passes: usize,
+    /// Samples per optimizer step.
+    pub batch: usize,
+    /// Peak learning rate.
+    pub lr: f64,
+    /// Held-out scenes the report measures the quantized networks on.
+    pub validation: usize,
+    /// What the scenes are drawn from.
+    pub ranges: SceneRanges,
+}
+
+impl TrainOptions {
+    /// The default training (about 25 minutes on two cores).
+    pub fn full(seed: u64) -> Self {
+        Self { seed, chunks: 16, chunk_scenes: 2048, passes: 2, batch: 64, lr: 2e-3, validation: 300, ranges: SceneRanges::default() }
+    }
+
+    /// A few seconds: for tests (the networks learn little).
+    pub fn quick(seed: u64) -> Self {
+        Self { seed, chunks: 2, chunk_scenes: 48, passes: 1, batch: 16, lr: 2e-3, validation: 12, ranges: SceneRanges::default() }
+    }
+
+    /// Optimizer steps in all.
+    pub fn steps(&self) -> usize {
+        self.chunks * self.passes * self.chunk_scenes.div_ceil(self.batch)
+    }
+}
+
+/// What training measured: losses, and the quantized detector on held-out renders.
+#[derive(Debug, Clone, Serialize)]
+pub struct TrainReport {
+    /// Optimizer steps taken.
+    pub steps: usize,
+    /// Mean finder loss over the last chunk.
+    pub finder_loss: f32,
+    /// Mean initializer loss over the last chunk.
+    pub initializer_loss: f32,
+    /// Held-out scenes measured.
+    pub validation_scenes: usize,
+    /// Fraction of them where the found box's centre is within half a face size of the truth.
+    pub found: f64,
+    /// Median landmark error over the inter-ocular distance (outer eye corners), quantized.
+    pub median_landmark_error: f64,
+    /// Median |yaw error| (degrees), quantized.
+    pub median_yaw_error_deg: f64,
+    /// Multiply-accumulates of the finder and the initializer.
+    pub macs: [usize; 2],
+    /// Bytes of the init file.
+    pub bytes: usize,
+    /// Seconds spent rendering scenes.
+    pub render_seconds: f64,
+    /// Seconds spent in optimizer steps.
+    pub train_seconds: f64,
+}
+
+/// What training reports as it goes.
+#[derive(Debug, Clone, Copy)]
+pub enum Progress {
+    /// A chunk of scenes is being rendered.
+    Rendering {
+        /// Chunk index.
+        chunk: usize,
+    },
+    /// An optimizer step finished.
+    Step {
+        /// Steps done.
+        done: usize,
+        /// Steps in all.
+        total: usize,
+        /// Finder loss of the step.
+        finder: f32,
+        /// Initializer loss of the step.
+        initializer: f32,
+    },
+    /// Quantizing and validating.
+    Validating,
+}
+
+/// The finder's and initializer's sizes (the init file's geometry).
+pub fn geometry(landmarks: usize) -> Geometry {
+    Geometry { frame_side: 96, grid: 12, crop_side: 64, crop_margin: 1.4, landmarks, light: LIGHT_LABELS }
+}
+
+fn err(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+/// Stable `ln(1 + e^x)`.
+fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
+    x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
+}
+
+fn finder_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
+    let x = batch_tensor(batch.iter().map(|s| s.frame.as_slice()), geo.frame_side, device)?;
+    let (out, _) = net.forward(&x)?;
+    let (b, cells) = (batch.len(), geo.grid * geo.grid);
+    // NHWC output: (b, cells, 4) → (b, 4, cells).
+    let out = out.reshape((b, cells, 4))?.transpose(1, 2)?.contiguous()?;
+    let mut onehot = vec![0f32; b * cells];
+    for (i, s) in batch.iter().enumerate() {
+        onehot[i * cells + s.cell] = 1.0;
+    }
+    let y = Tensor::from_vec(onehot, (b, 1, cells), device)?;
+    let logits = out.narrow(1, 0, 1)?;
+    // Binary cross-entropy per cell; the one positive cell weighs as much as all negatives.
+    let pos = (softplus(&logits.neg()?)? * &y)?.sum_all()?;
+    let neg = (softplus(&logits)? * (1.0 - &y)?)?.sum_all()?;
+    let cls = ((pos + (neg / (cells as f64 - 1.0))?)? / b as f64)?;
+    let place = out.narrow(1, 1, 3)?.broadcast_mul(&y)?.sum(D::Minus1)?;
+    let target = Tensor::from_vec(batch.iter().flat_map(|s| s.place).collect::<Vec<f32>>(), (b, 3), device)?;
+    let reg = (place - target)?.abs()?.mean_all()?;
+    cls + (reg * 4.0)?
+}
+
+fn initializer_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
+    let x = batch_tensor(batch.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
+    let (out, _) = net.forward(&x)?;
+    let d = geo.init_outputs();
+    let target = Tensor::from_vec(batch.iter().flat_map(|s| s.target.iter().copied()).collect::<Vec<f32>>(), (batch.len(), d), device)?;
+    let weights: Vec<f32> = (0..d)
+        .map(|i| {
+            if i < 2 * geo.landmarks {
+                1.0
+            } else if i < 2 * geo.landmarks + 3 {
+                2.0
+            } else {
+                0.3
+            }
+        })
+        .collect();
+    let w = Tensor::from_vec(weights, (1, d), device)?;
+    (out - target)?.abs()?.broadcast_mul(&w)?.mean_all()? * (d as f64 / (2 * geo.landmarks) as f64)
+}
+
+/// Trains both networks on renders of `model`; returns the init file's bytes and the report.
+pub fn train(model: &GpModel, opts: &TrainOptions, mut progress: impl FnMut(Progress)) -> Result<(Vec<u8>, TrainReport), String> {
+    let landmarks = model.landmarks.len();
+    if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
+        return Err(format!("the model has {landmarks} landmarks; the initializer reads 1 to 68"));
+    }
+    let device = Device::Cpu;
+    let geo = geometry(landmarks);
+    let finder = Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device).map_err(err)?;
+    let init = Net::new(Shape { h: geo.crop_side, w: geo.crop_side, c: 3 }, initializer_specs(geo.init_outputs()), opts.seed ^ 1, &device)
+        .map_err(err)?;
+    let params = |lr| ParamsAdamW { lr, weight_decay: 1e-4, ..Default::default() };
+    let mut opt_f = AdamW::new(finder.vars(), params(opts.lr)).map_err(err)?;
+    let mut opt_i = AdamW::new(init.vars(), params(opts.lr)).map_err(err)?;
+    let total = opts.steps();
+    let mut done = 0;
+    let (mut last_f, mut last_i) = (0.0f32, 0.0f32);
+    let mut calib: Vec<Sample> = Vec::new();
+    let (mut render_seconds, mut train_seconds) = (0.0, 0.0);
+    for chunk in 0..opts.chunks {
+        progress(Progress::Rendering { chunk });
+        let start = (chunk * opts.chunk_scenes) as u64;
+        let t0 = std::time::Instant::now();
+        let data = samples(model, &opts.ranges, &geo, opts.seed, start, opts.chunk_scenes as u64);
+        render_seconds += t0.elapsed().as_secs_f64();
+        let t0 = std::time::Instant::now();
+        if data.is_empty() {
+            return Err("no training scene could be rendered (is the model's landmark list valid?)".into());
+        }
+        let (mut sum_f, mut sum_i, mut n) = (0.0f32, 0.0f32, 0usize);
+        for pass in 0..opts.passes {
+            // A fixed, seed-dependent order per pass.
+            let mut order: Vec<usize> = (0..data.len()).collect();
+            let mut state = opts.seed ^ ((chunk * 31 + pass) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            for i in (1..order.len()).rev() {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                order.swap(i, (state % (i as u64 + 1)) as usize);
+            }
+            for idx in order.chunks(opts.batch) {
+                let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
+                let lr = opts.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total.max(1) as f64).cos()));
+                opt_f.set_learning_rate(lr);
+                opt_i.set_learning_rate(lr);
+                let lf = finder_loss(&finder, &batch, &geo, &device).map_err(err)?;
+                opt_f.backward_step(&lf).map_err(err)?;
+                let li = initializer_loss(&init, &batch, &geo, &device).map_err(err)?;
+                opt_i.backward_step(&li).map_err(err)?;
+                let (f, i) = (lf.to_scalar::<f32>().map_err(err)?, li.to_scalar::<f32>().map_err(err)?);
+                if !(f.is_finite() && i.is_finite()) {
+                    return Err(format!("training diverged at step {done} (loss {f} / {i}); try a smaller learning rate"));
+                }
+                if pass + 1 == opts.passes {
+                    sum_f += f;
+                    sum_i += i;
+                    n += 1;
+                }
+                done += 1;
+                progress(Progress::Step { done, total, finder: f, initializer: i });
+            }
+        }
+        train_seconds += t0.elapsed().as_secs_f64();
+        (last_f, last_i) = (sum_f / n.max(1) as f32, sum_i / n.max(1) as f32);
+        if chunk + 1 == opts.chunks {
+            calib = data.into_iter().take(256).collect();
+        }
+    }
+    progress(Progress::Validating);
+    let fx = batch_tensor(calib.iter().map(|s| s.frame.as_slice()), geo.frame_side, &device).map_err(err)?;
+    let ix = batch_tensor(calib.iter().map(|s| s.crop.as_slice()), geo.crop_side, &device).map_err(err)?;
+    let f_float = finder.to_float(&finder.calibrate(&fx).map_err(err)?).map_err(err)?;
+    let i_float = init.to_float(&init.calibrate(&ix).map_err(err)?).map_err(err)?;
+    let metadata = serde_json::json!({
+        "format": "gpmm-init",
+        "trained_on": model.metadata.kernel,
+        "seed": opts.seed,
+        "steps": total,
+        "scenes": opts.chunks * opts.chunk_scenes,
+        "yaw_range_deg": opts.ranges.yaw,
+        "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
+    })
+    .to_string();
+    let bytes = init_file_bytes(&f_float, &i_float, geo.crop_margin, landmarks as u16, geo.light as u16, &metadata).map_err(err)?;
+    let mut detector = InitModel::from_bytes(&bytes).map_err(err)?;
+    let v = validate(model, &opts.ranges, opts.seed.wrapping_add(0x0DD5_EED5), opts.validation, &mut detector)?;
+    let file = detector.file().map_err(err)?;
+    let report = TrainReport {
+        steps: total,
+        finder_loss: last_f,
+        initializer_loss: last_i,
+        validation_scenes: v.scenes,
+        found: v.found,
+        median_landmark_error: v.landmark_error,
+        median_yaw_error_deg: v.yaw_error,
+        macs: [file.finder.macs(), file.initializer.macs()],
+        bytes: bytes.len(),
+        render_seconds,
+        train_seconds,
+    };
+    Ok((bytes, report))
+}
+
+/// The quantized detector measured on rendered scenes it was not trained on.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Validation {
+    /// Scenes measured.
+    pub scenes: usize,
+    /// Fraction found (box centre within half a face size of the truth).
+    pub found: f64,
+    /// Median landmark error / inter-ocular distance.
+    pub landmark_error: f64,
+    /// Median |yaw error| (degrees).
+    pub yaw_error: f64,
+}
+
+/// Median of `v` (NaN if empty).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Runs the detector on `count` scenes of the stream `seed`.
+pub fn validate(model: &GpModel, ranges: &SceneRanges, seed: u64, count: usize, detector: &mut InitModel) -> Result<Validation, String> {
+    let mut renderer = Renderer::new();
+    let (mut found, mut errors, mut yaws, mut scenes) = (0usize, Vec::new(), Vec::new(), 0usize);
+    for i in 0..count as u64 {
+        let Some(scene) = render_scene(model, ranges, seed, i, &mut renderer) else { continue };
+        scenes += 1;
+        let Some(det) = detector.detect(&scene.frame, 0.0, 1).map_err(err)? else { continue };
+        let (cx, cy, size) = landmark_box(&scene.landmarks);
+        if (det.face.cx - cx).hypot(det.face.cy - cy) < 0.5 * size {
+            found += 1;
+        }
+        let iod = scene.landmarks.get(36).zip(scene.landmarks.get(45)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).unwrap_or(size);
+        let e: f32 = det.landmarks.iter().zip(&scene.landmarks).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).sum::<f32>()
+            / scene.landmarks.len().max(1) as f32;
+        errors.push(f64::from(e / iod.max(1e-3)));
+        yaws.push(f64::from((det.angles[0] - scene.angles[0]).abs().to_degrees()));
+    }
+    Ok(Validation { scenes, found: found as f64 / scenes.max(1) as f64, landmark_error: median(errors), yaw_error: median(yaws) })
+}
