@@ -4,7 +4,7 @@
 
 use super::{InitError, InitModel};
 use crate::photo::pts::read_pts;
-use gpmm_core::net::face::landmark_box;
+use gpmm_core::net::face::{landmark_box, Detection};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -55,13 +55,29 @@ pub struct DetectSummary {
     pub per_yaw: Vec<DetectYawRow>,
 }
 
-fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
+/// The `q` quantile of the finite values of `v` (NaN if there is none).
+pub fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
     v.retain(|x| x.is_finite());
     if v.is_empty() {
         return f64::NAN;
     }
     v.sort_by(f64::total_cmp);
     v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// A detection against reference landmarks: whether the face was found (the box's centre within
+/// half a face size of the reference box's) and the mean landmark distance over the outer-eye-
+/// corner distance (points 36 and 45; `None` if the point counts differ).
+pub fn score_detection(det: &Detection, refs: &[[f32; 2]]) -> (bool, Option<f64>) {
+    let (cx, cy, size) = landmark_box(refs);
+    let found = (det.face.cx - cx).hypot(det.face.cy - cy) < 0.5 * size;
+    let iod = refs.get(36).zip(refs.get(45)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).unwrap_or(size).max(1e-3);
+    let error = (det.landmarks.len() == refs.len()).then(|| {
+        det.landmarks.iter().zip(refs).map(|(a, b)| f64::from((a[0] - b[0]).hypot(a[1] - b[1]))).sum::<f64>()
+            / refs.len() as f64
+            / f64::from(iod)
+    });
+    (found, error)
 }
 
 /// The (image, reference .pts, truth yaw) triples of a directory: from its truth.json (a `gpmm

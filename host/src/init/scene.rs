@@ -7,7 +7,7 @@ use crate::gp::model::GpModel;
 use crate::render::{Background, Instance, RenderSettings, Renderer, View};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::net::face::landmark_box;
-use gpmm_core::{Cull, Pose, ShLight};
+use gpmm_core::{Cull, ShLight};
 use image::{Rgb, RgbImage, RgbaImage};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -208,9 +208,4 @@ pub fn render_scene(model: &GpModel, ranges: &SceneRanges, seed: u64, index: u64
     let frame = camera_effects(&render, &back, &mut rng);
     let light = settings.light.coeffs.iter().take(4).flat_map(|c| c.iter().copied()).collect();
     Some(Scene { frame, landmarks, angles: [view.yaw.to_radians(), view.pitch.to_radians(), view.roll.to_radians()], light })
-}
-
-/// The pose convention of the labels: the rotation part of the model-to-camera pose.
-pub fn label_angles(pose: &Pose) -> [f32; 3] {
-    [pose.yaw, pose.pitch, pose.roll]
 }

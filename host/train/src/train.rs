@@ -5,9 +5,9 @@ use crate::data::{samples, Geometry, Sample};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
 use candle_core::{Device, Tensor, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
-use gpmm_core::net::face::landmark_box;
 use gpmm_core::net::Shape;
 use gpmm_host::gp::model::GpModel;
+use gpmm_host::init::eval::{quantile, score_detection};
 use gpmm_host::init::scene::{render_scene, SceneRanges, LIGHT_LABELS};
 use gpmm_host::init::{init_file_bytes, InitModel};
 use gpmm_host::render::Renderer;
@@ -273,15 +273,6 @@ pub struct Validation {
     pub yaw_error: f64,
 }
 
-/// Median of `v` (NaN if empty).
-pub fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Runs the detector on `count` scenes of the stream `seed`.
 pub fn validate(model: &GpModel, ranges: &SceneRanges, seed: u64, count: usize, detector: &mut InitModel) -> Result<Validation, String> {
     let mut renderer = Renderer::new();
@@ -290,15 +281,15 @@ pub fn validate(model: &GpModel, ranges: &SceneRanges, seed: u64, count: usize, 
         let Some(scene) = render_scene(model, ranges, seed, i, &mut renderer) else { continue };
         scenes += 1;
         let Some(det) = detector.detect(&scene.frame, 0.0, 1).map_err(err)? else { continue };
-        let (cx, cy, size) = landmark_box(&scene.landmarks);
-        if (det.face.cx - cx).hypot(det.face.cy - cy) < 0.5 * size {
-            found += 1;
-        }
-        let iod = scene.landmarks.get(36).zip(scene.landmarks.get(45)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).unwrap_or(size);
-        let e: f32 = det.landmarks.iter().zip(&scene.landmarks).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).sum::<f32>()
-            / scene.landmarks.len().max(1) as f32;
-        errors.push(f64::from(e / iod.max(1e-3)));
+        let (hit, error) = score_detection(&det, &scene.landmarks);
+        found += usize::from(hit);
+        errors.extend(error);
         yaws.push(f64::from((det.angles[0] - scene.angles[0]).abs().to_degrees()));
     }
-    Ok(Validation { scenes, found: found as f64 / scenes.max(1) as f64, landmark_error: median(errors), yaw_error: median(yaws) })
+    Ok(Validation {
+        scenes,
+        found: found as f64 / scenes.max(1) as f64,
+        landmark_error: quantile(errors, 0.5),
+        yaw_error: quantile(yaws, 0.5),
+    })
 }
