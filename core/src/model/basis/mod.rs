@@ -211,10 +211,14 @@ impl QuantValues<'_> {
     }
 }
 
-/// Multiply-adds the components `(d, values)` in turn, four per pass over `out`: each entry
-/// still sums the components in their order (the same bits as one pass per component), with a
-/// quarter of the loads and stores of `out`.
-fn fold_factored_all<'v, Q: Copy + Into<f32> + 'v>(comps: impl Iterator<Item = (Vec3, &'v [Q])>, out: &mut [Vec3]) {
+/// Hands the components `(d, values)` to `four` in blocks of four and the rest to `one`, in
+/// their order (the blocked passes of [`fold_factored_all`] and [`gather_factored_all`]).
+fn in_blocks_of_four<'v, Q: 'v>(
+    comps: impl Iterator<Item = (Vec3, &'v [Q])>,
+    out: &mut [Vec3],
+    four: impl Fn(&[(Vec3, &'v [Q]); 4], &mut [Vec3]),
+    one: impl Fn(Vec3, &'v [Q], &mut [Vec3]),
+) {
     let mut block: [(Vec3, &[Q]); 4] = [([0.0; 3], &[]); 4];
     let mut filled = 0;
     for comp in comps {
@@ -223,13 +227,20 @@ fn fold_factored_all<'v, Q: Copy + Into<f32> + 'v>(comps: impl Iterator<Item = (
             filled += 1;
         }
         if filled == block.len() {
-            fold_factored4(&block, out);
+            four(&block, out);
             filled = 0;
         }
     }
     for (d, values) in block.iter().take(filled) {
-        fold_factored(*d, values, out);
+        one(*d, values, out);
     }
+}
+
+/// Multiply-adds the components `(d, values)` in turn, four per pass over `out`: each entry
+/// still sums the components in their order (the same bits as one pass per component), with a
+/// quarter of the loads and stores of `out`.
+fn fold_factored_all<'v, Q: Copy + Into<f32> + 'v>(comps: impl Iterator<Item = (Vec3, &'v [Q])>, out: &mut [Vec3]) {
+    in_blocks_of_four(comps, out, |block, out| fold_factored4(block, out), |d, values, out| fold_factored(d, values, out));
 }
 
 /// Four components of [`fold_factored`] in one pass (one at a time if a field is short).
@@ -407,21 +418,7 @@ impl<'a> QuantizedBasis<'a> {
 /// [`gather_factored`] of the components `(d, values)` in turn, four per pass over `ids` (each
 /// entry sums the components in their order: the same bits as one pass per component).
 fn gather_factored_all<'v, Q: Copy + Into<f32> + 'v>(comps: impl Iterator<Item = (Vec3, &'v [Q])>, ids: &[u32], out: &mut [Vec3]) {
-    let mut block: [(Vec3, &[Q]); 4] = [([0.0; 3], &[]); 4];
-    let mut filled = 0;
-    for comp in comps {
-        if let Some(slot) = block.get_mut(filled) {
-            *slot = comp;
-            filled += 1;
-        }
-        if filled == block.len() {
-            gather_factored4(&block, ids, out);
-            filled = 0;
-        }
-    }
-    for (d, values) in block.iter().take(filled) {
-        gather_factored(*d, values, ids, out);
-    }
+    in_blocks_of_four(comps, out, |block, out| gather_factored4(block, ids, out), |d, values, out| gather_factored(d, values, ids, out));
 }
 
 /// Four components of [`gather_factored`] in one pass.
