@@ -39,10 +39,13 @@ cargo test --workspace 2>&1 | tee target/test-output.txt
 
 step "Python package (venv, pip install ./host/python, pytest)"
 bash host/python/tests/setup-venv.sh target/py-venv
-# The package's tests compare against the gpmm program: build it first.
-cargo build --release -p gpmm
-target/py-venv/bin/pip install --quiet ./host/python
-GPMM_BIN="$PWD/target/release/gpmm" target/py-venv/bin/python -m pytest host/python/tests -q -p no:cacheprovider 2>&1 \
+# The package's tests compare against the gpmm program. Both the program and the native module
+# are built in the dev profile that `cargo test` has just compiled the dependencies for (they are
+# at opt-level 3 there too): a release build would compile every dependency a second time
+# (minutes on two cores). Users' `pip install` still builds in release (pyproject.toml).
+cargo build -p gpmm
+MATURIN_PEP517_ARGS="--profile dev" target/py-venv/bin/pip install --quiet ./host/python
+GPMM_BIN="$PWD/target/debug/gpmm" target/py-venv/bin/python -m pytest host/python/tests -q -p no:cacheprovider 2>&1 \
     | tee target/pytest-output.txt
 
 # Print one closing summary line over all test binaries and the pytest suite.
