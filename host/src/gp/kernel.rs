@@ -166,6 +166,16 @@ impl KernelBank {
         self.weights.is_empty()
     }
 
+    /// The distinct terms: the space each measures and its `1/scale²`.
+    pub(crate) fn terms(&self) -> &[(Space, f64)] {
+        &self.terms
+    }
+
+    /// Per kernel, the weight of each distinct term.
+    pub(crate) fn weights(&self) -> &[Vec<f64>] {
+        &self.weights
+    }
+
     /// Number of distinct terms (scratch length for [`KernelBank::eval_into`]).
     pub fn term_count(&self) -> usize {
         self.terms.len()

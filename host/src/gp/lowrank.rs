@@ -2,8 +2,8 @@
 //!
 //! For each [`DirectionClass`](crate::gp::kernel::DirectionClass) of a [`DiagonalKernel`], the
 //! scalar kernel matrix `K` over the `N` mesh vertices is approximated from `m` sampled
-//! vertices `Z` (farthest-point sampling): `K_ZZ = U Λ Uᵀ` and the Nyström extensions
-//! `K_NZ u_i` of its leading eigenvectors span a subspace that holds `K`'s leading
+//! vertices `Z` (farthest-point sampling): the Nyström extensions `K_NZ U` of a basis `U` of
+//! `K_ZZ`'s leading subspace (a randomized range finder, see [`bank_nystrom`]) span a subspace that holds `K`'s leading
 //! eigenvectors. By default ([`NystromOptions::refine`]) that subspace is orthonormalized and a
 //! Rayleigh–Ritz step against the exact `K` (streamed in row blocks, never stored) gives
 //! the eigenpairs: plain Nyström underestimates every eigenvalue (`K̃ = K_NZ K_ZZ⁺ K_ZN ⪯ K`),
@@ -16,6 +16,7 @@
 //! with the exact trace of the full `3N x 3N` kernel matrix.
 
 use crate::gp::kernel::{DiagonalKernel, KernelBank, KernelPoint, ScalarKernel};
+use crate::gp::kernel_columns::PointColumns;
 use crate::mesh::geometry::dist2;
 use faer::{Mat, MatRef, Side};
 use rand::seq::index::sample;
@@ -53,7 +54,7 @@ pub struct NystromOptions {
     pub points: usize,
     /// Seed of the vertex sample.
     pub seed: u64,
-    /// Eigenvalues of `K_ZZ` below `tolerance · λ_max` are dropped (conditioning).
+    /// Without `refine`: eigenvalues of `K_ZZ` below `tolerance · λ_max` are dropped (conditioning).
     pub tolerance: f64,
     /// Refine the Nyström eigenpairs by Rayleigh–Ritz against the exact kernel matrix.
     pub refine: bool,
@@ -159,6 +160,12 @@ pub fn scalar_nystrom(kernel: &ScalarKernel, points: &[KernelPoint], opts: &Nyst
 
 /// Nyström eigendecompositions of several scalar kernels over the same points and sample,
 /// sharing every kernel evaluation (see [`KernelBank`]).
+///
+/// With [`NystromOptions::refine`] (the default): `K_NZ` in single precision, a basis of the
+/// leading subspace of `K_ZZ` from a randomized range finder (single precision too), its Nyström
+/// extensions `Y = K_NZ U`, and a Rayleigh–Ritz step in double precision against the exact
+/// kernel matrix ([`rayleigh_ritz_bank`]). The single-precision steps only choose the subspace:
+/// the eigenpairs are exact Ritz pairs of `K` within it.
 pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &NystromOptions, max_rank: usize) -> Vec<ScalarEigen> {
     let n = points.len();
     let c = kernels.len();
@@ -172,128 +179,116 @@ pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &Nys
     let m = opts.points.clamp(1, n);
     let mut z = sample_points(points, m, opts.seed);
     z.sort_unstable();
-
-    // K_NZ of every kernel at once: column j holds c stacked columns of length n.
-    let mut knz_data = vec![0.0; c * n * m];
-    knz_data.par_chunks_mut(c * n).zip(z.par_iter()).for_each(|(col, &j)| {
-        let pj = &points[j];
-        let mut scratch = vec![0.0; bank.term_count()];
-        let mut vals = vec![0.0; c];
-        for (i, pi) in points.iter().enumerate() {
-            bank.eval_into(pi, pj, &mut scratch, &mut vals);
-            for (k, v) in vals.iter().enumerate() {
-                col[k * n + i] = *v;
-            }
-        }
-    });
+    let columns = PointColumns::new(points);
+    // Kernel k's K_NZ in column-major order with column stride c · n (column j of every kernel together).
+    if !opts.refine {
+        let knz = kernel_columns(&bank, &columns, points, &z, |v| v);
+        return (0..c)
+            .zip(traces)
+            .map(|(k, trace)| {
+                let view = MatRef::from_column_major_slice_with_stride(&knz[k * n..], n, m, c * n);
+                plain_nystrom(view, &z, opts.tolerance, max_rank, trace)
+            })
+            .collect();
+    }
+    let knz = kernel_columns(&bank, &columns, points, &z, |v| v as f32);
     log::debug!("nystrom: N={n} m={m} classes={c}: K_NZ ({:.2?})", t0.elapsed());
-
-    let mut out = Vec::with_capacity(c);
-    let mut subspaces = Vec::with_capacity(c);
-    for (k, &trace) in traces.iter().enumerate() {
-        let knz = MatRef::from_column_major_slice_with_stride(&knz_data[k * n..], n, m, c * n);
-        let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
-        if opts.refine {
-            // Only the leading subspace is needed (Rayleigh–Ritz against the exact kernel
-            // follows): a randomized range finder instead of the full m × m decomposition.
-            let dim = m.min(max_rank.saturating_mul(2).saturating_add(10));
-            match leading_subspace(kzz.as_ref(), dim, opts.tolerance, opts.seed ^ (k as u64)) {
-                Some(uk) => {
-                    let ext = knz * &uk;
-                    subspaces.push(Some(ext.qr().compute_thin_Q()));
-                    out.push(None);
-                }
-                None => {
-                    out.push(Some(empty(trace)));
-                    subspaces.push(None);
+    // Twice the rank (Rayleigh–Ritz needs room to converge) and 10 more for the range finder, at most the sample.
+    let dim = m.min(max_rank.saturating_mul(2).saturating_add(20));
+    let bases: Vec<Mat<f64>> = (0..c)
+        .map(|k| {
+            let knz = MatRef::from_column_major_slice_with_stride(&knz[k * n..], n, m, c * n);
+            let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
+            let u = range_basis(kzz.as_ref(), dim, opts.seed ^ (k as u64));
+            let y = knz * &u;
+            let mut y = Mat::from_fn(n, dim, |i, j| f64::from(y[(i, j)]));
+            for j in 0..dim {
+                let norm = y.col(j).norm_l2();
+                if norm > 0.0 {
+                    y.col_mut(j).iter_mut().for_each(|v| *v /= norm);
                 }
             }
-            continue;
-        }
-        let Ok(eig) = kzz.self_adjoint_eigen(Side::Lower) else {
-            out.push(Some(empty(trace)));
-            subspaces.push(None);
-            continue;
-        };
-        let lambda = eig.S().column_vector();
-        let u = eig.U();
-        let lmax = (0..m).map(|i| lambda[i]).fold(0.0f64, f64::max);
-        let keep: Vec<usize> = (0..m).rev().filter(|&i| lambda[i] > opts.tolerance * lmax && lambda[i] > 0.0).collect();
-        if keep.is_empty() {
-            out.push(Some(empty(trace)));
-            subspaces.push(None);
-            continue;
-        }
-        if opts.refine {
-            // The Nyström extensions K_NZ u_i of K_ZZ's leading eigenvectors span the subspace
-            // (twice the rank: Rayleigh–Ritz needs room to converge); see `rayleigh_ritz_bank`.
-            let dim = keep.len().min(max_rank.saturating_mul(2).saturating_add(10));
-            let uk = Mat::from_fn(m, dim, |r, col| u[(r, keep[col])]);
-            let ext = knz * &uk;
-            subspaces.push(Some(ext.qr().compute_thin_Q()));
-            out.push(None);
-        } else {
-            out.push(Some(plain_nystrom(knz, u, lambda.iter().copied().collect(), &keep, max_rank, trace)));
-            subspaces.push(None);
-        }
-    }
-    log::debug!("nystrom: eigendecompositions of K_ZZ ({:.2?})", t0.elapsed());
-    drop(knz_data);
-    if opts.refine {
-        let refined = rayleigh_ritz_bank(&bank, points, &subspaces, max_rank, &traces);
-        for (slot, r) in out.iter_mut().zip(refined) {
-            if slot.is_none() {
-                *slot = r;
-            }
-        }
-        log::debug!("nystrom: rayleigh-ritz ({:.2?})", t0.elapsed());
-    }
-    out.into_iter().zip(traces).map(|(e, t)| e.unwrap_or_else(|| empty(t))).collect()
+            y
+        })
+        .collect();
+    drop(knz);
+    log::debug!("nystrom: subspaces ({:.2?})", t0.elapsed());
+    let refined = rayleigh_ritz_bank(&bank, &columns, points, &bases, max_rank);
+    log::debug!("nystrom: rayleigh-ritz ({:.2?})", t0.elapsed());
+    refined
+        .into_iter()
+        .zip(traces)
+        .map(|(e, trace)| e.map_or_else(|| empty(trace), |(values, vectors)| ScalarEigen { values, vectors, trace }))
+        .collect()
 }
 
-/// Power iterations of [`leading_subspace`].
+/// Every kernel of `bank` between all points and the points `z`, converted by `cast`: column `j`
+/// holds one column of length `N` per kernel, one after the other (so kernel `k`'s `N × |z|`
+/// matrix starts at `k · N` with column stride `kernels · N`).
+fn kernel_columns<T: Copy + Default + Send>(
+    bank: &KernelBank,
+    columns: &PointColumns,
+    points: &[KernelPoint],
+    z: &[usize],
+    cast: impl Fn(f64) -> T + Sync,
+) -> Vec<T> {
+    let n = points.len();
+    let stride = bank.len() * n;
+    let mut data = vec![T::default(); stride * z.len()];
+    data.par_chunks_mut(stride.max(1)).zip(z.par_iter()).for_each_init(
+        || vec![0.0; stride],
+        |values, (out, &j)| {
+            bank.eval_column(columns, 0..n, &points[j], values);
+            for (o, v) in out.iter_mut().zip(values.iter()) {
+                *o = cast(*v);
+            }
+        },
+    );
+    data
+}
+
+/// Power iterations of [`range_basis`].
 const POWER_ITERATIONS: usize = 4;
 
-/// An orthonormal basis (`m × ≤ dim`) of the leading eigenvectors of the symmetric positive
-/// semi-definite `a` (those with eigenvalue above `tolerance` × the largest), by a randomized range
-/// finder with [`POWER_ITERATIONS`] power iterations (Halko, Martinsson & Tropp 2011): `a` times a Gaussian block
-/// with 10 extra columns, re-orthonormalized after each product, then the Ritz vectors of the
-/// small projected matrix. `O(m² · dim)` instead of the full decomposition's `O(m³)`; `None` when
-/// `a` has no positive eigenvalue.
-fn leading_subspace(a: MatRef<'_, f64>, dim: usize, tolerance: f64, seed: u64) -> Option<Mat<f64>> {
+/// An orthonormal basis (`m × dim`) of the leading subspace of the symmetric positive
+/// semi-definite `a`, by a randomized range finder with [`POWER_ITERATIONS`] power iterations
+/// (Halko, Martinsson & Tropp 2011): `a` times a Gaussian block, re-orthonormalized after each
+/// product. `O(m² · dim)` instead of the full decomposition's `O(m³)`.
+fn range_basis(a: MatRef<'_, f32>, dim: usize, seed: u64) -> Mat<f32> {
     use rand_distr::{Distribution, StandardNormal};
-    let m = a.nrows();
-    let l = (dim + 10).min(m);
-    if l == 0 {
-        return None;
-    }
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let omega = Mat::from_fn(m, l, |_, _| -> f64 { StandardNormal.sample(&mut rng) });
+    let omega = Mat::from_fn(a.nrows(), dim, |_, _| {
+        let v: f64 = StandardNormal.sample(&mut rng);
+        v as f32
+    });
     let mut q = (a * &omega).qr().compute_thin_Q();
     for _ in 0..POWER_ITERATIONS {
         q = (a * &q).qr().compute_thin_Q();
     }
-    let b = q.transpose() * a * &q;
-    let eig = b.self_adjoint_eigen(Side::Lower).ok()?;
-    let theta = eig.S().column_vector();
-    let w = eig.U();
-    let tmax = (0..l).map(|i| theta[i]).fold(0.0f64, f64::max);
-    let keep: Vec<usize> = (0..l).rev().filter(|&i| theta[i] > tolerance * tmax && theta[i] > 0.0).take(dim).collect();
-    if keep.is_empty() {
-        return None;
-    }
-    let wk = Mat::from_fn(l, keep.len(), |r, c| w[(r, keep[c])]);
-    Some(&q * &wk)
+    q
 }
 
-/// Plain Nyström: `K̃ = B Bᵀ` with `B = K_NZ U Λ^{-1/2}`; eigenpairs of `K̃` from `Bᵀ B = V S Vᵀ`.
-fn plain_nystrom(knz: MatRef<'_, f64>, u: MatRef<'_, f64>, lambda: Vec<f64>, keep: &[usize], max_rank: usize, trace: f64) -> ScalarEigen {
-    let m = u.nrows();
+/// Plain Nyström: `K̃ = B Bᵀ` with `B = K_NZ U Λ^{-1/2}` (`K_ZZ = U Λ Uᵀ`, eigenvalues below
+/// `tolerance · λ_max` dropped); eigenpairs of `K̃` from `Bᵀ B = V S Vᵀ`.
+fn plain_nystrom(knz: MatRef<'_, f64>, z: &[usize], tolerance: f64, max_rank: usize, trace: f64) -> ScalarEigen {
+    let empty = || ScalarEigen { values: Vec::new(), vectors: Mat::zeros(knz.nrows(), 0), trace };
+    let m = z.len();
+    let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
+    let Ok(eig) = kzz.self_adjoint_eigen(Side::Lower) else {
+        return empty();
+    };
+    let lambda = eig.S().column_vector();
+    let u = eig.U();
+    let lmax = (0..m).map(|i| lambda[i]).fold(0.0f64, f64::max);
+    let keep: Vec<usize> = (0..m).rev().filter(|&i| lambda[i] > tolerance * lmax && lambda[i] > 0.0).collect();
+    if keep.is_empty() {
+        return empty();
+    }
     let w = Mat::from_fn(m, keep.len(), |r, c| u[(r, keep[c])] / lambda[keep[c]].sqrt());
     let b = knz * &w;
     let c = b.transpose() * &b;
     let Ok(eig_c) = c.self_adjoint_eigen(Side::Lower) else {
-        return ScalarEigen { values: Vec::new(), vectors: Mat::zeros(knz.nrows(), 0), trace };
+        return empty();
     };
     let s = eig_c.S().column_vector();
     let v = eig_c.U();
@@ -304,79 +299,94 @@ fn plain_nystrom(knz: MatRef<'_, f64>, u: MatRef<'_, f64>, lambda: Vec<f64>, kee
     ScalarEigen { values: top.iter().map(|&i| s[i]).collect(), vectors: &b * &vt, trace }
 }
 
-/// Rayleigh–Ritz refinement of orthonormal subspaces `Q_c` (`N x k_c`) against the exact
-/// kernel matrices `K_c` of a bank.
+/// Rows of the kernel matrix per Rayleigh–Ritz block.
+const BLOCK: usize = 128;
+
+/// Gram eigenvalues below this fraction of the largest are dropped from a Rayleigh–Ritz basis
+/// (directions the basis does not resolve to better than about 1e-7).
+const GRAM_TOLERANCE: f64 = 1e-9;
+
+/// Rayleigh–Ritz refinement of subspaces `span(Y_c)` (`N x k_c`, unit columns) against the exact
+/// kernel matrices `K_c` of a bank: eigenvalues (descending, at most `max_rank`) and orthonormal
+/// Ritz vectors, or `None` when the subspace is empty.
 ///
 /// Nyström's `K̃ = K_NZ K_ZZ⁺ K_ZN` is below `K` (it underestimates every eigenvalue, most for
 /// short-range terms the sample cannot resolve). Projecting the exact `K` onto the Nyström
-/// subspace (`H = Qᵀ K Q`) and diagonalizing `H` gives the best eigenpairs within it (Ritz
-/// values are lower bounds that converge fast). `K` is streamed in row blocks and only its
-/// upper block triangle is evaluated (`H = Σ_i Q_iᵀ K_ii Q_i + Σ_{i<j} (X_ij + X_ijᵀ)` with
-/// `X_ij = Q_iᵀ K_ij Q_j`), every kernel evaluation shared by all classes of the bank.
+/// subspace and diagonalizing gives the best eigenpairs within it (Ritz values are lower bounds
+/// that converge fast). `H = Yᵀ K Y` is accumulated with `K` streamed in row blocks, only its
+/// upper block triangle evaluated: `H = S + Sᵀ` with `S = Σ_i Y_iᵀ (½ K_ii Y_i + Σ_{j>i} K_ij Y_j)`
+/// (one product per block row), every kernel evaluation shared by all classes of the bank. `Y` is
+/// made orthonormal through its Gram matrix (`G = YᵀY = V S Vᵀ`, basis `Y V S^{-1/2}`), which the
+/// unit columns keep well conditioned; then `(V S^{-1/2})ᵀ H (V S^{-1/2})` is diagonalized.
 fn rayleigh_ritz_bank(
     bank: &KernelBank,
+    columns: &PointColumns,
     points: &[KernelPoint],
-    qs: &[Option<Mat<f64>>],
+    ys: &[Mat<f64>],
     max_rank: usize,
-    traces: &[f64],
-) -> Vec<Option<ScalarEigen>> {
+) -> Vec<Option<(Vec<f64>, Mat<f64>)>> {
     let n = points.len();
-    const BLOCK: usize = 96;
+    let c = bank.len();
     let starts: Vec<usize> = (0..n).step_by(BLOCK).collect();
-    let dims: Vec<usize> = qs.iter().map(|q| q.as_ref().map_or(0, |q| q.ncols())).collect();
-    let zeros = || dims.iter().map(|&k| Mat::<f64>::zeros(k, k)).collect::<Vec<_>>();
+    let zeros = || ys.iter().map(|y| Mat::<f64>::zeros(y.ncols(), y.ncols())).collect::<Vec<_>>();
     let h = starts
         .par_iter()
-        .fold(zeros, |mut acc, &start| {
-            let rows = BLOCK.min(n - start);
-            let cols = n - start;
-            let mut kb: Vec<Mat<f64>> = qs.iter().map(|q| if q.is_some() { Mat::zeros(rows, cols) } else { Mat::zeros(0, 0) }).collect();
-            let mut scratch = vec![0.0; bank.term_count()];
-            let mut vals = vec![0.0; bank.len()];
-            for c in 0..cols {
-                let pc = &points[start + c];
-                for r in 0..rows {
-                    bank.eval_into(&points[start + r], pc, &mut scratch, &mut vals);
-                    for ((m, v), q) in kb.iter_mut().zip(&vals).zip(qs) {
-                        if q.is_some() {
-                            m[(r, c)] = *v;
-                        }
+        .fold(
+            || (zeros(), Vec::new()),
+            |(mut acc, mut t), &start| {
+                let rows = BLOCK.min(n - start);
+                let len = n - start;
+                // Row r of the block against points start..n, every kernel: the block's transpose
+                // (in a buffer each worker reuses).
+                t.resize(rows * c * len, 0.0);
+                for (r, out) in t.chunks_mut(c * len).enumerate() {
+                    bank.eval_column(columns, start..n, &points[start + r], out);
+                }
+                // Halve the diagonal block: then S = Σ_i Y_iᵀ [½K_ii K_i,>i] Y_≥i gives H = S + Sᵀ.
+                for out in t.chunks_mut(c * len) {
+                    for k in 0..c {
+                        out[k * len..][..rows].iter_mut().for_each(|v| *v *= 0.5);
                     }
                 }
-            }
-            for ((hk, m), q) in acc.iter_mut().zip(&kb).zip(qs) {
-                let Some(q) = q else { continue };
-                let qi = q.subrows(start, rows);
-                let diag = m.subcols(0, rows) * qi;
-                *hk += qi.transpose() * &diag;
-                if cols > rows {
-                    let upper = m.subcols(rows, cols - rows) * q.subrows(start + rows, cols - rows);
-                    let x = qi.transpose() * &upper;
-                    *hk += &x;
-                    *hk += x.transpose();
+                for (k, (sk, y)) in acc.iter_mut().zip(ys).enumerate() {
+                    let tk = MatRef::from_column_major_slice_with_stride(&t[k * len..], len, rows, c * len);
+                    let p = tk.transpose() * y.subrows(start, len);
+                    *sk += y.subrows(start, rows).transpose() * &p;
                 }
-            }
-            acc
-        })
+                (acc, t)
+            },
+        )
+        .map(|(acc, _)| acc)
         .reduce(zeros, |mut a, b| {
             for (x, y) in a.iter_mut().zip(b) {
                 *x += y;
             }
             a
         });
-    qs.iter()
+    ys.iter()
         .zip(h)
-        .zip(traces)
-        .map(|((q, h), &trace)| {
-            let q = q.as_ref()?;
-            let k = q.ncols();
-            let hs = Mat::from_fn(k, k, |i, j| 0.5 * (h[(i, j)] + h[(j, i)]));
+        .map(|(y, half)| {
+            let h = &half + half.transpose();
+            let k = y.ncols();
+            let gram = y.transpose() * y;
+            let ge = gram.self_adjoint_eigen(Side::Lower).ok()?;
+            let s = ge.S().column_vector();
+            let v = ge.U();
+            let smax = (0..k).map(|i| s[i]).fold(0.0f64, f64::max);
+            let keep: Vec<usize> = (0..k).filter(|&i| s[i] > GRAM_TOLERANCE * smax && s[i] > 0.0).collect();
+            if keep.is_empty() {
+                return None;
+            }
+            let b = Mat::from_fn(k, keep.len(), |r, c| v[(r, keep[c])] / s[keep[c]].sqrt());
+            let projected = b.transpose() * (h * &b);
+            let r = keep.len();
+            let hs = Mat::from_fn(r, r, |i, j| 0.5 * (projected[(i, j)] + projected[(j, i)]));
             let eig = hs.self_adjoint_eigen(Side::Lower).ok()?;
             let theta = eig.S().column_vector();
             let w = eig.U();
-            let order: Vec<usize> = (0..k).rev().filter(|&i| theta[i] > 0.0).take(max_rank).collect();
-            let wt = Mat::from_fn(k, order.len(), |r, c| w[(r, order[c])]);
-            Some(ScalarEigen { values: order.iter().map(|&i| theta[i]).collect(), vectors: q * &wt, trace })
+            let order: Vec<usize> = (0..r).rev().filter(|&i| theta[i] > 0.0).take(max_rank).collect();
+            let wt = Mat::from_fn(r, order.len(), |row, col| w[(row, order[col])]);
+            Some((order.iter().map(|&i| theta[i]).collect(), y * (&b * &wt)))
         })
         .collect()
 }
