@@ -222,7 +222,10 @@ fn register_recovers_a_moved_instance_of_the_model() {
         .sum::<f64>()
         / mesh.positions.len() as f64;
     assert!(moved > 5.0 * d.max(0.1), "the target was moved by {moved} mm on average");
-    assert!(full["pose"]["translation"][1].as_f64().unwrap().abs() > 1.0, "{}", full["pose"]);
+    // The 10-degree turn is in the pose. (Not the shift: a long-range kernel has near-translation components that
+    // absorb part of it, by an amount that depends on how the subspace was found.)
+    let turned = full["pose"]["rotation"][0][2].as_f64().unwrap().abs().asin().to_degrees();
+    assert!((turned - 10.0).abs() < 0.5, "recovered turn {turned} degrees: {}", full["pose"]);
 }
 
 #[test]
