@@ -5,6 +5,8 @@ use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_host::gp::model_io;
+use gpmm_host::init::head::HeadContext;
+use gpmm_host::init::scene::SceneSource;
 use gpmm_host::init::InitModel;
 use image::{Rgb, RgbImage};
 use indicatif::ProgressBar;
@@ -24,12 +26,20 @@ pub struct TrainInitArgs {
     /// A few seconds of training on a few dozen scenes (for tests: the networks learn little).
     #[arg(long)]
     pub quick: bool,
-    /// Chunks of fresh scenes (default training: 16 of 2048 scenes, 2 passes each, about 25 minutes on 2 cores).
+    /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 25 minutes on 2 cores).
     #[arg(long, value_name = "N")]
     pub chunks: Option<usize>,
     /// Write a picture grid of training scenes (what the networks see) to this PNG.
     #[arg(long, value_name = "PNG")]
     pub preview: Option<PathBuf>,
+    /// Template directory (one .ply and landmarks_ibug68.json) whose whole head, neck and ears are
+    /// put around the model's faces; it must be the scan the model was built from. Default: the
+    /// data directory's template ($GPMM_DATA or ../shared/data).
+    #[arg(long, value_name = "DIR")]
+    pub head: Option<PathBuf>,
+    /// Render the model's faces alone on the backgrounds, with no head around them.
+    #[arg(long, conflicts_with = "head")]
+    pub no_head: bool,
 }
 
 /// Arguments of `gpmm detect`.
@@ -64,15 +74,27 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         }
         opts.chunks = c;
     }
+    let head = if a.no_head {
+        None
+    } else {
+        let dir = a.head.clone().unwrap_or_else(|| gpmm_host::data::template_dir(&gpmm_host::data::default_data_dir()));
+        let (mesh, landmarks) = template_files(&dir).with_context(|| {
+            format!("the head around the faces comes from a template directory: pass --head DIR or --no-head ({})", dir.display())
+        })?;
+        let head = HeadContext::load(&model, &mesh, &landmarks)?;
+        eprintln!("head: {} vertices from {}", head.vertices(), mesh.display());
+        Some(head)
+    };
+    let source = SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges };
     if let Some(path) = &a.preview {
-        let grid = gpmm_train::preview::scene_grid(&model, &opts.ranges, opts.seed, 4, 6);
+        let grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
             .with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
     let bar = ProgressBar::new(opts.steps() as u64);
     bar.set_style(bar_style("{bar:30} {pos}/{len} steps ({msg}) [{elapsed} / ~{duration}]"));
-    let (bytes, report) = gpmm_train::train(&model, &opts, |p| match p {
+    let (bytes, report) = gpmm_train::train(&model, head.as_ref(), &opts, |p| match p {
         gpmm_train::train::Progress::Rendering { chunk } => bar.set_message(format!("rendering chunk {}/{}", chunk + 1, opts.chunks)),
         gpmm_train::train::Progress::Step { done, finder, initializer, .. } => {
             bar.set_position(done as u64);
@@ -86,6 +108,21 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
+}
+
+/// The mesh (the directory's only .ply) and `landmarks_ibug68.json` of a template directory.
+fn template_files(dir: &Path) -> Result<(PathBuf, PathBuf)> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("cannot read the directory {}", dir.display()))?;
+    let plys: Vec<PathBuf> =
+        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("ply"))).collect();
+    let [mesh] = plys.as_slice() else {
+        bail!("{} holds {} .ply files; a template directory holds exactly one", dir.display(), plys.len());
+    };
+    let landmarks = dir.join("landmarks_ibug68.json");
+    if !landmarks.is_file() {
+        bail!("{} is missing", landmarks.display());
+    }
+    Ok((mesh.clone(), landmarks))
 }
 
 /// Runs `gpmm detect`.

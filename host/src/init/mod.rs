@@ -4,6 +4,7 @@
 
 pub mod encode;
 pub mod eval;
+pub mod head;
 pub mod scene;
 
 use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile};

@@ -4,6 +4,7 @@
 //! labelled by hand. One scene is a pure function of `(seed, index)`.
 
 use crate::gp::model::GpModel;
+use crate::init::head::HeadContext;
 use crate::render::{Background, Instance, RenderSettings, Renderer, View};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::net::face::landmark_box;
@@ -153,8 +154,20 @@ fn camera_effects(render: &RgbaImage, back: &RgbImage, rng: &mut impl Rng) -> Rg
     out
 }
 
+/// What scenes are drawn from: the model, the head put around its faces (if any), the ranges.
+#[derive(Debug, Clone, Copy)]
+pub struct SceneSource<'a> {
+    /// The model whose faces are rendered (its landmark vertices are the labels).
+    pub model: &'a GpModel,
+    /// The whole head around each face; `None` renders the face alone.
+    pub head: Option<&'a HeadContext>,
+    /// The ranges of pose, camera and framing.
+    pub ranges: &'a SceneRanges,
+}
+
 /// Renders scene `index` of the set drawn with `seed`.
-pub fn render_scene(model: &GpModel, ranges: &SceneRanges, seed: u64, index: u64, renderer: &mut Renderer) -> Option<Scene> {
+pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &mut Renderer) -> Option<Scene> {
+    let SceneSource { model, head, ranges } = source;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
@@ -198,7 +211,11 @@ pub fn render_scene(model: &GpModel, ranges: &SceneRanges, seed: u64, index: u64
     let (px, py) = (rng.random_range(0.15f32..0.85) * w as f32, rng.random_range(0.15f32..0.85) * h as f32);
     let (ox, oy) = ((px - camera.principal[0]) / camera.focal * depth, -(py - camera.principal[1]) / camera.focal * depth);
     pose.translation = [ox - rc[0], oy - rc[1], -depth - rc[2]];
-    let (render, _) = renderer.render(&instance, &model.triangles, &pose, &settings).ok()?;
+    let headed = head.map(|h| h.around(model, &instance, &mut rng));
+    let (render, _) = match &headed {
+        Some(h) => renderer.render(&h.instance, &h.triangles, &pose, &settings).ok()?,
+        None => renderer.render(&instance, &model.triangles, &pose, &settings).ok()?,
+    };
     let landmarks: Vec<[f32; 2]> =
         model.landmarks.iter().filter_map(|&i| renderer.projected().get(i as usize)).map(|p| [p.x, p.y]).collect();
     if landmarks.len() != model.landmarks.len() || landmarks.iter().flatten().any(|v| !v.is_finite()) {

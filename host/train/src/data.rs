@@ -3,8 +3,7 @@
 
 use gpmm_core::net::face::landmark_box;
 use gpmm_core::net::resample::{sample_rgb, Window};
-use gpmm_host::gp::model::GpModel;
-use gpmm_host::init::scene::{render_scene, Scene, SceneRanges};
+use gpmm_host::init::scene::{render_scene, Scene, SceneSource};
 use gpmm_host::render::Renderer;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -84,11 +83,11 @@ pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rn
 
 /// Samples `start..start + count` of the stream drawn with `seed` (rendered in parallel; the
 /// result depends on the seed and the indices only). Scenes that cannot be cut are skipped.
-pub fn samples(model: &GpModel, ranges: &SceneRanges, geo: &Geometry, seed: u64, start: u64, count: u64) -> Vec<Sample> {
+pub fn samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, count: u64) -> Vec<Sample> {
     (start..start + count)
         .into_par_iter()
         .map_init(Renderer::new, |renderer, i| {
-            let scene = render_scene(model, ranges, seed, i, renderer)?;
+            let scene = render_scene(source, seed, i, renderer)?;
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(0x5EED) ^ i.wrapping_mul(0xA24B_AED4_963E_E407));
             let _: u32 = rng.random();
             sample_of_scene(&scene, geo, &mut rng)

@@ -4,6 +4,7 @@
 
 pub mod data;
 pub mod nets;
+pub mod patches;
 pub mod preview;
 pub mod train;
 

@@ -1,17 +1,16 @@
 //! A picture grid of training scenes with their landmarks: what the networks learn from.
 
-use gpmm_host::gp::model::GpModel;
-use gpmm_host::init::scene::{render_scene, SceneRanges};
+use gpmm_host::init::scene::{render_scene, SceneSource};
 use gpmm_host::render::Renderer;
 use image::{imageops, Rgb, RgbImage};
 
 /// `rows × cols` scenes of the stream `seed`, each letterboxed into a 160 px cell, landmarks in green.
-pub fn scene_grid(model: &GpModel, ranges: &SceneRanges, seed: u64, rows: u32, cols: u32) -> RgbImage {
+pub fn scene_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32) -> RgbImage {
     const CELL: u32 = 160;
     let mut grid = RgbImage::from_pixel(cols * CELL, rows * CELL, Rgb([24, 24, 24]));
     let mut renderer = Renderer::new();
     for i in 0..rows * cols {
-        let Some(scene) = render_scene(model, ranges, seed, u64::from(i), &mut renderer) else { continue };
+        let Some(scene) = render_scene(source, seed, u64::from(i), &mut renderer) else { continue };
         let mut frame = scene.frame.clone();
         for p in &scene.landmarks {
             let (x, y) = (p[0].floor() as i64, p[1].floor() as i64);

@@ -1,0 +1,239 @@
+//! The head around the face in training scenes. A model covers the face only; photos show a
+//! face on a head, with ears, scalp, hair and neck. The template scan has them: its whole head,
+//! in the model's frame, is deformed and recoloured to continue each random face instance, laid
+//! a little beneath the face (the face wins the depth test, the head fills any seam), and
+//! sometimes given hair. The finder then learns heads, not floating masks.
+
+use crate::gp::model::GpModel;
+use crate::mesh::closest::closest_on_triangle;
+use crate::mesh::template::{face_crop_indices, load_template, Template, TemplateError, TemplateOptions};
+use crate::render::Instance;
+use gpmm_core::Vec3;
+use rand::{Rng, RngExt};
+use std::path::Path;
+
+/// Nearest face vertices each head vertex follows.
+const ANCHORS: usize = 6;
+/// How far beneath the face the head lies (mm, along its normals).
+const INSET_MM: f32 = 1.5;
+/// Distance from the face (mm) over which the head's deformation fades out.
+const FADE_MM: f32 = 45.0;
+/// Largest median distance (mm) from the model's mean vertices to the head for the two to be
+/// taken as one frame.
+const ALIGNED_MM: f32 = 2.0;
+
+/// One head vertex's link to the face: the nearest mean-face vertices, their weights, and how
+/// much of their shape change it takes (1 on the face, fading away from it).
+#[derive(Debug, Clone, Copy)]
+struct Anchor {
+    ids: [u32; ANCHORS],
+    weights: [f32; ANCHORS],
+    fade: f32,
+}
+
+/// The template's whole head, ready to be put around face instances of one model.
+#[derive(Debug, Clone)]
+pub struct HeadContext {
+    /// Rest positions (mm, model frame), already inset beneath the surface.
+    positions: Vec<Vec3>,
+    /// Rest albedos (linear RGB).
+    albedos: Vec<Vec3>,
+    /// Triangles over the head's vertices.
+    triangles: Vec<[u32; 3]>,
+    /// Per vertex: which face vertices it follows.
+    anchors: Vec<Anchor>,
+    /// Per vertex: whether hair may cover it (scalp and back of the head, never the face).
+    scalp: Vec<bool>,
+    /// Height (mm, model frame) of the eyes, for the hairline.
+    eye_y: f32,
+}
+
+/// A head instance around a face: the combined vertices and triangles, face first (so the
+/// model's vertex ids, landmarks included, still index the face).
+#[derive(Debug, Clone)]
+pub struct HeadedInstance {
+    /// Face vertices, then head vertices.
+    pub instance: Instance,
+    /// The model's triangles, then the head's.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl HeadContext {
+    /// Loads the whole (uncropped) template from its mesh and landmark files, in the normalized
+    /// frame a model built from it has, and links it to `model`.
+    pub fn load(model: &GpModel, mesh: &Path, landmarks: &Path) -> Result<Self, TemplateError> {
+        let head = load_template(mesh, landmarks, &TemplateOptions { no_crop: true, ..Default::default() })?;
+        Self::new(model, &head).map_err(|message| TemplateError::Processing {
+            path: mesh.to_path_buf(),
+            message: format!("as the head around the model: {message}"),
+        })
+    }
+
+    /// Links a normalized, uncropped template to `model`; an error when the model's mean face
+    /// does not lie on it (a model built from another scan or at another scale).
+    pub fn new(model: &GpModel, head: &Template) -> Result<Self, String> {
+        let face: Vec<Vec3> = model.shape.mean.clone();
+        if face.is_empty() || head.mesh.positions.is_empty() {
+            return Err("empty model or head".into());
+        }
+        let positions: Vec<Vec3> = head.mesh.positions.iter().map(|p| p.map(|v| v as f32)).collect();
+        let albedos: Vec<Vec3> = head.mesh.colors.iter().map(|c| c.map(|v| v.clamp(0.0, 1.0) as f32)).collect();
+        // Are they one frame? The mean face's vertices lie on the template's surface (measured to
+        // the triangles around the nearest head vertex: a simplified face's vertices lie between
+        // the head's).
+        let mut around: Vec<Vec<u32>> = vec![Vec::new(); positions.len()];
+        for (t, tri) in head.mesh.triangles.iter().enumerate() {
+            for &v in tri {
+                if let Some(a) = around.get_mut(v as usize) {
+                    a.push(t as u32);
+                }
+            }
+        }
+        let surface_gap = |p: Vec3| -> f32 {
+            let (i, d) = nearest(&positions, p);
+            let q = p.map(f64::from);
+            around[i]
+                .iter()
+                .filter_map(|&t| head.mesh.triangles.get(t as usize))
+                .filter_map(|tri| {
+                    let corners = [
+                        head.mesh.positions.get(tri[0] as usize)?,
+                        head.mesh.positions.get(tri[1] as usize)?,
+                        head.mesh.positions.get(tri[2] as usize)?,
+                    ];
+                    let (c, _) = closest_on_triangle(q, corners.map(|c| *c));
+                    Some(((c[0] - q[0]).powi(2) + (c[1] - q[1]).powi(2) + (c[2] - q[2]).powi(2)).sqrt() as f32)
+                })
+                .fold(d, f32::min)
+        };
+        let mut gaps: Vec<f32> = face.iter().map(|p| surface_gap(*p)).collect();
+        gaps.sort_by(f32::total_cmp);
+        let median = gaps[gaps.len() / 2];
+        if median.is_nan() || median > ALIGNED_MM {
+            return Err(format!(
+                "the model's mean face lies {median:.1} mm (median) from this head, more than {ALIGNED_MM} mm: \
+                 the model was not built from this template (or at another scale)"
+            ));
+        }
+        let normals = vertex_normals(&positions, &head.mesh.triangles);
+        let positions: Vec<Vec3> = positions.iter().zip(&normals).map(|(p, n)| std::array::from_fn(|k| p[k] - INSET_MM * n[k])).collect();
+        let anchors = positions.iter().map(|p| anchor(&face, *p)).collect();
+        let inside = face_crop_indices(&head.mesh, &head.landmarks).unwrap_or_default();
+        let mut scalp = vec![true; positions.len()];
+        for i in inside {
+            if let Some(s) = scalp.get_mut(i as usize) {
+                *s = false;
+            }
+        }
+        let eyes: Vec<f32> = [36usize, 39, 42, 45]
+            .iter()
+            .filter_map(|&k| model.landmarks.get(k))
+            .filter_map(|&i| face.get(i as usize))
+            .map(|p| p[1])
+            .collect();
+        let eye_y = if eyes.is_empty() { 0.0 } else { eyes.iter().sum::<f32>() / eyes.len() as f32 };
+        Ok(Self { positions, albedos, triangles: head.mesh.triangles.clone(), anchors, scalp, eye_y })
+    }
+
+    /// Vertices of the head.
+    pub fn vertices(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// The head around `face` (an instance of `model`): shape and colour changes of the face
+    /// carried over to the head (shape fading away from the face), with random hair from `rng`.
+    pub fn around(&self, model: &GpModel, face: &Instance, rng: &mut impl Rng) -> HeadedInstance {
+        let n = face.positions.len();
+        let mean = &model.shape.mean;
+        let colour_mean = &model.color.mean;
+        let delta = |values: &[Vec3], base: &[Vec3], a: &Anchor| -> Vec3 {
+            let mut d = [0.0f32; 3];
+            for (&id, &w) in a.ids.iter().zip(&a.weights) {
+                let (v, b) = (values.get(id as usize), base.get(id as usize));
+                if let (Some(v), Some(b)) = (v, b) {
+                    for k in 0..3 {
+                        d[k] += w * (v[k] - b[k]);
+                    }
+                }
+            }
+            d
+        };
+        let hair = rng.random_bool(0.6).then(|| {
+            let tones = [[0.02f32, 0.015, 0.01], [0.08, 0.04, 0.02], [0.25, 0.15, 0.07], [0.45, 0.35, 0.2], [0.35, 0.35, 0.35]];
+            let t = tones[rng.random_range(0..tones.len())];
+            let v = rng.random_range(0.7f32..1.3);
+            (t.map(|c| (c * v).min(1.0)), self.eye_y + rng.random_range(20.0f32..55.0), rng.random_range(-40.0f32..10.0))
+        });
+        let mut positions = face.positions.clone();
+        let mut albedos = face.albedos.clone();
+        for (i, a) in self.anchors.iter().enumerate() {
+            let ds = delta(&face.positions, mean, a);
+            let dc = delta(&face.albedos, colour_mean, a);
+            let p = self.positions[i];
+            positions.push(std::array::from_fn(|k| p[k] + a.fade * ds[k]));
+            let mut c: Vec3 = std::array::from_fn(|k| (self.albedos[i][k] + dc[k]).clamp(0.0, 1.0));
+            if let Some((tone, hairline, back)) = hair {
+                // The scalp above the hairline, and the back of the head down to the ears.
+                if self.scalp[i] && (p[1] > hairline || (p[2] < back && p[1] > self.eye_y - 25.0)) {
+                    c = tone;
+                }
+            }
+            albedos.push(c);
+        }
+        let mut triangles = model.triangles.clone();
+        triangles.extend(self.triangles.iter().map(|t| t.map(|v| v + n as u32)));
+        HeadedInstance { instance: Instance { positions, albedos }, triangles }
+    }
+}
+
+/// The nearest point of `points` to `q` and its distance.
+fn nearest(points: &[Vec3], q: Vec3) -> (usize, f32) {
+    let mut best = (0, f32::INFINITY);
+    for (i, p) in points.iter().enumerate() {
+        let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+        if d < best.1 {
+            best = (i, d);
+        }
+    }
+    (best.0, best.1.sqrt())
+}
+
+/// The `ANCHORS` nearest face vertices of `p`, weighted by inverse squared distance.
+fn anchor(face: &[Vec3], p: Vec3) -> Anchor {
+    let mut near = [(0u32, f32::INFINITY); ANCHORS];
+    for (i, q) in face.iter().enumerate() {
+        let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+        if d < near[ANCHORS - 1].1 {
+            near[ANCHORS - 1] = (i as u32, d);
+            near.sort_by(|a, b| a.1.total_cmp(&b.1));
+        }
+    }
+    let raw: [f32; ANCHORS] = near.map(|(_, d)| 1.0 / (d + 1.0));
+    let sum: f32 = raw.iter().sum();
+    let closest = near[0].1.sqrt();
+    Anchor { ids: near.map(|(i, _)| i), weights: raw.map(|w| w / sum), fade: (-(closest / FADE_MM).powi(2)).exp() }
+}
+
+/// Area-weighted unit vertex normals (zero for unused vertices).
+fn vertex_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut normals = vec![[0.0f32; 3]; positions.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions.get(i as usize).copied().unwrap_or_default());
+        let (u, v) = (std::array::from_fn::<f32, 3, _>(|k| b[k] - a[k]), std::array::from_fn::<f32, 3, _>(|k| c[k] - a[k]));
+        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        for &i in t {
+            if let Some(m) = normals.get_mut(i as usize) {
+                for k in 0..3 {
+                    m[k] += n[k];
+                }
+            }
+        }
+    }
+    for n in &mut normals {
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if l > 0.0 {
+            *n = n.map(|v| v / l);
+        }
+    }
+    normals
+}

@@ -1,0 +1,84 @@
+//! The head put around training faces: it continues the face (same frame, face first, seams
+//! closed near the face, untouched far from it) and refuses a model built from another scan.
+
+use gpmm_host::data::{data_dir_for_tests, template_dir};
+use gpmm_host::gp::kernel::ModelKernel;
+use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
+use gpmm_host::init::head::HeadContext;
+use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::render::Instance;
+use rand::SeedableRng;
+use rand_xoshiro::Xoshiro256PlusPlus;
+use std::path::PathBuf;
+
+fn files() -> Option<(PathBuf, PathBuf)> {
+    let dir = template_dir(&data_dir_for_tests()?);
+    Some((dir.join("lee-perry-smith.ply"), dir.join("landmarks_ibug68.json")))
+}
+
+fn small_model(mesh: &PathBuf, landmarks: &PathBuf) -> GpModel {
+    let template = load_template(mesh, landmarks, &TemplateOptions { vertices: Some(800), ..Default::default() }).unwrap();
+    let build = BuildOptions {
+        kernel: ModelKernel::SymmetricFull,
+        hyperparameters: Default::default(),
+        rank_shape: RankSpec::Count(8),
+        rank_color: RankSpec::Count(8),
+        nystrom: NystromOptions { points: 200, ..Default::default() },
+    };
+    build_model(&template, &build, |_, _, _| {})
+}
+
+fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[test]
+fn the_head_continues_the_face_and_leaves_the_far_head_alone() {
+    let Some((mesh, lm)) = files() else { return };
+    let model = small_model(&mesh, &lm);
+    let head = HeadContext::load(&model, &mesh, &lm).unwrap();
+    assert!(head.vertices() > 2 * model.vertices(), "{} head vertices", head.vertices());
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+    let mean = Instance::of_model(&model, &[], &[]).unwrap();
+    let face = Instance::of_model(&model, &[2.5, -2.0, 1.5], &[1.0]).unwrap();
+    let rest = head.around(&model, &mean, &mut rng);
+    let moved = head.around(&model, &face, &mut rng);
+    let n = model.vertices();
+    // Face first, unchanged: the model's landmark ids still index the face.
+    assert_eq!(&moved.instance.positions[..n], &face.positions[..]);
+    assert_eq!(moved.instance.positions.len(), n + head.vertices());
+    assert_eq!(moved.triangles.len(), model.triangles.len() + (rest.triangles.len() - model.triangles.len()));
+    assert!(moved.triangles.iter().flatten().all(|&v| (v as usize) < moved.instance.positions.len()));
+    // Around the mean face the head lies just beneath it (inset 1.5 mm).
+    let gaps: Vec<f32> = (n..rest.instance.positions.len())
+        .map(|i| mean.positions.iter().map(|p| dist(*p, rest.instance.positions[i])).fold(f32::INFINITY, f32::min))
+        .collect();
+    let near = gaps.iter().filter(|&&g| g < 3.0).count();
+    assert!(near > n / 2, "only {near} head vertices within 3 mm of the face");
+    // The head vertex nearest each face vertex moves with it; the farthest head vertices do not move.
+    let shift = |i: usize| dist(moved.instance.positions[i], rest.instance.positions[i]);
+    let mut face_moves = Vec::new();
+    for (f, p) in face.positions.iter().enumerate().step_by(7) {
+        let (i, _) = (n..rest.instance.positions.len())
+            .map(|i| (i, dist(rest.instance.positions[i], mean.positions[f])))
+            .fold((0, f32::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+        face_moves.push((shift(i) - dist(*p, mean.positions[f])).abs());
+    }
+    face_moves.sort_by(f32::total_cmp);
+    assert!(face_moves[face_moves.len() / 2] < 1.0, "median seam gap {} mm", face_moves[face_moves.len() / 2]);
+    let far = gaps.iter().zip(n..).filter(|(g, _)| **g > 200.0).map(|(_, i)| shift(i)).fold(0.0f32, f32::max);
+    assert!(gaps.iter().any(|&g| g > 200.0), "the head has no part 20 cm from the face");
+    assert!(far < 0.01, "a vertex 20 cm from the face moved by {far} mm");
+}
+
+#[test]
+fn a_model_of_another_scan_is_refused_with_the_file_named() {
+    let Some((mesh, lm)) = files() else { return };
+    let mut model = small_model(&mesh, &lm);
+    for p in &mut model.shape.mean {
+        p[1] += 25.0;
+    }
+    let e = HeadContext::load(&model, &mesh, &lm).unwrap_err().to_string();
+    assert!(e.contains("lee-perry-smith.ply") && e.contains("not built from this template"), "{e}");
+}
