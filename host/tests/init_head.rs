@@ -10,14 +10,14 @@ use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::render::Instance;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn files() -> Option<(PathBuf, PathBuf)> {
     let dir = template_dir(&data_dir_for_tests()?);
     Some((dir.join("lee-perry-smith.ply"), dir.join("landmarks_ibug68.json")))
 }
 
-fn small_model(mesh: &PathBuf, landmarks: &PathBuf) -> GpModel {
+fn small_model(mesh: &Path, landmarks: &Path) -> GpModel {
     let template = load_template(mesh, landmarks, &TemplateOptions { vertices: Some(800), ..Default::default() }).unwrap();
     let build = BuildOptions {
         kernel: ModelKernel::SymmetricFull,
