@@ -30,14 +30,17 @@ const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
     Spec { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
 }
 
-/// The finder: a `side × side` RGB frame to a grid of `side / 8` cells × 4 values.
+/// The finder: a `side × side` RGB frame to a grid of `side / 16` cells × 4 values. Its last
+/// cells see 79 px of the input, as large as the largest faces it is trained on.
 pub fn finder_specs() -> Vec<Spec> {
     vec![
         conv(3, 8, 2),
         conv(8, 16, 2),
         conv(16, 32, 2),
         conv(32, 32, 1),
-        Spec { kind: LayerKind::Conv, kernel: 1, stride: 1, relu: false, cin: 32, cout: 4 },
+        conv(32, 64, 2),
+        conv(64, 64, 1),
+        Spec { kind: LayerKind::Conv, kernel: 1, stride: 1, relu: false, cin: 64, cout: 4 },
     ]
 }
 
@@ -46,6 +49,7 @@ pub fn initializer_specs(outputs: usize) -> Vec<Spec> {
     vec![
         conv(3, 16, 2),
         conv(16, 32, 2),
+        conv(32, 32, 1),
         conv(32, 64, 2),
         conv(64, 64, 2),
         Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: true, cin: 4 * 4 * 64, cout: 128 },

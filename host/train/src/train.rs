@@ -105,7 +105,7 @@ pub enum Progress {
 
 /// The finder's and initializer's sizes (the init file's geometry).
 pub fn geometry(landmarks: usize) -> Geometry {
-    Geometry { frame_side: 96, grid: 12, crop_side: 64, crop_margin: 1.4, landmarks, light: LIGHT_LABELS }
+    Geometry { frame_side: 96, grid: 6, crop_side: 64, crop_margin: 1.4, landmarks, light: LIGHT_LABELS }
 }
 
 fn err(e: impl std::fmt::Display) -> String {
