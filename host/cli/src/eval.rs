@@ -72,6 +72,10 @@ pub struct DetectEvalArgs {
     /// Do not write DIR/detect.json.
     #[arg(long)]
     pub no_write: bool,
+    /// Write each detection's 68 landmarks to PTS_DIR/NAME.pts (0-based), e.g. for
+    /// `gpmm bench-fit --landmarks-dir PTS_DIR` or `gpmm eval recognition --landmarks-dir PTS_DIR`.
+    #[arg(long, value_name = "PTS_DIR")]
+    pub pts_dir: Option<PathBuf>,
 }
 
 /// Model selection and building options shared by the evaluations.
@@ -423,6 +427,13 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
         bail!("{}: no image with a reference .pts found", a.dir.display());
     }
     let (summary, rows) = gpmm_host::init::eval::evaluate(&mut init, &images, a.pts_one_based)?;
+    if let Some(dir) = &a.pts_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for r in rows.iter().filter(|r| !r.landmarks.is_empty()) {
+            crate::init::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &r.landmarks)?;
+        }
+        eprintln!("wrote {} .pts files to {}", rows.iter().filter(|r| !r.landmarks.is_empty()).count(), dir.display());
+    }
     if !a.no_write {
         let path = a.dir.join("detect.json");
         let body = serde_json::json!({ "init": a.init, "summary": summary, "images": rows });

@@ -89,9 +89,15 @@ fn detect_writes_68_landmarks_and_a_picture() {
 #[test]
 fn eval_detect_reports_every_image() {
     let Some(f) = fixture() else { return };
-    let out = ok(&gpmm(&["eval", "detect", s(&f.synth), "--init", s(&f.init)]));
+    let pts_dir = f.dir.path().join("detected-pts");
+    let out = ok(&gpmm(&["eval", "detect", s(&f.synth), "--init", s(&f.init), "--pts-dir", s(&pts_dir)]));
     let json: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(json["images"].as_u64(), Some(2));
+    // Every detection's landmarks as a 68-point .pts named after its image (bench-fit reads them).
+    for name in ["0000_yaw00.pts", "0000_yaw30.pts"] {
+        let pts = gpmm_host::photo::pts::read_pts(&pts_dir.join(name), false).unwrap();
+        assert_eq!(pts.points.len(), 68, "{name}");
+    }
     let found = json["found"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&found));
     assert_eq!(json["per_yaw"].as_array().unwrap().len(), 2);

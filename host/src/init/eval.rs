@@ -23,6 +23,9 @@ pub struct DetectImage {
     pub yaw_deg: Option<f64>,
     /// Initializer's yaw minus the truth's (degrees).
     pub yaw_error_deg: Option<f64>,
+    /// The detected landmarks (image pixels; empty when nothing was detected).
+    #[serde(skip)]
+    pub landmarks: Vec<[f32; 2]>,
 }
 
 /// Per-|yaw| medians.
@@ -36,6 +39,9 @@ pub struct DetectYawRow {
     pub median_landmark_error: f64,
     /// Median |yaw error| (degrees).
     pub median_abs_yaw_error_deg: f64,
+    /// Mean signed yaw error (degrees, the initializer's yaw minus the truth's, with the sign of
+    /// the truth's yaw: negative means turned toward frontal).
+    pub mean_yaw_bias_deg: f64,
 }
 
 /// Summary over a directory.
@@ -130,19 +136,21 @@ pub fn evaluate(
         let det = init.detect(&img, 0.0, 1)?;
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let Some(det) = det else {
-            rows.push(DetectImage { image: name, found: false, score: 0.0, landmark_error: None, yaw_deg: *yaw, yaw_error_deg: None });
+            rows.push(DetectImage {
+                image: name,
+                found: false,
+                score: 0.0,
+                landmark_error: None,
+                yaw_deg: *yaw,
+                yaw_error_deg: None,
+                landmarks: Vec::new(),
+            });
             continue;
         };
-        let (cx, cy, size) = landmark_box(&refs);
-        let found = (det.face.cx - cx).hypot(det.face.cy - cy) < 0.5 * size;
-        let iod = refs.get(36).zip(refs.get(45)).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).unwrap_or(size).max(1e-3);
-        let landmark_error = (det.landmarks.len() == refs.len()).then(|| {
-            det.landmarks.iter().zip(&refs).map(|(a, b)| f64::from((a[0] - b[0]).hypot(a[1] - b[1]))).sum::<f64>()
-                / refs.len() as f64
-                / f64::from(iod)
-        });
+        let (found, landmark_error) = score_detection(&det, &refs);
         let yaw_error_deg = yaw.map(|y| f64::from(det.angles[0].to_degrees()) - y);
-        rows.push(DetectImage { image: name, found, score: det.face.score, landmark_error, yaw_deg: *yaw, yaw_error_deg });
+        let landmarks = det.landmarks.to_vec();
+        rows.push(DetectImage { image: name, found, score: det.face.score, landmark_error, yaw_deg: *yaw, yaw_error_deg, landmarks });
     }
     let found: Vec<&DetectImage> = rows.iter().filter(|r| r.found).collect();
     let errs: Vec<f64> = found.iter().filter_map(|r| r.landmark_error).collect();
@@ -158,6 +166,15 @@ pub fn evaluate(
                 images: at.len(),
                 median_landmark_error: quantile(at.iter().filter_map(|r| r.landmark_error).collect(), 0.5),
                 median_abs_yaw_error_deg: quantile(at.iter().filter_map(|r| r.yaw_error_deg.map(f64::abs)).collect(), 0.5),
+                mean_yaw_bias_deg: {
+                    let b: Vec<f64> =
+                        at.iter().filter_map(|r| Some(r.yaw_error_deg? * r.yaw_deg?.signum())).filter(|v| v.is_finite()).collect();
+                    if b.is_empty() {
+                        f64::NAN
+                    } else {
+                        b.iter().sum::<f64>() / b.len() as f64
+                    }
+                },
             }
         })
         .collect();
