@@ -154,25 +154,27 @@ pub fn sample_points(points: &[KernelPoint], m: usize, seed: u64) -> Vec<usize> 
 
 /// Nyström eigendecomposition of one scalar kernel over `points`, keeping at most `max_rank` pairs.
 pub fn scalar_nystrom(kernel: &ScalarKernel, points: &[KernelPoint], opts: &NystromOptions, max_rank: usize) -> ScalarEigen {
-    let mut all = bank_nystrom(std::slice::from_ref(kernel), points, opts, max_rank);
+    let mut all = bank_nystrom(std::slice::from_ref(kernel), points, opts, &[max_rank]);
     all.pop().unwrap_or_else(|| ScalarEigen { values: Vec::new(), vectors: Mat::zeros(points.len(), 0), trace: 0.0 })
 }
 
 /// Nyström eigendecompositions of several scalar kernels over the same points and sample,
-/// sharing every kernel evaluation (see [`KernelBank`]).
+/// sharing every kernel evaluation (see [`KernelBank`]); kernel `k` keeps at most `max_ranks[k]` pairs.
 ///
 /// With [`NystromOptions::refine`] (the default): `K_NZ` in single precision, a basis of the
 /// leading subspace of `K_ZZ` from a randomized range finder (single precision too), its Nyström
 /// extensions `Y = K_NZ U`, and a Rayleigh–Ritz step in double precision against the exact
 /// kernel matrix ([`rayleigh_ritz_bank`]). The single-precision steps only choose the subspace:
 /// the eigenpairs are exact Ritz pairs of `K` within it.
-pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &NystromOptions, max_rank: usize) -> Vec<ScalarEigen> {
+pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &NystromOptions, max_ranks: &[usize]) -> Vec<ScalarEigen> {
     let n = points.len();
     let c = kernels.len();
+    assert_eq!(max_ranks.len(), c, "bank_nystrom: one rank per kernel");
     let bank = KernelBank::new(kernels);
     let traces: Vec<f64> = kernels.iter().map(|k| points.iter().map(|p| k.eval(p, p)).sum()).collect();
     let empty = |trace| ScalarEigen { values: Vec::new(), vectors: Mat::zeros(n, 0), trace };
-    if n == 0 || max_rank == 0 || c == 0 {
+    let max_rank = max_ranks.iter().copied().max().unwrap_or(0);
+    if n == 0 || max_rank == 0 {
         return traces.into_iter().map(empty).collect();
     }
     let t0 = std::time::Instant::now();
@@ -187,16 +189,16 @@ pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &Nys
             .zip(traces)
             .map(|(k, trace)| {
                 let view = MatRef::from_column_major_slice_with_stride(&knz[k * n..], n, m, c * n);
-                plain_nystrom(view, &z, opts.tolerance, max_rank, trace)
+                plain_nystrom(view, &z, opts.tolerance, max_ranks[k], trace)
             })
             .collect();
     }
     let knz = kernel_columns(&bank, &columns, points, &z, |v| v as f32);
     log::debug!("nystrom: N={n} m={m} classes={c}: K_NZ ({:.2?})", t0.elapsed());
-    // Twice the rank (Rayleigh–Ritz needs room to converge) and 10 more for the range finder, at most the sample.
-    let dim = m.min(max_rank.saturating_mul(2).saturating_add(20));
     let bases: Vec<Mat<f64>> = (0..c)
         .map(|k| {
+            // Twice the rank (Rayleigh–Ritz needs room to converge) and 10 more for the range finder, at most the sample.
+            let dim = m.min(max_ranks[k].saturating_mul(2).saturating_add(20));
             let knz = MatRef::from_column_major_slice_with_stride(&knz[k * n..], n, m, c * n);
             let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
             let u = range_basis(kzz.as_ref(), dim, opts.seed ^ (k as u64));
@@ -213,7 +215,7 @@ pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &Nys
         .collect();
     drop(knz);
     log::debug!("nystrom: subspaces ({:.2?})", t0.elapsed());
-    let refined = rayleigh_ritz_bank(&bank, &columns, points, &bases, max_rank);
+    let refined = rayleigh_ritz_bank(&bank, &columns, points, &bases, max_ranks);
     log::debug!("nystrom: rayleigh-ritz ({:.2?})", t0.elapsed());
     refined
         .into_iter()
@@ -307,7 +309,7 @@ const BLOCK: usize = 128;
 const GRAM_TOLERANCE: f64 = 1e-9;
 
 /// Rayleigh–Ritz refinement of subspaces `span(Y_c)` (`N x k_c`, unit columns) against the exact
-/// kernel matrices `K_c` of a bank: eigenvalues (descending, at most `max_rank`) and orthonormal
+/// kernel matrices `K_c` of a bank: eigenvalues (descending, at most `max_ranks[c]`) and orthonormal
 /// Ritz vectors, or `None` when the subspace is empty.
 ///
 /// Nyström's `K̃ = K_NZ K_ZZ⁺ K_ZN` is below `K` (it underestimates every eigenvalue, most for
@@ -323,7 +325,7 @@ fn rayleigh_ritz_bank(
     columns: &PointColumns,
     points: &[KernelPoint],
     ys: &[Mat<f64>],
-    max_rank: usize,
+    max_ranks: &[usize],
 ) -> Vec<Option<(Vec<f64>, Mat<f64>)>> {
     let n = points.len();
     let c = bank.len();
@@ -365,7 +367,8 @@ fn rayleigh_ritz_bank(
         });
     ys.iter()
         .zip(h)
-        .map(|(y, half)| {
+        .zip(max_ranks)
+        .map(|((y, half), &max_rank)| {
             let h = &half + half.transpose();
             let k = y.ncols();
             let gram = y.transpose() * y;
@@ -402,14 +405,19 @@ pub fn low_rank(
     mut progress: impl FnMut(usize, usize),
 ) -> LowRank {
     let classes = kernel.classes();
-    let max_rank = match rank {
-        RankSpec::Count(k) => k,
-        RankSpec::Captured(_) => usize::MAX,
-    };
+    // A pair of a class with d directions gives d components: with a count of k, pairs beyond
+    // the first ceil(k / d) can never be kept (the candidates sort by value, then pair index).
+    let max_ranks: Vec<usize> = classes
+        .iter()
+        .map(|class| match rank {
+            RankSpec::Count(k) => k.div_ceil(class.directions.len().max(1)),
+            RankSpec::Captured(_) => usize::MAX,
+        })
+        .collect();
     let mut candidates: Vec<(f64, usize, usize, usize)> = Vec::new(); // (value, class, pair, direction)
     let kernels: Vec<ScalarKernel> = classes.iter().map(|c| c.kernel.clone()).collect();
     progress(0, 1);
-    let eigens = bank_nystrom(&kernels, points, opts, max_rank);
+    let eigens = bank_nystrom(&kernels, points, opts, &max_ranks);
     progress(1, 1);
     let mut trace = 0.0;
     for (ci, (class, e)) in classes.iter().zip(&eigens).enumerate() {
@@ -446,7 +454,9 @@ pub fn low_rank(
             field: eigens[ci].vectors.col(pi).iter().copied().collect(),
         })
         .collect();
-    LowRank { components, trace }
+    let lr = LowRank { components, trace };
+    log::debug!("low rank: {keep} components, captured {:.6}", lr.captured());
+    lr
 }
 
 /// Exact eigenvalues (descending) of the scalar kernel matrix over `points` (test and report helper).
