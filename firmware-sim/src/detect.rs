@@ -57,7 +57,11 @@ pub fn run(part: &'static [u8]) {
         init.initializer.macs() as u32
     );
     if needed > SCRATCH {
-        defmt::error!("the init file's networks need {=u32} bytes per activation buffer; this firmware has {=u32}", needed as u32, SCRATCH as u32);
+        defmt::error!(
+            "the init file's networks need {=u32} bytes per activation buffer; this firmware has {=u32}",
+            needed as u32,
+            SCRATCH as u32
+        );
         fail();
     }
     let mut counts = DetectCounts {

@@ -19,9 +19,9 @@ use gpmm_core::net::{LayerKind, Shape};
 use gpmm_core::profile::M4F;
 use gpmm_host::device::detect::{compare, frame_bytes, host_detect, partition_bytes, run_detection, DeviceDetectReport};
 use gpmm_host::device::fit::run_firmware;
-use image::RgbImage;
 use gpmm_host::init::encode::{FloatLayer, FloatNet};
 use gpmm_host::init::{init_file_bytes, InitModel};
+use image::RgbImage;
 use std::path::PathBuf;
 
 /// The budget for the finder and the initializer together (instructions).
@@ -203,8 +203,7 @@ fn firmware_refuses_a_corrupted_init_file_or_frame() {
     // The init file alone: no frame after it.
     let mut bad = init.clone();
     bad.extend_from_slice(&[0x55; 64]);
-    let err = run_firmware("m4f", &partition_file("detect-no-frame.partition", &bad), 300)
-        .expect_err("a missing frame must fail")
-        .to_string();
+    let err =
+        run_firmware("m4f", &partition_file("detect-no-frame.partition", &bad), 300).expect_err("a missing frame must fail").to_string();
     assert!(err.contains("no valid detection frame") && err.contains("GPDF"), "{err}");
 }
