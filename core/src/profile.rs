@@ -28,6 +28,11 @@ pub struct DeviceProfile {
     /// image pixel): a colour or light proposal re-shades a frame up to this size instead of
     /// rendering it (`gpmm_core::frame_cache`).
     pub frame_cache_pixels: usize,
+    /// Bytes of each of the two activation buffers (`gpmm_core::net::NetScratch`) the device gives
+    /// the landmark-free start's networks: the largest activation of the default finder and
+    /// initializer is the finder's 96 × 96 × 3 input. They live on the detection's stack, not in
+    /// the statics, so the fit's RAM is unchanged.
+    pub net_scratch: usize,
     /// Program flash (bytes), from address 0.
     pub flash_code_bytes: usize,
     /// Data partition (bytes) right after the program flash: the blob and the fit input.
@@ -53,6 +58,7 @@ pub const M4F: DeviceProfile = DeviceProfile {
     vertex_pool: 3072,
     projected_pool: 1024,
     frame_cache_pixels: 7168,
+    net_scratch: 96 * 96 * 3,
     flash_code_bytes: 512 * 1024,
     partition_bytes: 512 * 1024,
     ram_bytes: 192 * 1024,
@@ -72,6 +78,7 @@ pub const M7: DeviceProfile = DeviceProfile {
     vertex_pool: 9216,
     projected_pool: 3072,
     frame_cache_pixels: 28672,
+    net_scratch: 96 * 96 * 3,
     flash_code_bytes: 1024 * 1024,
     partition_bytes: 1024 * 1024,
     ram_bytes: 512 * 1024,

@@ -3,6 +3,7 @@
 #![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
 use gpmm_core::fit::{FitSettings, ImageSettings, LandmarkSettings, StartSettings};
+use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::device_mesh::{self, DeviceMeshView, DeviceScene};
 use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
 use gpmm_core::format::{fit_input, FormatError};
@@ -123,4 +124,63 @@ fn fit_record_round_trip_and_corruption() {
     assert_eq!(r.color.iter().collect::<Vec<_>>(), color);
     assert_eq!(r.landmarks.iter().collect::<Vec<_>>(), [10.0, 20.0, 30.5, 40.5]);
     refuses_corruption(&out, |b| fit_record::parse(b).is_ok());
+}
+
+#[test]
+fn detection_frame_round_trip_and_corruption() {
+    let rgb: Vec<u8> = (0..5 * 3 * 3).map(|i| (i * 7 % 256) as u8).collect();
+    let frame = Frame { width: 5, height: 3, min_score: 0.25, refine: 2, rgb: &rgb };
+    let mut out = vec![0u8; detection::frame_len(5, 3)];
+    assert_eq!(detection::write_frame(&mut out, &frame).unwrap(), out.len());
+    assert_eq!(out.len(), 24 + 48 + 4, "45 pixel bytes padded to 48");
+    let back = detection::parse_frame(&out).unwrap();
+    assert_eq!((back.width, back.height, back.min_score, back.refine, back.rgb), (5, 3, 0.25, 2, &rgb[..]));
+    // More bytes after the frame (the rest of the partition) are ignored.
+    let mut longer = out.clone();
+    longer.extend_from_slice(&[0xff; 9]);
+    assert!(detection::parse_frame(&longer).is_ok());
+    refuses_corruption(&out, |b| detection::parse_frame(b).is_ok());
+    // The writer refuses what the reader would.
+    let bad = |f: Frame<'_>| detection::write_frame(&mut vec![0u8; 4096], &f).unwrap_err();
+    assert_eq!(bad(Frame { min_score: f32::NAN, ..frame }), FormatError::BadField("minimum score"));
+    assert_eq!(bad(Frame { refine: 9, ..frame }), FormatError::BadField("refinement passes"));
+    assert_eq!(bad(Frame { width: 4, ..frame }), FormatError::BadField("pixel count"));
+    assert_eq!(bad(Frame { width: 0, rgb: &[], ..frame }), FormatError::BadField("frame width"));
+    assert!(matches!(detection::write_frame(&mut [0u8; 40], &frame), Err(FormatError::BufferTooSmall { .. })));
+    assert_eq!(detection::frame_offset(230_768), 230_768);
+    assert_eq!(detection::frame_offset(230_770), 230_784);
+}
+
+#[test]
+fn detection_record_round_trip_and_corruption() {
+    let figures = DetectionFigures { found: true, cx: 80.5, cy: 61.25, size: 40.0, score: 0.875, angles: [0.1, -0.2, 0.03] };
+    let counts = DetectCounts {
+        instructions_finder: 21_000_000,
+        instructions_initializer: 43_000_000,
+        stack_peak_bytes: 62_000,
+        scratch_bytes: 27_648,
+        frame_width: 160,
+        frame_height: 120,
+        ..DetectCounts::default()
+    };
+    let lm = [[10.0f32, 20.0], [30.5, 40.5], [-1.0, 1e6]];
+    let light = [0.5f32, 0.25, -0.125, 1.0];
+    let mut out = vec![0u8; detection::record_len(3, 4)];
+    assert_eq!(detection::write_record(&mut out, &figures, &counts, &lm, &light).unwrap(), out.len());
+    let r = detection::parse_record(&out).unwrap();
+    assert_eq!(r.figures, figures);
+    assert_eq!(r.counts, counts);
+    assert_eq!(r.landmarks.iter().collect::<Vec<_>>(), [10.0, 20.0, 30.5, 40.5, -1.0, 1e6]);
+    assert_eq!(r.light.iter().collect::<Vec<_>>(), light);
+    refuses_corruption(&out, |b| detection::parse_record(b).is_ok());
+    // Nothing found: an empty record.
+    let none = DetectionFigures { found: false, ..figures };
+    let mut out = vec![0u8; detection::record_len(0, 0)];
+    detection::write_record(&mut out, &none, &counts, &[], &[]).unwrap();
+    let r = detection::parse_record(&out).unwrap();
+    assert!(!r.figures.found && r.landmarks.is_empty() && r.light.is_empty());
+    // More than a record holds.
+    let many = [[0.0f32; 2]; 69];
+    let err = detection::write_record(&mut vec![0u8; 2048], &figures, &counts, &many, &[]).unwrap_err();
+    assert_eq!(err, FormatError::TooMany("landmarks"));
 }

@@ -15,8 +15,8 @@ use gpmm_core::fit::{
     project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, Stage, StandardFit, TargetImage, MAX_LANDMARKS,
 };
 use gpmm_core::format::fit_input::{self, FitInput};
-use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
 use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
+use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
 use gpmm_core::{ProjectedVertex, Vec3};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;

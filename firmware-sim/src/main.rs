@@ -1,12 +1,14 @@
 //! gpmm firmware, simulated: Cortex-M4F under QEMU (mps2-an386), or on a board.
 //!
-//! What it does (the data partition decides: a device mesh is rendered, a model blob is fitted):
+//! What it does (the data partition decides: a device mesh is rendered, a model blob is fitted, an
+//! init file runs the landmark-free start on the camera frame after it, `detect.rs`):
 //! 1. calibrates SysTick against a loop of known instruction count (under QEMU with
 //!    `-icount shift=0` one SysTick tick is 40 instructions: 1 instruction = 1 ns of
 //!    virtual time, SysTick runs on the 25 MHz system clock);
 //! 2. reads the data partition (`GPMM_DATA` in memory.x), flashed separately from the
 //!    program: nothing there (first word erased) logs "no data partition" and exits ok;
-//!    a device mesh (`gpmm_core::format::device_mesh`, magic `GPDM`) is rendered, anything else
+//!    a device mesh (`gpmm_core::format::device_mesh`, magic `GPDM`) is rendered, an init file
+//!    (magic `GPMI`) and a frame (`gpmm_core::format::detection`) are detected in, anything else
 //!    must be a model blob followed by a fit input (`gpmm_core::format::fit_input`), which is
 //!    fitted (`fit.rs`);
 //! 3. a device mesh: renders it with gpmm-core exactly as the host does: the vertex stage (normals,
@@ -21,6 +23,7 @@
 #![no_main]
 
 mod clock;
+mod detect;
 mod fit;
 mod partition;
 mod stack;
@@ -29,6 +32,7 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
 use gpmm_core::frame_cache::CompactBuffers;
+use gpmm_core::net::face::INIT_MAGIC;
 use gpmm_core::profile::{DeviceProfile, M4F, M7};
 use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasterizer, Vec3};
 
@@ -96,6 +100,8 @@ fn main() -> ! {
     defmt::info!("data_partition_addr=0x{=u32:08x} data_partition_bytes={=u32}", part.as_ptr() as u32, part.len() as u32);
     if partition::is_erased(part) {
         defmt::info!("no data partition (first word erased)");
+    } else if part.starts_with(&INIT_MAGIC) {
+        detect::run(part);
     } else if !device_mesh::is_device_mesh(part) {
         fit::run(part, NORMALS, PROJECTED, RASTERIZER, CompactBuffers { covered: CACHE_COVERED, triangles: CACHE_TRIANGLES });
     } else {

@@ -117,6 +117,38 @@ fn quantized_run_follows_the_float_network() {
     assert_eq!(parsed.run(&mut scratch, &mut [0.0; 4]), Err(NetError::LengthMismatch));
 }
 
+/// Receptive fields larger than the core's 1 KiB patch (5 × 5 × 48 = 1,200 values) are summed
+/// row by row instead: both ways follow the float network.
+#[test]
+fn large_receptive_fields_follow_the_float_network() {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(9);
+    let mut net = FloatNet {
+        input: Shape { h: 7, w: 6, c: 48 },
+        layers: vec![
+            layer(&mut rng, LayerKind::Conv, 5, 1, true, 48, 6),
+            layer(&mut rng, LayerKind::Conv, 3, 2, true, 6, 5),
+            layer(&mut rng, LayerKind::Dense, 1, 1, false, 4 * 3 * 5, 3),
+        ],
+    };
+    let input_q: Vec<i8> = (0..7 * 6 * 48).map(|_| rng.random_range(-128i32..128) as i8).collect();
+    let input: Vec<f32> = input_q.iter().map(|&q| f32::from(q) / 128.0).collect();
+    let (want, maxima) = reference(&net, &input);
+    for (l, m) in net.layers.iter_mut().zip(&maxima) {
+        l.out_max = *m;
+    }
+    let bytes = encode_network(&net).unwrap();
+    let (parsed, _) = Network::parse(&bytes).unwrap();
+    let mut scratch = NetScratch::<4096>::new();
+    scratch.input_mut(input_q.len()).unwrap().copy_from_slice(&input_q);
+    let mut got = [0.0f32; 3];
+    parsed.run(&mut scratch, &mut got).unwrap();
+    let range = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(range > 0.0);
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 0.08 * range + 0.02, "quantized {g} vs float {w} (range {range})");
+    }
+}
+
 fn init_bytes(seed: u64) -> Vec<u8> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let finder = FloatNet {

@@ -109,6 +109,11 @@ pub struct DeviceCounts {
 pub struct F32s<'a>(&'a [u8]);
 
 impl<'a> F32s<'a> {
+    /// The values in `bytes` (4 each, little-endian).
+    pub(crate) const fn new(bytes: &'a [u8]) -> Self {
+        Self(bytes)
+    }
+
     /// Number of values.
     pub fn len(&self) -> usize {
         self.0.len() / 4

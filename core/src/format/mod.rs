@@ -3,7 +3,8 @@
 //! - [`blob`]: the quantized model (`GPMB`, `docs/blob-format.md`);
 //! - [`device_mesh`]: a mesh instance plus the scene to render it in (`GPDM`);
 //! - [`fit_input`]: the target image, its landmarks, the seed and the whole fit settings (`GPFI`);
-//! - [`fit_record`]: the fit's result as the firmware reports it (`GPFR`).
+//! - [`fit_record`]: the fit's result as the firmware reports it (`GPFR`);
+//! - [`detection`]: a camera frame to detect the face in (`GPDF`) and the detection (`GPDR`).
 //!
 //! All are little-endian, 4-byte aligned where read in place, and end in (or carry) a CRC-32.
 //! Readers check everything before anything is used and return a [`FormatError`], never panic.
@@ -12,6 +13,7 @@
 
 pub mod blob;
 pub mod bytes;
+pub mod detection;
 pub mod device_mesh;
 #[cfg(feature = "serde")]
 pub mod fit_input;
@@ -19,7 +21,7 @@ pub mod fit_record;
 
 use core::fmt;
 
-/// Why bytes were refused by a reader or a writer of [`device_mesh`], [`fit_input`] or [`fit_record`].
+/// Why bytes were refused by a reader or a writer of [`device_mesh`], [`fit_input`], [`fit_record`] or [`detection`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FormatError {

@@ -95,6 +95,13 @@ impl<'a> InitFile<'a> {
         Ok(Self { finder, initializer, crop_margin, landmarks, light, metadata })
     }
 
+    /// Bytes of the init file at the start of `bytes` by its header (`body_len` + 4 for the CRC);
+    /// checks the magic and the version only ([`Self::parse`] checks the rest).
+    pub fn byte_len(bytes: &[u8]) -> Result<usize, NetError> {
+        let mut r = Reader::after_header(bytes, INIT_MAGIC, INIT_VERSION)?;
+        Ok((r.u32()? as usize).saturating_add(4))
+    }
+
     /// Bytes each scratch buffer needs for both networks.
     pub fn scratch_bytes(&self) -> usize {
         self.finder.scratch_bytes().max(self.initializer.scratch_bytes())
@@ -245,22 +252,22 @@ pub fn landmark_box(points: &[[f32; 2]]) -> (f32, f32, f32) {
     ((lx + hx) * 0.5, (ly + hy) * 0.5, (hx - lx).max(hy - ly))
 }
 
-/// Finds the face and reads it: finder, then the initializer `1 + refine` times, each time on a
-/// crop re-centred on the previous pass's landmarks. `None` when the finder's score is below
-/// `min_score`.
-pub fn detect<const A: usize>(
+/// Whether the finder's box counts as a face for `min_score` (a NaN score never does).
+pub fn is_face(face: &FaceBox, min_score: f32) -> bool {
+    !(face.score.is_nan() || face.score < min_score)
+}
+
+/// The initializer's part of [`detect`]: reads the face in `face`'s box, then `refine` more times,
+/// each time on a crop re-centred on the previous pass's landmarks.
+pub fn read_landmarks<const A: usize>(
     init: &InitFile<'_>,
     rgb: &[u8],
     w: usize,
     h: usize,
-    min_score: f32,
+    face: FaceBox,
     refine: usize,
     scratch: &mut NetScratch<A>,
-) -> Result<Option<Detection>, NetError> {
-    let face = find_face(init, rgb, w, h, scratch)?;
-    if face.score.is_nan() || face.score < min_score {
-        return Ok(None);
-    }
+) -> Result<Detection, NetError> {
     let mut det = Detection { face, landmarks: Vec::new(), angles: [0.0; 3], light: Vec::new() };
     let mut crop = (face.cx, face.cy, face.size);
     for pass in 0..=refine {
@@ -273,5 +280,23 @@ pub fn detect<const A: usize>(
             }
         }
     }
-    Ok(Some(det))
+    Ok(det)
+}
+
+/// Finds the face and reads it: [`find_face`], then [`read_landmarks`] if [`is_face`] at
+/// `min_score` (else `None`).
+pub fn detect<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    min_score: f32,
+    refine: usize,
+    scratch: &mut NetScratch<A>,
+) -> Result<Option<Detection>, NetError> {
+    let face = find_face(init, rgb, w, h, scratch)?;
+    if !is_face(&face, min_score) {
+        return Ok(None);
+    }
+    read_landmarks(init, rgb, w, h, face, refine, scratch).map(Some)
 }

@@ -353,17 +353,22 @@ fn layer_forward(layer: &Layer<'_>, src: &[i8], input: Shape, output: Shape, mut
         }
     };
     match layer.kind {
-        LayerKind::Dense => {
-            for (o, w) in layer.weights.chunks_exact(layer.cin).enumerate() {
-                emit(o, finish(dot(src, w), o));
-            }
-        }
+        LayerKind::Dense => dot_channels(src, layer.weights, layer.cout, |o, acc| emit(o, finish(acc, o))),
         LayerKind::Conv => {
             let pad = k / 2;
-            let taps = k * layer.cin;
+            let taps = k * k * layer.cin;
+            let mut patch = [0i8; MAX_PATCH];
             let mut i = 0;
             for oy in 0..output.h {
                 for ox in 0..output.w {
+                    if let Some(patch) = patch.get_mut(..taps) {
+                        // The receptive field as one contiguous `[ky][kx][cin]` run, zeros outside
+                        // the image: one dot product per output channel, in the weights' order.
+                        gather(src, input, layer, (oy, ox), patch);
+                        dot_channels(patch, layer.weights, layer.cout, |o, acc| emit(i + o, finish(acc, o)));
+                        i += layer.cout;
+                        continue;
+                    }
                     // The kernel window clipped to the image (zero padding contributes nothing).
                     let y0 = (oy * layer.stride).saturating_sub(pad);
                     let y1 = (oy * layer.stride + k - pad).min(input.h);
@@ -372,11 +377,12 @@ fn layer_forward(layer: &Layer<'_>, src: &[i8], input: Shape, output: Shape, mut
                     let ky0 = y0 + pad - oy * layer.stride;
                     let kx0 = x0 + pad - ox * layer.stride;
                     let run = (x1.saturating_sub(x0)) * layer.cin;
-                    for (o, w) in layer.weights.chunks_exact(k * taps).enumerate() {
+                    let row = k * layer.cin;
+                    for (o, w) in layer.weights.chunks_exact(taps).enumerate() {
                         let mut acc = 0i32;
                         for (dy, iy) in (y0..y1).enumerate() {
                             let a = src.get((iy * input.w + x0) * layer.cin..).unwrap_or(&[]);
-                            let wr = w.get((ky0 + dy) * taps + kx0 * layer.cin..).unwrap_or(&[]);
+                            let wr = w.get((ky0 + dy) * row + kx0 * layer.cin..).unwrap_or(&[]);
                             acc += dot(a.get(..run).unwrap_or(&[]), wr);
                         }
                         emit(i, finish(acc, o));
@@ -385,6 +391,55 @@ fn layer_forward(layer: &Layer<'_>, src: &[i8], input: Shape, output: Shape, mut
                 }
             }
         }
+    }
+}
+
+/// Largest receptive field (`k·k·cin` bytes) gathered into a contiguous patch on the stack
+/// (3 × 3 × 64 = 576 in the default networks); larger layers sum row by row from the tensor.
+const MAX_PATCH: usize = 1024;
+
+/// Copies the `k × k × cin` receptive field of output `(oy, ox)` into `patch`, zeros outside the image.
+fn gather(src: &[i8], input: Shape, layer: &Layer<'_>, (oy, ox): (usize, usize), patch: &mut [i8]) {
+    let (k, cin) = (layer.kernel, layer.cin);
+    let pad = k / 2;
+    for (ky, row) in patch.chunks_exact_mut(k * cin).enumerate() {
+        let iy = (oy * layer.stride + ky).checked_sub(pad).filter(|&y| y < input.h);
+        for (kx, px) in row.chunks_exact_mut(cin).enumerate() {
+            let ix = (ox * layer.stride + kx).checked_sub(pad).filter(|&x| x < input.w);
+            let from = iy.zip(ix).and_then(|(y, x)| src.get((y * input.w + x) * cin..(y * input.w + x + 1) * cin));
+            match from {
+                Some(v) => px.copy_from_slice(v),
+                None => px.fill(0),
+            }
+        }
+    }
+}
+
+/// `emit(o, Σ a·w_o)` for every output channel `o` of `weights` (`cout` rows of `a.len()`), in
+/// order; two channels share each load of `a`. Integer sums: the order does not change them.
+fn dot_channels(a: &[i8], weights: &[i8], cout: usize, mut emit: impl FnMut(usize, i32)) {
+    let n = a.len();
+    if n == 0 {
+        (0..cout).for_each(|o| emit(o, 0));
+        return;
+    }
+    let mut rows = weights.chunks_exact(n).take(cout);
+    let mut o = 0;
+    while o + 2 <= cout {
+        let (Some(w0), Some(w1)) = (rows.next(), rows.next()) else { break };
+        let (mut s0, mut s1) = (0i32, 0i32);
+        for ((&x, &p), &q) in a.iter().zip(w0).zip(w1) {
+            let x = i32::from(x);
+            s0 += x * i32::from(p);
+            s1 += x * i32::from(q);
+        }
+        emit(o, s0);
+        emit(o + 1, s1);
+        o += 2;
+    }
+    for w in rows {
+        emit(o, dot(a, w));
+        o += 1;
     }
 }
 

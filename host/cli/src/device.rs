@@ -1,4 +1,4 @@
-//! The device commands: `gpmm quantize`, `gpmm inspect` and `gpmm device-fit`.
+//! The device commands: `gpmm quantize`, `gpmm inspect`, `gpmm device-fit` and `gpmm device-detect`.
 
 use crate::progress::spinner;
 use anyhow::{Context, Result};
@@ -45,6 +45,40 @@ pub struct DeviceFitArgs {
     pub keep_partition: Option<PathBuf>,
     /// QEMU time limit in seconds.
     #[arg(long, default_value_t = 1800)]
+    pub timeout: u32,
+}
+
+/// Arguments of `gpmm device-detect`.
+#[derive(Debug, Args)]
+pub struct DeviceDetectArgs {
+    /// Photo: PNG, JPEG or PPM (scaled to cover the device's frame and cut to it, as a camera would give).
+    pub image: PathBuf,
+    /// Init file from `gpmm train-init`.
+    #[arg(long, value_name = "INIT")]
+    pub init: PathBuf,
+    /// Device profile: m4f (Cortex-M4F, 192 KiB RAM) or m7 (Cortex-M7, 512 KiB RAM).
+    #[arg(long, default_value = "m4f", value_parser = ["m4f", "m7"])]
+    pub profile: String,
+    /// Frame width (px) of the device's camera.
+    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_WIDTH)]
+    pub width: u32,
+    /// Frame height (px).
+    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT)]
+    pub height: u32,
+    /// Re-centre the crop on the read landmarks this many times (0..=8).
+    #[arg(long, default_value_t = 1)]
+    pub refine: u32,
+    /// Smallest finder score (0..1) counted as a face.
+    #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE)]
+    pub min_score: f32,
+    /// Also run the core on the host on the same frame and report whether the outputs are bit-identical.
+    #[arg(long)]
+    pub compare_host: bool,
+    /// Keep the data partition image (init file + frame) at this path.
+    #[arg(long, value_name = "FILE")]
+    pub keep_partition: Option<PathBuf>,
+    /// QEMU time limit in seconds.
+    #[arg(long, default_value_t = 600)]
     pub timeout: u32,
 }
 
@@ -214,6 +248,47 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
             "max_landmark_difference_px": max_diff,
             "log_likelihood_relative_difference": ((host_ll - report.log_likelihood) / host_ll.abs().max(1e-9)).abs(),
         });
+    }
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    Ok(())
+}
+
+/// Runs `gpmm device-detect`: the frame and the partition, the firmware under QEMU, the JSON report.
+pub fn device_detect(a: DeviceDetectArgs) -> Result<()> {
+    use gpmm_host::device::detect::{camera_frame, compare, frame_bytes, host_detect, partition_bytes, run_detection};
+    let profile =
+        gpmm_core::profile::DeviceProfile::by_name(&a.profile).with_context(|| format!("unknown device profile {}", a.profile))?;
+    let mut init = gpmm_host::init::InitModel::load(&a.init)?;
+    let needed = init.file().map(|f| f.scratch_bytes()).unwrap_or(0);
+    if needed > profile.net_scratch {
+        anyhow::bail!(
+            "{}: its networks need {needed} bytes per activation buffer; the {} firmware gives them {}",
+            a.init.display(),
+            profile.name,
+            profile.net_scratch
+        );
+    }
+    let photo = gpmm_host::photo::load_rgb(&a.image)?;
+    if a.width == 0 || a.height == 0 || a.width > 1024 || a.height > 1024 {
+        anyhow::bail!("--width and --height must be 1..=1024 (got {}x{})", a.width, a.height);
+    }
+    let (frame, mapping) = camera_frame(&photo, a.width, a.height);
+    let section = frame_bytes(&frame, a.min_score, a.refine)?;
+    let partition = partition_bytes(init.bytes(), &section, &profile)?;
+    let dir = tempfile::tempdir().context("creating a temporary directory")?;
+    let path = a.keep_partition.clone().unwrap_or_else(|| dir.path().join("partition.bin"));
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.set_message(format!("building the {} firmware and detecting under QEMU", a.profile));
+    pb.enable_steady_tick(std::time::Duration::from_millis(200));
+    let report = run_detection(&a.profile, &partition, &path, a.timeout);
+    pb.finish_and_clear();
+    let report = report?;
+    let mut json = serde_json::to_value(&report)?;
+    json["frame_to_photo"] = serde_json::to_value(mapping)?;
+    json["landmarks_photo_px"] = serde_json::to_value(report.landmarks_px.iter().map(|p| mapping.to_photo(*p)).collect::<Vec<_>>())?;
+    if a.compare_host {
+        let (face, det) = host_detect(&mut init, &frame, a.min_score, a.refine)?;
+        json["parity"] = serde_json::to_value(compare(&report, &face, det.as_ref())?)?;
     }
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())

@@ -100,6 +100,15 @@ pub enum Command {
     /// log-likelihood and 68 landmarks. --compare-host runs the same fit on the host core too.
     /// Needs a gpmm source checkout (firmware-sim/) and installs QEMU and the toolchain if missing.
     DeviceFit(device::DeviceFitArgs),
+    /// Find the face and read its landmarks on the simulated device: Cortex-M firmware under QEMU.
+    ///
+    /// Scales the photo to cover the device camera's frame (default 160x120) and cuts it to it,
+    /// writes the data partition (the init file, then the frame), builds the firmware for the
+    /// profile, runs the core's finder and initializer under QEMU and prints JSON: the box,
+    /// score, pose, 68 landmarks (frame and photo px) and light, the instructions of the finder
+    /// and of the initializer, the stack peak and static RAM. --compare-host runs the same core
+    /// code on the host on the same frame and reports whether the outputs are bit-identical.
+    DeviceDetect(device::DeviceDetectArgs),
     /// Import a statismo / scalismo-faces .h5 model (e.g. the Basel Face Model) as a gpmm model (dense layout).
     ///
     /// Reads /shape and /color (model/mean, pcaBasis, pcaVariance, version, representer/cells;
@@ -156,6 +165,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Quantize(a) => device::quantize(a),
         Command::Inspect(a) => device::inspect(a),
         Command::DeviceFit(a) => device::device_fit(a),
+        Command::DeviceDetect(a) => device::device_detect(a),
         Command::ImportH5(a) => h5::import_h5(a),
         Command::ExportH5(a) => h5::export_h5(a),
         Command::TrainInit(a) => init::train_init(a),

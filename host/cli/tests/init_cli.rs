@@ -140,3 +140,39 @@ fn corrupted_or_missing_init_files_are_refused_by_name() {
     let err = fails(&gpmm(&["detect", s(&image), "--init", s(&f.model)]));
     assert!(err.contains("GPMI"), "{err}");
 }
+
+/// `gpmm device-detect` on a trained (quick) init file: the firmware under QEMU reads the same
+/// face as the host to the bit, and a bad init file or image is refused before QEMU runs.
+/// Needs QEMU and the thumbv7em toolchain (firmware-sim/install-deps.sh).
+#[test]
+fn device_detect_matches_the_host_bit_for_bit() {
+    let Some(f) = fixture() else { return };
+    let image = f.synth.join("0000_yaw30.png");
+    let part = f.dir.path().join("detect.partition");
+    let out = ok(&gpmm(&["device-detect", s(&image), "--init", s(&f.init), "--compare-host", "--keep-partition", s(&part)]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    eprintln!("{}", serde_json::to_string(&json["counts"]).unwrap());
+    assert_eq!(json["parity"]["bit_identical"], true, "{out}");
+    let c = &json["counts"];
+    assert_eq!((c["frame_width"].as_u64(), c["frame_height"].as_u64()), (Some(160), Some(120)));
+    let (finder, init) = (c["instructions_finder"].as_u64().unwrap(), c["instructions_initializer"].as_u64().unwrap());
+    assert!(finder > 1_000_000 && finder < c["instructions_total"].as_u64().unwrap(), "{c}");
+    if json["detection"]["found"] == true {
+        assert_eq!(json["landmarks_px"].as_array().unwrap().len(), 68);
+        assert_eq!(json["landmarks_photo_px"].as_array().unwrap().len(), 68);
+        assert!(init > 1_000_000, "{c}");
+    }
+    assert!(json["ram_total_bytes"].as_u64().unwrap() <= json["ram_budget_bytes"].as_u64().unwrap(), "{out}");
+    let kept = std::fs::read(&part).unwrap();
+    assert_eq!(&kept[..4], b"GPMI");
+    // A corrupted init file and a file that is no image: refused by name, before QEMU.
+    let mut bytes = std::fs::read(&f.init).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x01;
+    let bad = f.dir.path().join("device-bad.init");
+    std::fs::write(&bad, &bytes).unwrap();
+    let err = fails(&gpmm(&["device-detect", s(&image), "--init", s(&bad)]));
+    assert!(err.contains("device-bad.init") && err.contains("CRC"), "{err}");
+    let err = fails(&gpmm(&["device-detect", s(&f.init), "--init", s(&f.init)]));
+    assert!(err.contains("quick.init") && err.contains("image"), "{err}");
+}

@@ -252,13 +252,19 @@ pub fn run_firmware(profile: &str, partition: &Path, timeout_s: u32) -> Result<S
 
 /// The fit record the firmware logged as `GPFR <hex>` lines, as bytes.
 pub fn record_bytes(log: &str) -> Result<Vec<u8>, DeviceFitError> {
-    let hex: String = log.lines().filter_map(|l| l.split_once("GPFR ").map(|(_, h)| h.trim())).collect();
-    if hex.is_empty() {
+    if !log.lines().any(|l| l.contains("GPFR ")) {
         return Err(DeviceFitError::Missing("fit record (GPFR lines)"));
     }
+    tagged_hex(log, "GPFR ").ok_or(DeviceFitError::Missing("well-formed fit record (hex digits)"))
+}
+
+/// The bytes a firmware logged as hex after `tag` on its lines, joined (`None` if there are no
+/// such lines or they are not whole bytes of hex digits).
+pub fn tagged_hex(log: &str, tag: &str) -> Option<Vec<u8>> {
+    let hex: String = log.lines().filter_map(|l| l.split_once(tag).map(|(_, h)| h.trim())).collect();
     let digits: Option<Vec<u8>> = hex.chars().map(|c| c.to_digit(16).map(|d| d as u8)).collect();
-    let digits = digits.filter(|d| d.len() % 2 == 0).ok_or(DeviceFitError::Missing("well-formed fit record (hex digits)"))?;
-    Ok(digits.chunks_exact(2).map(|p| p[0] << 4 | p[1]).collect())
+    let digits = digits.filter(|d| !d.is_empty() && d.len() % 2 == 0)?;
+    Some(digits.chunks_exact(2).map(|p| p[0] << 4 | p[1]).collect())
 }
 
 /// Reads the report out of the firmware's fit record and the `GPMM_FIGURES` line of `run.sh`.
@@ -314,7 +320,7 @@ pub fn parse_report(profile: &str, log: &str) -> Result<DeviceFitReport, DeviceF
 }
 
 /// A figure from run.sh's `GPMM_FIGURES {json}` line.
-fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError> {
+pub(crate) fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError> {
     let line = log.lines().find_map(|l| l.strip_prefix("GPMM_FIGURES ")).ok_or(DeviceFitError::Missing("GPMM_FIGURES line"))?;
     let v: serde_json::Value = serde_json::from_str(line).map_err(|_| DeviceFitError::Missing("GPMM_FIGURES line"))?;
     v.get(key).and_then(|x| x.as_u64().or_else(|| x.as_str().and_then(|s| s.parse().ok()))).ok_or(DeviceFitError::Missing(key))

@@ -1,0 +1,160 @@
+//! The landmark-free start on the device: an init file (`GPMI`, `docs/init-format.md`) at the start
+//! of the data partition and a camera frame after it (`gpmm_core::format::detection`, `GPDF`), the
+//! core's finder and initializer on the whole frame (`find_face`, then `read_landmarks`: the two
+//! halves of `face::detect`, which `gpmm detect` runs on the host), and the result as a detection
+//! record (`GPDR`, logged as `GPDR <hex>` lines) plus the figures as `key=value`.
+//!
+//! RAM: the networks' two activation buffers (`NetScratch`, `PROFILE.net_scratch` bytes each) live
+//! on this function's stack, not in the statics: a detection and a fit never run in one boot, so
+//! the fit's static RAM and stack margin stay as they were.
+
+use crate::{clock, fail, stack, PROFILE};
+use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
+use gpmm_core::net::face::{find_face, is_face, read_landmarks, Detection, FaceBox, InitFile};
+use gpmm_core::net::{NetError, NetScratch};
+
+/// Bytes of each activation buffer.
+const SCRATCH: usize = PROFILE.net_scratch;
+/// Record bytes logged per `GPDR` line.
+const RECORD_CHUNK: usize = 96;
+
+fn instructions_now() -> u64 {
+    clock::ticks() * u64::from(clock::INSTRUCTIONS_PER_TICK)
+}
+
+/// Runs the detection on the init file and the frame in `part`; logs everything, fails on bad data.
+pub fn run(part: &'static [u8]) {
+    let t_start = instructions_now();
+    let init = match InitFile::parse(part) {
+        Ok(i) => i,
+        Err(e) => {
+            defmt::error!("data partition: not a valid init file: {}", defmt::Display2Format(&e));
+            fail();
+        }
+    };
+    let init_len = InitFile::byte_len(part).unwrap_or(part.len());
+    let frame = match part.get(detection::frame_offset(init_len)..).map(detection::parse_frame) {
+        Some(Ok(f)) => f,
+        Some(Err(e)) => {
+            defmt::error!("data partition: no valid detection frame after the init file: {}", defmt::Display2Format(&e));
+            fail();
+        }
+        None => {
+            defmt::error!("data partition: the init file fills it, no room for a detection frame");
+            fail();
+        }
+    };
+    let t_parsed = instructions_now();
+    let needed = init.scratch_bytes();
+    defmt::info!(
+        "init_bytes={=u32} frame_width={=u32} frame_height={=u32} net_scratch_bytes={=u32} net_scratch_needed_bytes={=u32} finder_macs={=u32} initializer_macs={=u32}",
+        init_len as u32,
+        frame.width,
+        frame.height,
+        SCRATCH as u32,
+        needed as u32,
+        init.finder.macs() as u32,
+        init.initializer.macs() as u32
+    );
+    if needed > SCRATCH {
+        defmt::error!(
+            "the init file's networks need {=u32} bytes per activation buffer; this firmware has {=u32}",
+            needed as u32,
+            SCRATCH as u32
+        );
+        fail();
+    }
+    let mut counts = DetectCounts {
+        instructions_parse: t_parsed - t_start,
+        scratch_bytes: SCRATCH as u32,
+        scratch_needed_bytes: needed as u32,
+        init_bytes: init_len as u32,
+        partition_bytes: part.len() as u32,
+        finder_macs: init.finder.macs() as u32,
+        initializer_macs: init.initializer.macs() as u32,
+        frame_width: frame.width,
+        frame_height: frame.height,
+        ..DetectCounts::default()
+    };
+    let (face, det) = networks(&init, &frame, &mut counts);
+    counts.instructions_total = instructions_now() - t_start;
+    log_record(&face, det.as_ref(), &mut counts);
+}
+
+/// The finder, then (if it found a face) the initializer, each timed; the scratch is this frame's.
+#[inline(never)]
+fn networks(init: &InitFile<'_>, frame: &Frame<'_>, counts: &mut DetectCounts) -> (FaceBox, Option<Detection>) {
+    let mut scratch = NetScratch::<SCRATCH>::new();
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let (face, finder) = clock::measure(|| find_face(init, frame.rgb, w, h, &mut scratch));
+    counts.instructions_finder = finder;
+    let face = face.unwrap_or_else(|e| refused("finder", e));
+    if !is_face(&face, frame.min_score) {
+        return (face, None);
+    }
+    let refine = frame.refine as usize;
+    let (det, initializer) = clock::measure(|| read_landmarks(init, frame.rgb, w, h, face, refine, &mut scratch));
+    counts.instructions_initializer = initializer;
+    counts.initializer_runs = frame.refine + 1;
+    (face, Some(det.unwrap_or_else(|e| refused("initializer", e))))
+}
+
+/// Encodes the record and logs it as hex lines, then the figures and a human summary.
+#[inline(never)]
+fn log_record(face: &FaceBox, det: Option<&Detection>, counts: &mut DetectCounts) {
+    let figures = DetectionFigures {
+        found: det.is_some(),
+        cx: face.cx,
+        cy: face.cy,
+        size: face.size,
+        score: face.score,
+        angles: det.map_or([0.0; 3], |d| d.angles),
+    };
+    let (landmarks, light): (&[[f32; 2]], &[f32]) = match det {
+        Some(d) => (&d.landmarks, &d.light),
+        None => (&[], &[]),
+    };
+    // Everything the detection used is behind us: the high-water mark is the detection's.
+    counts.stack_peak_bytes = stack::peak_bytes();
+    let mut record = [0u8; detection::record_len(MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT)];
+    let len = match detection::write_record(&mut record, &figures, counts, landmarks, light) {
+        Ok(len) => len,
+        Err(e) => {
+            defmt::error!("detection record: {}", e);
+            fail();
+        }
+    };
+    let mut hex = [0u8; 2 * RECORD_CHUNK];
+    for chunk in record.get(..len).unwrap_or(&[]).chunks(RECORD_CHUNK) {
+        for (pair, b) in hex.chunks_exact_mut(2).zip(chunk) {
+            let digit = |v: u8| if v < 10 { b'0' + v } else { b'a' + v - 10 };
+            pair.copy_from_slice(&[digit(b >> 4), digit(b & 15)]);
+        }
+        let text = hex.get(..2 * chunk.len()).and_then(|h| core::str::from_utf8(h).ok()).unwrap_or("");
+        defmt::info!("GPDR {=str}", text);
+    }
+    defmt::info!(
+        "finder_instructions={=u64} initializer_instructions={=u64} initializer_runs={=u32} detect_instructions={=u64}",
+        counts.instructions_finder,
+        counts.instructions_initializer,
+        counts.initializer_runs,
+        counts.instructions_total
+    );
+    match det {
+        Some(d) => defmt::info!(
+            "detect: face at ({=f32}, {=f32}) px, size {=f32} px, score {=f32}; yaw {=f32} rad; {=u32} landmarks",
+            d.face.cx,
+            d.face.cy,
+            d.face.size,
+            d.face.score,
+            d.angles[0],
+            d.landmarks.len() as u32
+        ),
+        None => defmt::info!("detect: no face (finder score {=f32} below the frame's minimum)", face.score),
+    }
+}
+
+fn refused(stage: &str, e: NetError) -> ! {
+    defmt::error!("{=str}: the core refused the input: {}", stage, defmt::Display2Format(&e));
+    fail()
+}
