@@ -26,7 +26,7 @@ pub struct TrainInitArgs {
     /// A few seconds of training on a few dozen scenes (for tests: the networks learn little).
     #[arg(long)]
     pub quick: bool,
-    /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 25 minutes on 2 cores).
+    /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 30 minutes on 2 cores).
     #[arg(long, value_name = "N")]
     pub chunks: Option<usize>,
     /// Write a picture grid of training scenes (what the networks see) to this PNG.

@@ -36,8 +36,8 @@ pub struct TrainOptions {
 }
 
 impl TrainOptions {
-    /// The default training (3,840 steps on 81,920 scenes, each seen three times; about 25
-    /// minutes on two cores).
+    /// The default training (3,840 steps on 81,920 scenes, each seen three times; about 30
+    /// minutes on two idle cores; 65 at load 4-8).
     pub fn full(seed: u64) -> Self {
         Self { seed, chunks: 40, chunk_scenes: 2048, passes: 3, batch: 64, lr: 2e-3, validation: 300, ranges: SceneRanges::default() }
     }
