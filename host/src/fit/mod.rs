@@ -395,6 +395,9 @@ pub struct FitReport {
     pub image: String,
     /// Landmark file as given.
     pub landmarks_file: String,
+    /// Every setting of the fit (as `gpmm fit --set` names them; absent in older files).
+    #[serde(default)]
+    pub settings: FitSettings,
     /// Whether the landmark file was read as 1-based.
     pub pts_one_based: bool,
     /// Original image width and height.
@@ -498,6 +501,7 @@ pub fn report(
         fitted_ranks: [p.shape_len(), p.color_len()],
         image: inputs.image_path.to_string(),
         landmarks_file: inputs.pts_path.to_string(),
+        settings: settings.fit,
         pts_one_based: inputs.pts_one_based,
         image_size: prepared.original_size,
         crop: prepared.crop,
