@@ -8,15 +8,13 @@
 //! on this function's stack, not in the statics: a detection and a fit never run in one boot, so
 //! the fit's static RAM and stack margin stay as they were.
 
-use crate::{clock, fail, stack, PROFILE};
-use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
-use gpmm_core::net::face::{find_face, is_face, read_landmarks, Detection, FaceBox, InitFile};
+use crate::{clock, fail, hexlog, stack, PROFILE};
+use gpmm_core::format::detection::{self, DetectCounts, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
+use gpmm_core::net::face::{find_face, is_face, read_landmarks, record_parts, Detection, FaceBox, InitFile};
 use gpmm_core::net::{NetError, NetScratch};
 
 /// Bytes of each activation buffer.
 const SCRATCH: usize = PROFILE.net_scratch;
-/// Record bytes logged per `GPDR` line.
-const RECORD_CHUNK: usize = 96;
 
 fn instructions_now() -> u64 {
     clock::ticks() * u64::from(clock::INSTRUCTIONS_PER_TICK)
@@ -102,18 +100,7 @@ fn networks(init: &InitFile<'_>, frame: &Frame<'_>, counts: &mut DetectCounts) -
 /// Encodes the record and logs it as hex lines, then the figures and a human summary.
 #[inline(never)]
 fn log_record(face: &FaceBox, det: Option<&Detection>, counts: &mut DetectCounts) {
-    let figures = DetectionFigures {
-        found: det.is_some(),
-        cx: face.cx,
-        cy: face.cy,
-        size: face.size,
-        score: face.score,
-        angles: det.map_or([0.0; 3], |d| d.angles),
-    };
-    let (landmarks, light): (&[[f32; 2]], &[f32]) = match det {
-        Some(d) => (&d.landmarks, &d.light),
-        None => (&[], &[]),
-    };
+    let (figures, landmarks, light) = record_parts(face, det);
     // Everything the detection used is behind us: the high-water mark is the detection's.
     counts.stack_peak_bytes = stack::peak_bytes();
     let mut record = [0u8; detection::record_len(MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT)];
@@ -124,15 +111,7 @@ fn log_record(face: &FaceBox, det: Option<&Detection>, counts: &mut DetectCounts
             fail();
         }
     };
-    let mut hex = [0u8; 2 * RECORD_CHUNK];
-    for chunk in record.get(..len).unwrap_or(&[]).chunks(RECORD_CHUNK) {
-        for (pair, b) in hex.chunks_exact_mut(2).zip(chunk) {
-            let digit = |v: u8| if v < 10 { b'0' + v } else { b'a' + v - 10 };
-            pair.copy_from_slice(&[digit(b >> 4), digit(b & 15)]);
-        }
-        let text = hex.get(..2 * chunk.len()).and_then(|h| core::str::from_utf8(h).ok()).unwrap_or("");
-        defmt::info!("GPDR {=str}", text);
-    }
+    hexlog::lines("GPDR", record.get(..len).unwrap_or(&[]));
     defmt::info!(
         "finder_instructions={=u64} initializer_instructions={=u64} initializer_runs={=u32} detect_instructions={=u64}",
         counts.instructions_finder,

@@ -9,7 +9,7 @@
 //! covered pixel) out of two static arrays; the rest (parameters, chain states, background
 //! model) is stack.
 
-use crate::{clock, fail, stack, Rasterizer, PROFILE};
+use crate::{clock, fail, hexlog, stack, Rasterizer, PROFILE};
 use gpmm_core::blob::ModelBlob;
 use gpmm_core::fit::{
     project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, Stage, StandardFit, TargetImage, MAX_LANDMARKS,
@@ -26,8 +26,6 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 pub const KS: usize = PROFILE.shape_capacity;
 /// Colour coefficient capacity.
 pub const KC: usize = PROFILE.color_capacity;
-/// Record bytes logged per `GPFR` line.
-const RECORD_CHUNK: usize = 96;
 
 /// Instruction counter readings at the stage boundaries.
 #[derive(Default)]
@@ -197,15 +195,7 @@ fn log_record(
                 fail();
             }
         };
-    let mut hex = [0u8; 2 * RECORD_CHUNK];
-    for chunk in record.get(..len).unwrap_or(&[]).chunks(RECORD_CHUNK) {
-        for (pair, b) in hex.chunks_exact_mut(2).zip(chunk) {
-            let digit = |v: u8| if v < 10 { b'0' + v } else { b'a' + v - 10 };
-            pair.copy_from_slice(&[digit(b >> 4), digit(b & 15)]);
-        }
-        let text = hex.get(..2 * chunk.len()).and_then(|h| core::str::from_utf8(h).ok()).unwrap_or("");
-        defmt::info!("GPFR {=str}", text);
-    }
+    hexlog::lines("GPFR", record.get(..len).unwrap_or(&[]));
     let deg = 180.0 / core::f32::consts::PI;
     defmt::info!(
         "fit: yaw {=f32} deg, pitch {=f32} deg, landmark RMSE {=f32} px, log-likelihood {=f32}; {=u64} instructions ({=u64} per image step), stack {=u32} B",

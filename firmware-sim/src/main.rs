@@ -25,6 +25,7 @@
 mod clock;
 mod detect;
 mod fit;
+mod hexlog;
 mod partition;
 mod stack;
 

@@ -5,6 +5,7 @@
 use super::resample::{sample_rgb, Window};
 use super::{NetError, NetScratch, Network};
 use crate::format::bytes::{check_crc, Reader, Writer};
+use crate::format::detection::DetectionFigures;
 use crate::format::FormatError;
 use heapless::Vec;
 
@@ -299,4 +300,21 @@ pub fn detect<const A: usize>(
         return Ok(None);
     }
     read_landmarks(init, rgb, w, h, face, refine, scratch).map(Some)
+}
+
+/// A detection record's figures, landmarks and light for the finder's box and, when it was
+/// taken as a face, the initializer's reading (the firmware and the host build records alike).
+pub fn record_parts<'a>(face: &FaceBox, det: Option<&'a Detection>) -> (DetectionFigures, &'a [[f32; 2]], &'a [f32]) {
+    let figures = DetectionFigures {
+        found: det.is_some(),
+        cx: face.cx,
+        cy: face.cy,
+        size: face.size,
+        score: face.score,
+        angles: det.map_or([0.0; 3], |d| d.angles),
+    };
+    match det {
+        Some(d) => (figures, &d.landmarks, &d.light),
+        None => (figures, &[], &[]),
+    }
 }

@@ -8,7 +8,7 @@ use crate::device::fit::{figure, run_firmware, tagged_hex, DeviceFitError};
 use crate::init::{InitError, InitModel};
 use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::FormatError;
-use gpmm_core::net::face::{find_face, Detection, FaceBox};
+use gpmm_core::net::face::{find_face, record_parts, Detection, FaceBox};
 use gpmm_core::net::NetScratch;
 use gpmm_core::profile::DeviceProfile;
 use image::RgbImage;
@@ -117,15 +117,7 @@ pub fn host_detect(
 /// Record bytes for a detection with `counts` (the host's run gets the device's counts, so two
 /// records are byte-identical exactly when the detections are bit-identical).
 pub fn record_bytes(face: &FaceBox, det: Option<&Detection>, counts: &DetectCounts) -> Result<Vec<u8>, FormatError> {
-    let figures = DetectionFigures {
-        found: det.is_some(),
-        cx: face.cx,
-        cy: face.cy,
-        size: face.size,
-        score: face.score,
-        angles: det.map_or([0.0; 3], |d| d.angles),
-    };
-    let (lm, light): (&[[f32; 2]], &[f32]) = det.map_or((&[], &[]), |d| (&d.landmarks, &d.light));
+    let (figures, lm, light) = record_parts(face, det);
     let mut out = vec![0u8; detection::record_len(lm.len(), light.len())];
     let n = detection::write_record(&mut out, &figures, counts, lm, light)?;
     out.truncate(n);
