@@ -5,10 +5,11 @@
 //! sometimes given hair. The finder then learns heads, not floating masks.
 
 use crate::gp::model::GpModel;
-use crate::mesh::closest::closest_on_triangle;
+use crate::mesh::closest::{closest_on_triangle, Grid};
+use crate::mesh::geometry::dist2;
 use crate::mesh::template::{face_crop_indices, load_template, Template, TemplateError, TemplateOptions};
 use crate::render::Instance;
-use gpmm_core::Vec3;
+use gpmm_core::{vertex_normals, Vec3};
 use rand::{Rng, RngExt};
 use std::path::Path;
 
@@ -89,9 +90,11 @@ impl HeadContext {
                 }
             }
         }
+        let grid = Grid::new(&head.mesh.positions, 5.0);
         let surface_gap = |p: Vec3| -> f32 {
-            let (i, d) = nearest(&positions, p);
             let q = p.map(f64::from);
+            let Some(i) = grid.nearest(&head.mesh.positions, q) else { return f32::INFINITY };
+            let d = head.mesh.positions.get(i).map_or(f32::INFINITY, |v| dist2(*v, q).sqrt() as f32);
             around[i]
                 .iter()
                 .filter_map(|&t| head.mesh.triangles.get(t as usize))
@@ -102,7 +105,7 @@ impl HeadContext {
                         head.mesh.positions.get(tri[2] as usize)?,
                     ];
                     let (c, _) = closest_on_triangle(q, corners.map(|c| *c));
-                    Some(((c[0] - q[0]).powi(2) + (c[1] - q[1]).powi(2) + (c[2] - q[2]).powi(2)).sqrt() as f32)
+                    Some(dist2(c, q).sqrt() as f32)
                 })
                 .fold(d, f32::min)
         };
@@ -115,7 +118,8 @@ impl HeadContext {
                  the model was not built from this template (or at another scale)"
             ));
         }
-        let normals = vertex_normals(&positions, &head.mesh.triangles);
+        let mut normals = vec![[0.0f32; 3]; positions.len()];
+        vertex_normals(&positions, &head.mesh.triangles, &mut normals).map_err(|e| format!("the head mesh: {e}"))?;
         let positions: Vec<Vec3> = positions.iter().zip(&normals).map(|(p, n)| std::array::from_fn(|k| p[k] - INSET_MM * n[k])).collect();
         let anchors = positions.iter().map(|p| anchor(&face, *p)).collect();
         let inside = face_crop_indices(&head.mesh, &head.landmarks).unwrap_or_default();
@@ -186,18 +190,6 @@ impl HeadContext {
     }
 }
 
-/// The nearest point of `points` to `q` and its distance.
-fn nearest(points: &[Vec3], q: Vec3) -> (usize, f32) {
-    let mut best = (0, f32::INFINITY);
-    for (i, p) in points.iter().enumerate() {
-        let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
-        if d < best.1 {
-            best = (i, d);
-        }
-    }
-    (best.0, best.1.sqrt())
-}
-
 /// The `ANCHORS` nearest face vertices of `p`, weighted by inverse squared distance.
 fn anchor(face: &[Vec3], p: Vec3) -> Anchor {
     let mut near = [(0u32, f32::INFINITY); ANCHORS];
@@ -212,28 +204,4 @@ fn anchor(face: &[Vec3], p: Vec3) -> Anchor {
     let sum: f32 = raw.iter().sum();
     let closest = near[0].1.sqrt();
     Anchor { ids: near.map(|(i, _)| i), weights: raw.map(|w| w / sum), fade: (-(closest / FADE_MM).powi(2)).exp() }
-}
-
-/// Area-weighted unit vertex normals (zero for unused vertices).
-fn vertex_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
-    let mut normals = vec![[0.0f32; 3]; positions.len()];
-    for t in triangles {
-        let [a, b, c] = t.map(|i| positions.get(i as usize).copied().unwrap_or_default());
-        let (u, v) = (std::array::from_fn::<f32, 3, _>(|k| b[k] - a[k]), std::array::from_fn::<f32, 3, _>(|k| c[k] - a[k]));
-        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-        for &i in t {
-            if let Some(m) = normals.get_mut(i as usize) {
-                for k in 0..3 {
-                    m[k] += n[k];
-                }
-            }
-        }
-    }
-    for n in &mut normals {
-        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        if l > 0.0 {
-            *n = n.map(|v| v / l);
-        }
-    }
-    normals
 }
