@@ -174,7 +174,21 @@ fn firmware_fit_uses_every_setting() {
         },
         image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02, color_polish_rounds: 1 },
         ranks: RankSettings { shape: 30, color: 20 },
-        start: StartSettings { nominal_distance_mm: 600.0, color_rounds: 2, color_stride: 3, color_weight: 0.5, color_iterations: 12 },
+        // The shape solve needs the host's scratch (about 1 MB): the device refuses it, so its
+        // rounds stay 0 here and only the settings' wire form is exercised.
+        start: StartSettings {
+            nominal_distance_mm: 600.0,
+            color_rounds: 2,
+            color_stride: 3,
+            color_weight: 0.5,
+            color_iterations: 12,
+            shape_rounds: 0,
+            shape_components: 12,
+            shape_iterations: 2,
+            shape_stride: 3,
+            shape_weight: 0.5,
+            shape_landmarks: false,
+        },
         proposals: ProposalSettings {
             landmark_pose: MixtureShares { pose: 0.9, ..defaults.proposals.landmark_pose },
             landmark_shape: MixtureShares { shape: 0.5, ..defaults.proposals.landmark_shape },

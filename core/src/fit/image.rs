@@ -63,6 +63,30 @@ impl<'a> TargetImage<'a> {
         Some(to_linear(p))
     }
 
+    /// The linear colour at the continuous position `(x, y)`, interpolated bilinearly between the
+    /// four nearest pixel centres (edge pixels repeated), if `(x, y)` is inside the image.
+    pub fn sample_bilinear(&self, x: f32, y: f32) -> Option<Vec3> {
+        if !(x >= 0.0 && y >= 0.0 && x < self.width as f32 && y < self.height as f32) {
+            return None;
+        }
+        let (fx, fy) = (x - 0.5, y - 0.5);
+        let (x0, y0) = (libm::floorf(fx), libm::floorf(fy));
+        let (tx, ty) = (fx - x0, fy - y0);
+        let clamp = |v: f32, hi: u32| -> u32 { (v.max(0.0) as u32).min(hi.saturating_sub(1)) };
+        let (xa, xb) = (clamp(x0, self.width), clamp(x0 + 1.0, self.width));
+        let (ya, yb) = (clamp(y0, self.height), clamp(y0 + 1.0, self.height));
+        let px = |xx: u32, yy: u32| self.pixel(xx, yy).map(to_linear);
+        let (a, b, c, d) = (px(xa, ya)?, px(xb, ya)?, px(xa, yb)?, px(xb, yb)?);
+        let mut out = [0.0f32; 3];
+        for (i, o) in out.iter_mut().enumerate() {
+            let g = |v: &Vec3| v.get(i).copied().unwrap_or(0.0);
+            let top = g(&a) + tx * (g(&b) - g(&a));
+            let bottom = g(&c) + tx * (g(&d) - g(&c));
+            *o = top + ty * (bottom - top);
+        }
+        Some(out)
+    }
+
     /// The pixel at row-major index `index`, if inside.
     pub fn pixel_at(&self, index: u32) -> Option<[u8; 3]> {
         self.pixels.get(index as usize).copied()

@@ -11,6 +11,7 @@
 //! - [`observer`]: [`ChainObserver`]s that see every proposal's outcome ([`Acceptance`] counts).
 //! - [`light_fit`]: the closed-form least-squares SH light on sampled visible vertices.
 //! - [`color_fit`]: the colour coefficients by regularized least squares (conjugate gradients).
+//! - [`shape_fit`]: the leading shape coefficients by damped Gauss–Newton on the image.
 //! - [`chain`]: Metropolis-Hastings with delayed acceptance (prior and landmarks, then the image).
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
 //! - [`settings`]: its one [`FitSettings`] (steps, ranks, σ's, proposal mixtures, light).
@@ -35,8 +36,9 @@ pub mod prior;
 pub mod proposal;
 pub mod recipe;
 pub mod settings;
+pub mod shape_fit;
 
-pub use crate::model::instance::{Instance, InstanceBuffers, SpareBuffers};
+pub use crate::model::instance::{Instance, InstanceBuffers, SolveScratch, SolverView, SpareBuffers};
 /// The morphable-model view under its old path (`gpmm_core::fit::morph`); it lives in [`crate::model`].
 pub use crate::model::morphable as morph;
 pub use crate::model::morphable::MorphableModel;
@@ -60,5 +62,6 @@ pub use settings::{
     Drift, DriftSettings, FitSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, ProposalSettings, RankSettings,
     StartSettings,
 };
+pub use shape_fit::{solve_shape, ShapeSolveConfig, ShapeSolveReport, MAX_SHAPE_SOLVE};
 
 pub use crate::error::FitError;

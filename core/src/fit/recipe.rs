@@ -37,6 +37,7 @@ use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::{Mixture, StandardProposal};
 use super::settings::FitSettings;
+use super::shape_fit::{solve_shape, ShapeSolveConfig};
 use super::FitError;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
@@ -185,6 +186,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         start.light = l;
     }
     color_rounds::<I, KS, KC>(model, &image, settings, settings.start.color_rounds, &mut start, instance, w, h)?;
+    shape_rounds::<I, KS, KC>(model, &image, settings.start.shape_landmarks.then_some(&lm), settings, &mut start, instance, w, h)?;
 
     // 4. The image chain.
     let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
@@ -280,6 +282,54 @@ fn color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
             Err(_) => break,
         }
     }
+    Ok(())
+}
+
+/// [`StartSettings::shape_rounds`](super::settings::StartSettings) shape-and-light rounds on
+/// `start` (step 3 of [`standard_fit`]): the leading shape components by Gauss–Newton on the
+/// image, then the light (and, with colour rounds, one colour round). A failed solve ends the
+/// rounds and keeps what was found before it; without the solve scratch the fit is refused
+/// ([`FitError::BadConfig`]). `instance` must hold `start`.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn shape_rounds<I: TriIndex, const KS: usize, const KC: usize>(
+    model: &MorphableModel<'_, I>,
+    image: &TargetImage<'_>,
+    landmarks: Option<&LandmarkTarget<'_>>,
+    settings: &FitSettings,
+    start: &mut FitParams<KS, KC>,
+    instance: &mut Instance<'_, KS, KC>,
+    w: u32,
+    h: u32,
+) -> Result<(), FitError> {
+    let s = &settings.start;
+    if s.shape_rounds == 0 {
+        return Ok(());
+    }
+    if instance.solver_view().is_none() {
+        return Err(FitError::BadConfig);
+    }
+    let config = ShapeSolveConfig {
+        stride: s.shape_stride,
+        min_cos: settings.light.min_cos,
+        pixel_sigma: settings.image.pixel_sigma,
+        weight: s.shape_weight,
+        components: s.shape_components,
+        iterations: s.shape_iterations,
+    };
+    let every_vertex = settings.light.solve_config(settings.light.start_stride);
+    for _ in 0..s.shape_rounds {
+        if solve_shape(model, instance, start, image, landmarks, &config).is_err() {
+            break;
+        }
+        let camera = start.camera(w, h);
+        match solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &camera, image, &every_vertex) {
+            Ok(l) => start.light = l,
+            Err(_) => break,
+        }
+        color_rounds::<I, KS, KC>(model, image, settings, u32::from(s.color_rounds > 0), start, instance, w, h)?;
+    }
+    instance.update(model, start, w, h)?;
     Ok(())
 }
 

@@ -104,12 +104,37 @@ pub struct StartSettings {
     pub color_weight: f32,
     /// Conjugate-gradient iterations of one colour solve.
     pub color_iterations: u32,
+    /// Rounds of the start's shape solve (after the colour rounds): each moves the leading shape
+    /// components by Gauss–Newton on the image ([`super::shape_fit`]), then solves the light and
+    /// (with colour rounds) the colour again. Needs the host's solve scratch; 0 on the device.
+    pub shape_rounds: u32,
+    /// Leading shape components the shape solve moves (at most [`super::shape_fit::MAX_SHAPE_SOLVE`]).
+    pub shape_components: usize,
+    /// Gauss–Newton iterations of one shape solve.
+    pub shape_iterations: u32,
+    /// Vertex stride of the shape solve (≥ 1).
+    pub shape_stride: usize,
+    /// Pixels a sampled vertex stands for in the shape solve's data term (> 0).
+    pub shape_weight: f32,
+    /// Whether the shape solve's objective has the landmark term (Gaussian, the chain's σ).
+    pub shape_landmarks: bool,
 }
 
 impl StartSettings {
-    /// Start at 500 mm; no colour solve.
-    pub const DEFAULT: Self =
-        Self { nominal_distance_mm: 500.0, color_rounds: 0, color_stride: 2, color_weight: 1.0, color_iterations: 12 };
+    /// Start at 500 mm; no colour or shape solve.
+    pub const DEFAULT: Self = Self {
+        nominal_distance_mm: 500.0,
+        color_rounds: 0,
+        color_stride: 2,
+        color_weight: 1.0,
+        color_iterations: 12,
+        shape_rounds: 0,
+        shape_components: 40,
+        shape_iterations: 3,
+        shape_stride: 2,
+        shape_weight: 1.0,
+        shape_landmarks: true,
+    };
 }
 
 impl FitSettings {
@@ -158,6 +183,9 @@ impl FitSettings {
             && positive(self.start.nominal_distance_mm)
             && self.start.color_stride >= 1
             && positive(self.start.color_weight)
+            && self.start.shape_stride >= 1
+            && positive(self.start.shape_weight)
+            && self.start.shape_components <= super::shape_fit::MAX_SHAPE_SOLVE
             && positive(l.contour_sigma_factor)
             && i.background_floor >= 0.0
             && (0.0..=1.0).contains(&l.pose_share)

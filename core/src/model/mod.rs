@@ -11,6 +11,6 @@ pub mod morphable;
 pub mod params;
 
 pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
-pub use instance::{Instance, InstanceBuffers, SpareBuffers};
+pub use instance::{Instance, InstanceBuffers, SolveScratch, SolverView, SpareBuffers};
 pub use morphable::{MorphableModel, MAX_LANDMARKS};
 pub use params::FitParams;

@@ -152,6 +152,11 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
         self.color_mean
     }
 
+    /// Shape component `k`'s (scaled) vector at `vertex` (zero outside the basis).
+    pub fn shape_component(&self, k: usize, vertex: usize) -> Vec3 {
+        self.shape.component_at(k, vertex)
+    }
+
     /// Colour component `k`'s (scaled) vector at `vertex` (zero outside the basis).
     pub fn color_component(&self, k: usize, vertex: usize) -> Vec3 {
         self.color.component_at(k, vertex)

@@ -25,7 +25,8 @@ use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
-    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SpareBuffers, TargetImage, MAX_LANDMARKS,
+    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SolveScratch, SpareBuffers, TargetImage,
+    MAX_LANDMARKS, MAX_SHAPE_SOLVE,
 };
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::shading::{ShadingBuffers, ShadingCache};
@@ -264,12 +265,18 @@ pub fn fit_prepared(
     let (mut basis, mut irradiance) = (vec![[0.0f32; SH_COEFFS]; nv], vec![[0.0f32; 3]; nv]);
     let shading = ShadingCache::new(ShadingBuffers { basis: &mut basis, irradiance: &mut irradiance }, nv)
         .map_err(|e| FitRunError::Core { stage: "instance", error: e.into() })?;
+    // Room for the start's shape solve (only when it runs): sampled vertex ids and their
+    // residuals and Jacobian rows.
+    let solve_samples = if core_settings.start.shape_rounds > 0 { nv.div_ceil(core_settings.start.shape_stride.max(1)) } else { 0 };
+    let solve_row = 3 * (core_settings.start.shape_components.min(MAX_SHAPE_SOLVE) + 1);
+    let (mut solve_ids, mut solve_values) = (vec![0u32; solve_samples], vec![0.0f32; solve_samples * solve_row]);
     let mut inst =
         Instance::<KS, KC>::new(InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj }, nv)
             .and_then(|i| i.with_spare(SpareBuffers { positions: &mut pos2, normals: &mut nor2, albedos: &mut alb2 }))
             .map_err(core("instance"))?
             .with_frame_cache(frame_memory.cache())
-            .with_shading_cache(shading);
+            .with_shading_cache(shading)
+            .with_solve_scratch(SolveScratch { samples: &mut solve_ids, values: &mut solve_values });
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 

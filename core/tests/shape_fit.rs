@@ -1,0 +1,148 @@
+//! The start's shape solve (Gauss–Newton on the image) on a synthetic model with known truth.
+#![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+mod fit_support;
+
+use fit_support::*;
+use gpmm_core::fit::{
+    solve_shape, FitError, FitParams, Instance, InstanceBuffers, ShapeSolveConfig, SolveScratch, SpareBuffers, TargetImage,
+    DEFAULT_PIXEL_SIGMA,
+};
+use gpmm_core::{ProjectedVertex, Vec3};
+
+/// Per-vertex buffers with a spare instance, plus the solve's scratch.
+struct Room {
+    main: Buffers,
+    spare: [Vec<Vec3>; 3],
+    ids: Vec<u32>,
+    values: Vec<f32>,
+}
+
+impl Room {
+    fn new(n: usize) -> Self {
+        Self {
+            main: Buffers::new(n),
+            spare: [vec![[0.0; 3]; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]],
+            ids: vec![0; n],
+            values: vec![0.0; n * 3 * (KS + 1)],
+        }
+    }
+
+    fn instance(&mut self, scratch: bool) -> Instance<'_, KS, KC> {
+        let n = self.main.positions.len();
+        let m = &mut self.main;
+        let bufs =
+            InstanceBuffers { positions: &mut m.positions, albedos: &mut m.albedos, normals: &mut m.normals, projected: &mut m.projected };
+        let [p, nn, a] = &mut self.spare;
+        let inst = Instance::new(bufs, n).unwrap().with_spare(SpareBuffers { positions: p, normals: nn, albedos: a }).unwrap();
+        if scratch {
+            inst.with_solve_scratch(SolveScratch { samples: &mut self.ids, values: &mut self.values })
+        } else {
+            inst
+        }
+    }
+}
+
+fn config() -> ShapeSolveConfig {
+    ShapeSolveConfig { stride: 1, min_cos: 0.2, pixel_sigma: DEFAULT_PIXEL_SIGMA, weight: 1.0, components: KS, iterations: 6 }
+}
+
+fn distance(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>().sqrt()
+}
+
+/// The truth with its shape coefficients zeroed: where the solve starts.
+fn start() -> FitParams<KS, KC> {
+    let mut p = truth();
+    p.shape_coeffs_mut().fill(0.0);
+    p
+}
+
+#[test]
+fn shape_solve_moves_the_shape_toward_the_rendered_one() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let truth = truth();
+    let pixels = render_target(&synth, &truth);
+    let image = TargetImage::new(&pixels, W, H).unwrap();
+    let mut room = Room::new(synth.vertices());
+    let mut inst = room.instance(true);
+    let mut p = start();
+    let before = distance(p.shape_coeffs(), truth.shape_coeffs());
+    let report = solve_shape(&model, &mut inst, &mut p, &image, None, &config()).unwrap();
+    let after = distance(p.shape_coeffs(), truth.shape_coeffs());
+    eprintln!("{report:?}: distance to the truth {before:.3} -> {after:.3}; solved {:?}", p.shape_coeffs());
+    assert!(report.samples > 100, "{report:?}");
+    assert!(report.steps >= 1, "{report:?}");
+    assert!(report.objective_after < 0.5 * report.objective_before, "{report:?}");
+    // From the image alone (shading and where each vertex looks) the coefficients come most of
+    // the way to the rendered ones.
+    assert!(after < 0.4 * before, "{before} -> {after}");
+    // Nothing else moved, and the instance holds the result.
+    assert_eq!(p.pose, truth.pose);
+    assert_eq!(p.color_coeffs(), truth.color_coeffs());
+    let mut expected = vec![[0.0f32; 3]; synth.vertices()];
+    model.shape_instance(p.shape_coeffs(), &mut expected).unwrap();
+    assert_eq!(inst.positions(), &expected[..]);
+}
+
+#[test]
+fn shape_solve_with_landmarks_agrees_with_both() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let truth = truth();
+    let pixels = render_target(&synth, &truth);
+    let image = TargetImage::new(&pixels, W, H).unwrap();
+    let points = project_landmarks(&model, &truth);
+    let valid = all_valid(points.len());
+    let lm = target(&points, &valid);
+    let mut room = Room::new(synth.vertices());
+    let mut inst = room.instance(true);
+    let mut p = start();
+    let before = distance(p.shape_coeffs(), truth.shape_coeffs());
+    let report = solve_shape(&model, &mut inst, &mut p, &image, Some(&lm), &config()).unwrap();
+    let after = distance(p.shape_coeffs(), truth.shape_coeffs());
+    eprintln!("{report:?}: {before:.3} -> {after:.3}");
+    assert!(after < 0.4 * before, "{before} -> {after}");
+    // Landmarks pulled elsewhere (shifted 3 px) move the solution away from the image's.
+    let shifted: Vec<[f32; 2]> = points.iter().map(|q| [q[0] + 3.0, q[1]]).collect();
+    let lm_shifted = target(&shifted, &valid);
+    let mut q = start();
+    solve_shape(&model, &mut inst, &mut q, &image, Some(&lm_shifted), &config()).unwrap();
+    assert!(distance(q.shape_coeffs(), p.shape_coeffs()) > 0.05, "{:?} vs {:?}", q.shape_coeffs(), p.shape_coeffs());
+}
+
+#[test]
+fn shape_solve_refuses_bad_settings_and_missing_room() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let pixels = render_target(&synth, &truth());
+    let image = TargetImage::new(&pixels, W, H).unwrap();
+    let mut room = Room::new(synth.vertices());
+    let mut p = start();
+    {
+        let mut inst = room.instance(false);
+        assert_eq!(solve_shape(&model, &mut inst, &mut p, &image, None, &config()), Err(FitError::BadConfig));
+    }
+    let mut inst = room.instance(true);
+    for bad in [
+        ShapeSolveConfig { stride: 0, ..config() },
+        ShapeSolveConfig { pixel_sigma: f32::NAN, ..config() },
+        ShapeSolveConfig { weight: 0.0, ..config() },
+        ShapeSolveConfig { min_cos: f32::INFINITY, ..config() },
+    ] {
+        assert_eq!(solve_shape(&model, &mut inst, &mut p, &image, None, &bad), Err(FitError::BadConfig), "{bad:?}");
+    }
+    assert_eq!(p.shape_coeffs(), start().shape_coeffs());
+    // An image with nothing of the face in view: too few samples, nothing moves.
+    let mut away = start();
+    away.pose.translation = [5000.0, 0.0, -600.0];
+    assert_eq!(solve_shape(&model, &mut inst, &mut away, &image, None, &config()), Err(FitError::Singular));
+    assert_eq!(away.shape_coeffs(), start().shape_coeffs());
+    // A NaN coefficient is refused by the model, not solved around.
+    let mut nan = start();
+    nan.shape_coeffs_mut()[0] = f32::NAN;
+    assert!(solve_shape(&model, &mut inst, &mut nan, &image, None, &config()).is_err());
+    let _ = ProjectedVertex::INVALID;
+}
