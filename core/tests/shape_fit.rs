@@ -45,7 +45,7 @@ impl Room {
 }
 
 fn config() -> ShapeSolveConfig {
-    ShapeSolveConfig { stride: 1, min_cos: 0.2, pixel_sigma: DEFAULT_PIXEL_SIGMA, weight: 1.0, components: KS, iterations: 6 }
+    ShapeSolveConfig { stride: 1, min_cos: 0.2, pixel_sigma: DEFAULT_PIXEL_SIGMA, weight: 1.0, components: KS, iterations: 6, pose: false }
 }
 
 fn distance(a: &[f32], b: &[f32]) -> f32 {
@@ -145,4 +145,35 @@ fn shape_solve_refuses_bad_settings_and_missing_room() {
     nan.shape_coeffs_mut()[0] = f32::NAN;
     assert!(solve_shape(&model, &mut inst, &mut nan, &image, None, &config()).is_err());
     let _ = ProjectedVertex::INVALID;
+}
+
+#[test]
+fn shape_solve_with_the_pose_recovers_a_turned_start() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let truth = truth();
+    let pixels = render_target(&synth, &truth);
+    let image = TargetImage::new(&pixels, W, H).unwrap();
+    let points = project_landmarks(&model, &truth);
+    let valid = all_valid(points.len());
+    let lm = target(&points, &valid);
+    let mut room = Room::new(synth.vertices());
+    let mut inst = room.instance(true);
+    let turned = || {
+        let mut p = start();
+        p.pose.yaw += 3f32.to_radians();
+        p.pose.translation[0] += 4.0;
+        p
+    };
+    let yaw_error = |p: &FitParams<KS, KC>| (p.pose.yaw - truth.pose.yaw).to_degrees().abs();
+    // The pose held: it stays where it was.
+    let mut held = turned();
+    solve_shape(&model, &mut inst, &mut held, &image, Some(&lm), &config()).unwrap();
+    assert_eq!(held.pose, turned().pose);
+    // The pose moving with the shape: the yaw comes back to within a degree of the truth.
+    let mut moved = turned();
+    let report = solve_shape(&model, &mut inst, &mut moved, &image, Some(&lm), &ShapeSolveConfig { pose: true, ..config() }).unwrap();
+    eprintln!("{report:?}: yaw error 3.0 -> {:.2} deg, translation {:?}", yaw_error(&moved), moved.pose.translation);
+    assert!(yaw_error(&moved) < 1.0, "{}", yaw_error(&moved));
+    assert!((moved.pose.translation[0] - truth.pose.translation[0]).abs() < 2.0, "{:?}", moved.pose.translation);
 }

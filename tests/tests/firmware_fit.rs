@@ -188,6 +188,7 @@ fn firmware_fit_uses_every_setting() {
             shape_stride: 3,
             shape_weight: 0.5,
             shape_landmarks: false,
+            shape_pose: true,
         },
         proposals: ProposalSettings {
             landmark_pose: MixtureShares { pose: 0.9, ..defaults.proposals.landmark_pose },

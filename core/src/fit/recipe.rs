@@ -316,6 +316,7 @@ fn shape_rounds<I: TriIndex, const KS: usize, const KC: usize>(
         weight: s.shape_weight,
         components: s.shape_components,
         iterations: s.shape_iterations,
+        pose: s.shape_pose,
     };
     let every_vertex = settings.light.solve_config(settings.light.start_stride);
     for _ in 0..s.shape_rounds {

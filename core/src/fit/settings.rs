@@ -118,6 +118,8 @@ pub struct StartSettings {
     pub shape_weight: f32,
     /// Whether the shape solve's objective has the landmark term (Gaussian, the chain's σ).
     pub shape_landmarks: bool,
+    /// Whether the shape solve moves the pose (yaw, pitch, roll, translation) with the shape.
+    pub shape_pose: bool,
 }
 
 impl StartSettings {
@@ -134,6 +136,7 @@ impl StartSettings {
         shape_stride: 2,
         shape_weight: 1.0,
         shape_landmarks: true,
+        shape_pose: false,
     };
 }
 

@@ -26,7 +26,7 @@ use crate::model::morphable::MAX_LANDMARKS;
 use crate::model::params::FitParams;
 use crate::render::pose::mat_vec;
 use crate::render::shading::{vertex_normals, TriIndex};
-use crate::{Camera, ShLight, Vec3};
+use crate::{Camera, Pose, ShLight, Vec3};
 
 /// Most shape components one solve moves.
 pub const MAX_SHAPE_SOLVE: usize = 64;
@@ -52,6 +52,8 @@ pub struct ShapeSolveConfig {
     pub components: usize,
     /// Gauss–Newton iterations.
     pub iterations: u32,
+    /// Whether the pose (yaw, pitch, roll, translation) moves with the shape.
+    pub pose: bool,
 }
 
 /// What a solve did.
@@ -111,11 +113,11 @@ fn triple(values: &[f32], at: usize) -> Vec3 {
     }
 }
 
-/// Moves the leading shape coefficients of `params` toward the mode of the image term times the
-/// prior (pose, focal length, light and colour held). `instance` must carry a spare and a solve
-/// scratch; it holds `params`' instance on return. Errors on a bad configuration, missing room
-/// ([`FitError::BadConfig`]) or fewer than 16 samples ([`FitError::Singular`]); a failed step
-/// leaves `params` as it was.
+/// Moves the leading shape coefficients of `params` (and with [`ShapeSolveConfig::pose`] the
+/// pose) toward the mode of the image term times the prior (focal length, light and colour held).
+/// `instance` must carry a spare and a solve scratch; it holds `params`' instance on return.
+/// Errors on a bad configuration, missing room ([`FitError::BadConfig`]) or fewer than 16
+/// samples ([`FitError::Singular`]); a failed step leaves `params` as it was.
 #[inline(never)]
 pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
     model: &MorphableModel<'_, I>,
@@ -131,24 +133,19 @@ pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
     }
     let k = config.components.min(params.shape_coeffs().len()).min(MAX_SHAPE_SOLVE);
     let mut report = ShapeSolveReport::default();
-    if k == 0 {
+    if k == 0 && !config.pose {
         return Ok(report);
     }
+    let columns = Columns { shape: k, pose: if config.pose { POSE_PARAMS } else { 0 } };
     let w = config.weight / (config.pixel_sigma * config.pixel_sigma);
     let (width, height) = (image.width(), image.height());
     let mut damping = 1e-3f32;
     for iteration in 0..config.iterations {
         instance.update(model, params, width, height)?;
-        let frame = Frame {
-            rotation: params.pose.rotation(),
-            translation: params.pose.translation,
-            camera: params.camera(width, height),
-            light: params.light,
-            image,
-        };
+        let scene = Scene { pose: params.pose, camera: params.camera(width, height), light: params.light, image };
         let coeffs = params.shape_coeffs();
         let view = instance.solver_view().ok_or(FitError::BadConfig)?;
-        let step = iterate(model, view, &frame, landmarks, config, w, coeffs, k, &mut damping)?;
+        let step = iterate(model, view, &scene, landmarks, config, w, coeffs, columns, &mut damping)?;
         report.samples = step.samples;
         if iteration == 0 {
             report.objective_before = step.before;
@@ -158,6 +155,9 @@ pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
             for (c, d) in params.shape_coeffs_mut().iter_mut().zip(delta.iter().take(k)) {
                 *c += d;
             }
+            if columns.pose > 0 {
+                params.pose = moved_pose(&params.pose, delta.get(k..).unwrap_or(&[]));
+            }
             report.steps += 1;
         }
     }
@@ -165,12 +165,63 @@ pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
     Ok(report)
 }
 
+/// Pose parameters a solve can move: yaw, pitch, roll, translation x, y, z.
+const POSE_PARAMS: usize = 6;
+/// Forward-difference steps of the pose parameters (radians, mm).
+const POSE_STEPS: [f32; POSE_PARAMS] = [0.002, 0.002, 0.002, 0.2, 0.2, 1.0];
+/// Columns of the Jacobian at most: shape components and pose parameters.
+const MAX_COLUMNS: usize = MAX_SHAPE_SOLVE + POSE_PARAMS;
+
+/// The unknowns of a solve: the leading `shape` components, then `pose` pose parameters.
+#[derive(Clone, Copy)]
+struct Columns {
+    shape: usize,
+    pose: usize,
+}
+
+impl Columns {
+    fn len(&self) -> usize {
+        self.shape + self.pose
+    }
+}
+
+/// `pose` moved by `delta` (yaw, pitch, roll, translation; missing entries are zero).
+fn moved_pose(pose: &Pose, delta: &[f32]) -> Pose {
+    let d = |i: usize| delta.get(i).copied().unwrap_or(0.0);
+    let t = pose.translation;
+    Pose { yaw: pose.yaw + d(0), pitch: pose.pitch + d(1), roll: pose.roll + d(2), translation: [t[0] + d(3), t[1] + d(4), t[2] + d(5)] }
+}
+
+/// The pose with parameter `i` moved by its difference step.
+fn nudged_pose(pose: &Pose, i: usize) -> Pose {
+    let mut delta = [0.0f32; POSE_PARAMS];
+    if let (Some(d), Some(s)) = (delta.get_mut(i), POSE_STEPS.get(i)) {
+        *d = *s;
+    }
+    moved_pose(pose, &delta)
+}
+
+/// Pose, camera, light and image: what a [`Frame`] is made from.
+#[derive(Clone, Copy)]
+struct Scene<'s, 'i> {
+    pose: Pose,
+    camera: Camera,
+    light: ShLight,
+    image: &'s TargetImage<'i>,
+}
+
+impl<'s, 'i> Scene<'s, 'i> {
+    fn frame(&self, pose: &Pose) -> Frame<'s, 'i> {
+        Frame { rotation: pose.rotation(), translation: pose.translation, camera: self.camera, light: self.light, image: self.image }
+    }
+}
+
 /// One Gauss–Newton iteration's outcome.
 struct Iteration {
     samples: usize,
     before: f32,
     after: f32,
-    delta: Option<[f32; MAX_SHAPE_SOLVE]>,
+    delta: Option<[f32; MAX_COLUMNS]>,
 }
 
 /// Writes the landmark residuals `(target − projection) / σ` of shape coefficients `coeffs` into
@@ -197,47 +248,83 @@ fn landmark_residuals<I: TriIndex>(
     Ok(n)
 }
 
+/// The landmark residuals and their forward differences per column.
+struct LandmarkRows {
+    count: usize,
+    base: [[f32; 2]; MAX_LANDMARKS],
+    jacobian: [[[f32; 2]; MAX_LANDMARKS]; MAX_COLUMNS],
+}
+
+impl LandmarkRows {
+    #[allow(clippy::too_many_arguments)]
+    fn new<I: TriIndex>(
+        model: &MorphableModel<'_, I>,
+        scene: &Scene<'_, '_>,
+        target: Option<&LandmarkTarget<'_>>,
+        full: &mut [f32],
+        columns: Columns,
+    ) -> Result<Self, FitError> {
+        let mut rows = Self { count: 0, base: [[0.0; 2]; MAX_LANDMARKS], jacobian: [[[0.0; 2]; MAX_LANDMARKS]; MAX_COLUMNS] };
+        let Some(target) = target else { return Ok(rows) };
+        let frame = scene.frame(&scene.pose);
+        rows.count = landmark_residuals(model, &frame, target, full, &mut rows.base)?;
+        let mut moved = [[0.0f32; 2]; MAX_LANDMARKS];
+        for j in 0..columns.len() {
+            let step = if j < columns.shape {
+                if let Some(c) = full.get_mut(j) {
+                    *c += DIFFERENCE_STEP;
+                }
+                landmark_residuals(model, &frame, target, full, &mut moved)?;
+                if let Some(c) = full.get_mut(j) {
+                    *c -= DIFFERENCE_STEP;
+                }
+                DIFFERENCE_STEP
+            } else {
+                let i = j - columns.shape;
+                landmark_residuals(model, &scene.frame(&nudged_pose(&scene.pose, i)), target, full, &mut moved)?;
+                POSE_STEPS.get(i).copied().unwrap_or(1.0)
+            };
+            let Some(col) = rows.jacobian.get_mut(j) else { continue };
+            for ((d, m), b) in col.iter_mut().zip(moved.iter()).zip(rows.base.iter()).take(rows.count) {
+                *d = [(m[0] - b[0]) / step, (m[1] - b[1]) / step];
+            }
+        }
+        Ok(rows)
+    }
+
+    fn term(&self, r: &[[f32; 2]; MAX_LANDMARKS]) -> f32 {
+        r.iter().take(self.count).map(|r| r[0] * r[0] + r[1] * r[1]).sum()
+    }
+
+    fn column(&self, j: usize, l: usize) -> [f32; 2] {
+        self.jacobian.get(j).and_then(|c| c.get(l)).copied().unwrap_or([0.0; 2])
+    }
+}
+
 /// Samples, the Jacobian, the damped normal equations and the tries of one iteration.
 #[allow(clippy::too_many_arguments)]
 fn iterate<I: TriIndex>(
     model: &MorphableModel<'_, I>,
     view: SolverView<'_>,
-    frame: &Frame<'_, '_>,
+    scene: &Scene<'_, '_>,
     landmarks: Option<&LandmarkTarget<'_>>,
     config: &ShapeSolveConfig,
     w: f32,
     coeffs: &[f32],
-    k: usize,
+    columns: Columns,
     damping: &mut f32,
 ) -> Result<Iteration, FitError> {
     let SolverView { positions, normals, albedos, spare_positions, spare_normals, samples, values } = view;
+    let k = columns.shape;
+    let m = columns.len();
     let alpha = coeffs.get(..k).ok_or(FitError::BadConfig)?;
-    let row = 3 * (k + 1);
+    let row = 3 * (m + 1);
     let cap = samples.len().min(values.len() / row);
-    // The landmarks: residuals and their forward differences (the Jacobian's last rows).
+    let frame = scene.frame(&scene.pose);
     let mut full = [0.0f32; KS_MAX];
     let full = full.get_mut(..coeffs.len()).ok_or(FitError::BadConfig)?;
     full.copy_from_slice(coeffs);
-    let mut lm_base = [[0.0f32; 2]; MAX_LANDMARKS];
-    let mut lm_jac = [[[0.0f32; 2]; MAX_LANDMARKS]; MAX_SHAPE_SOLVE];
-    let mut lm_count = 0;
-    if let Some(target) = landmarks {
-        lm_count = landmark_residuals(model, frame, target, full, &mut lm_base)?;
-        let mut moved = [[0.0f32; 2]; MAX_LANDMARKS];
-        for (j, col) in lm_jac.iter_mut().enumerate().take(k) {
-            if let Some(c) = full.get_mut(j) {
-                *c += DIFFERENCE_STEP;
-            }
-            landmark_residuals(model, frame, target, full, &mut moved)?;
-            if let Some(c) = full.get_mut(j) {
-                *c -= DIFFERENCE_STEP;
-            }
-            for ((d, m), b) in col.iter_mut().zip(moved.iter()).zip(lm_base.iter()).take(lm_count) {
-                *d = [(m[0] - b[0]) / DIFFERENCE_STEP, (m[1] - b[1]) / DIFFERENCE_STEP];
-            }
-        }
-    }
-    let lm_term = |r: &[[f32; 2]; MAX_LANDMARKS]| -> f32 { r.iter().take(lm_count).map(|r| r[0] * r[0] + r[1] * r[1]).sum() };
+    let lm = LandmarkRows::new(model, scene, landmarks, full, columns)?;
     let at = |v: usize| (positions.get(v).copied(), normals.get(v).copied(), albedos.get(v).copied());
     // The samples and their residuals.
     let mut count = 0usize;
@@ -261,55 +348,67 @@ fn iterate<I: TriIndex>(
     }
     let prior: f32 = alpha.iter().map(|a| a * a).sum();
     let data = |values: &[f32]| -> f32 { (0..count).map(|s| triple(values, s * row)).map(|r| w * dot3(r, r)).sum() };
-    let before = data(values) + prior + lm_term(&lm_base);
-    // The Jacobian, a component at a time.
-    let h = DIFFERENCE_STEP;
-    for j in 0..k {
-        for (v, (sp, p)) in spare_positions.iter_mut().zip(positions.iter()).enumerate() {
-            let u = model.shape_component(j, v);
-            *sp = [p[0] + h * u[0], p[1] + h * u[1], p[2] + h * u[2]];
-        }
-        vertex_normals(spare_positions, model.triangles(), spare_normals)?;
+    let before = data(values) + prior + lm.term(&lm.base);
+    // The Jacobian, a column at a time: shape components (normals recomputed), then the pose.
+    for j in 0..m {
+        let (moved_frame, h) = if j < k {
+            for (v, (sp, p)) in spare_positions.iter_mut().zip(positions.iter()).enumerate() {
+                let u = model.shape_component(j, v);
+                *sp = [p[0] + DIFFERENCE_STEP * u[0], p[1] + DIFFERENCE_STEP * u[1], p[2] + DIFFERENCE_STEP * u[2]];
+            }
+            vertex_normals(spare_positions, model.triangles(), spare_normals)?;
+            (None, DIFFERENCE_STEP)
+        } else {
+            let i = j - k;
+            (Some(scene.frame(&nudged_pose(&scene.pose, i))), POSE_STEPS.get(i).copied().unwrap_or(1.0))
+        };
         for s in 0..count {
             let v = samples.get(s).map_or(0, |&v| v as usize);
-            let (Some(p), Some(n), Some(a)) = (spare_positions.get(v), spare_normals.get(v), albedos.get(v)) else { continue };
-            let base = triple(values, s * row);
-            let d = match frame.residual(*p, *n, *a) {
-                Some(r) => [(r[0] - base[0]) / h, (r[1] - base[1]) / h, (r[2] - base[2]) / h],
-                None => [0.0; 3],
+            let r = match &moved_frame {
+                None => match (spare_positions.get(v), spare_normals.get(v), albedos.get(v)) {
+                    (Some(p), Some(n), Some(a)) => frame.residual(*p, *n, *a),
+                    _ => None,
+                },
+                Some(f) => match at(v) {
+                    (Some(p), Some(n), Some(a)) => f.residual(p, n, a),
+                    _ => None,
+                },
             };
+            let base = triple(values, s * row);
+            let d = r.map_or([0.0; 3], |r| [(r[0] - base[0]) / h, (r[1] - base[1]) / h, (r[2] - base[2]) / h]);
             if let Some(slot) = values.get_mut(s * row + 3 + 3 * j..s * row + 6 + 3 * j) {
                 slot.copy_from_slice(&d);
             }
         }
     }
-    // Normal equations: (w JᵀJ + I) δ = −w Jᵀ r − α.
-    let mut a = [[0.0f32; MAX_SHAPE_SOLVE]; MAX_SHAPE_SOLVE];
-    let mut g = [0.0f32; MAX_SHAPE_SOLVE];
+    // Normal equations: (w JᵀJ + P) δ = −w Jᵀ r − P x (P: the prior's precision, 1 on the
+    // shape components, 0 on the pose, whose prior is broad).
+    let mut a = [[0.0f32; MAX_COLUMNS]; MAX_COLUMNS];
+    let mut g = [0.0f32; MAX_COLUMNS];
     for s in 0..count {
         let base = triple(values, s * row);
-        for i in 0..k {
+        for i in 0..m {
             let ji = triple(values, s * row + 3 + 3 * i);
             if let Some(gi) = g.get_mut(i) {
                 *gi -= w * dot3(ji, base);
             }
             let Some(ai) = a.get_mut(i) else { continue };
-            for (l, aij) in ai.iter_mut().enumerate().take(i + 1) {
-                *aij += w * dot3(ji, triple(values, s * row + 3 + 3 * l));
+            for (l, ail) in ai.iter_mut().enumerate().take(i + 1) {
+                *ail += w * dot3(ji, triple(values, s * row + 3 + 3 * l));
             }
         }
     }
-    for l in 0..lm_count {
-        let b = lm_base.get(l).copied().unwrap_or([0.0; 2]);
-        for i in 0..k {
-            let ji = lm_jac.get(i).and_then(|c| c.get(l)).copied().unwrap_or([0.0; 2]);
+    for l in 0..lm.count {
+        let b = lm.base.get(l).copied().unwrap_or([0.0; 2]);
+        for i in 0..m {
+            let ji = lm.column(i, l);
             if let Some(gi) = g.get_mut(i) {
                 *gi -= ji[0] * b[0] + ji[1] * b[1];
             }
             let Some(ai) = a.get_mut(i) else { continue };
-            for (m, aim) in ai.iter_mut().enumerate().take(i + 1) {
-                let jm = lm_jac.get(m).and_then(|c| c.get(l)).copied().unwrap_or([0.0; 2]);
-                *aim += ji[0] * jm[0] + ji[1] * jm[1];
+            for (q, aiq) in ai.iter_mut().enumerate().take(i + 1) {
+                let jq = lm.column(q, l);
+                *aiq += ji[0] * jq[0] + ji[1] * jq[1];
             }
         }
     }
@@ -318,52 +417,39 @@ fn iterate<I: TriIndex>(
     }
     // Tries: a damped step, kept if the objective on these samples falls.
     for _ in 0..DAMPING_TRIES {
-        let mut m = [[0.0f32; MAX_SHAPE_SOLVE]; MAX_SHAPE_SOLVE];
-        for i in 0..k {
+        let mut mm = [[0.0f32; MAX_COLUMNS]; MAX_COLUMNS];
+        for i in 0..m {
             for l in 0..=i {
                 let v = a.get(i).and_then(|r| r.get(l)).copied().unwrap_or(0.0);
-                let v = if i == l { v * (1.0 + *damping) + 1.0 } else { v };
-                if let Some(e) = m.get_mut(i).and_then(|r| r.get_mut(l)) {
+                let v = if i == l { v * (1.0 + *damping) + if i < k { 1.0 } else { 1e-6 } } else { v };
+                if let Some(e) = mm.get_mut(i).and_then(|r| r.get_mut(l)) {
                     *e = v;
                 }
             }
         }
-        let Ok(delta) = cholesky_solve(&mut m, &g, k) else {
+        let Ok(delta) = cholesky_solve(&mut mm, &g, m) else {
             *damping *= 10.0;
             continue;
         };
-        // The objective at α + δ on the same samples.
-        for (v, (sp, p)) in spare_positions.iter_mut().zip(positions.iter()).enumerate() {
-            let mut q = *p;
-            for (j, d) in delta.iter().enumerate().take(k) {
-                let u = model.shape_component(j, v);
-                q = [q[0] + d * u[0], q[1] + d * u[1], q[2] + d * u[2]];
-            }
-            *sp = q;
-        }
-        let mut after_prior: f32 = alpha.iter().zip(delta.iter()).map(|(a, d)| (a + d) * (a + d)).sum();
-        if let Some(target) = landmarks {
-            for (c, (a, d)) in full.iter_mut().zip(alpha.iter().zip(delta.iter())) {
-                *c = a + d;
-            }
-            let mut moved = [[0.0f32; 2]; MAX_LANDMARKS];
-            landmark_residuals(model, frame, target, full, &mut moved)?;
-            full.get_mut(..k).ok_or(FitError::BadConfig)?.copy_from_slice(alpha);
-            after_prior += lm_term(&moved);
-        }
-        let after = if vertex_normals(spare_positions, model.triangles(), spare_normals).is_ok() {
-            let mut sum = after_prior;
-            for s in 0..count {
-                let v = samples.get(s).map_or(0, |&v| v as usize);
-                let (Some(p), Some(n), Some(al)) = (spare_positions.get(v), spare_normals.get(v), albedos.get(v)) else { continue };
-                // A sample that leaves the image counts as the residual it had.
-                let r = frame.residual(*p, *n, *al).unwrap_or_else(|| triple(values, s * row));
-                sum += w * dot3(r, r);
-            }
-            sum
-        } else {
-            f32::INFINITY
-        };
+        let after = objective_at(
+            model,
+            &delta,
+            columns,
+            alpha,
+            full,
+            scene,
+            landmarks,
+            &lm,
+            positions,
+            albedos,
+            spare_positions,
+            spare_normals,
+            samples,
+            values,
+            count,
+            row,
+            w,
+        )?;
         if after < before {
             *damping = (*damping * 0.3).max(1e-6);
             return Ok(Iteration { samples: count, before, after, delta: Some(delta) });
@@ -373,14 +459,65 @@ fn iterate<I: TriIndex>(
     Ok(Iteration { samples: count, before, after: before, delta: None })
 }
 
+/// The objective at the trial step `delta` on the same samples (a sample that leaves the image
+/// counts as the residual it had).
+#[allow(clippy::too_many_arguments)]
+fn objective_at<I: TriIndex>(
+    model: &MorphableModel<'_, I>,
+    delta: &[f32; MAX_COLUMNS],
+    columns: Columns,
+    alpha: &[f32],
+    full: &mut [f32],
+    scene: &Scene<'_, '_>,
+    landmarks: Option<&LandmarkTarget<'_>>,
+    lm: &LandmarkRows,
+    positions: &[Vec3],
+    albedos: &[Vec3],
+    spare_positions: &mut [Vec3],
+    spare_normals: &mut [Vec3],
+    samples: &[u32],
+    values: &[f32],
+    count: usize,
+    row: usize,
+    w: f32,
+) -> Result<f32, FitError> {
+    let k = columns.shape;
+    let pose = if columns.pose > 0 { moved_pose(&scene.pose, delta.get(k..).unwrap_or(&[])) } else { scene.pose };
+    let frame = scene.frame(&pose);
+    for (v, (sp, p)) in spare_positions.iter_mut().zip(positions.iter()).enumerate() {
+        let mut q = *p;
+        for (j, d) in delta.iter().enumerate().take(k) {
+            let u = model.shape_component(j, v);
+            q = [q[0] + d * u[0], q[1] + d * u[1], q[2] + d * u[2]];
+        }
+        *sp = q;
+    }
+    let mut sum: f32 = alpha.iter().zip(delta.iter()).map(|(a, d)| (a + d) * (a + d)).sum();
+    if let Some(target) = landmarks {
+        for (c, (a, d)) in full.iter_mut().zip(alpha.iter().zip(delta.iter())) {
+            *c = a + d;
+        }
+        let mut moved = [[0.0f32; 2]; MAX_LANDMARKS];
+        landmark_residuals(model, &frame, target, full, &mut moved)?;
+        full.get_mut(..k).ok_or(FitError::BadConfig)?.copy_from_slice(alpha);
+        sum += lm.term(&moved);
+    }
+    if vertex_normals(spare_positions, model.triangles(), spare_normals).is_err() {
+        return Ok(f32::INFINITY);
+    }
+    for s in 0..count {
+        let v = samples.get(s).map_or(0, |&v| v as usize);
+        let (Some(p), Some(n), Some(al)) = (spare_positions.get(v), spare_normals.get(v), albedos.get(v)) else { continue };
+        let r = frame.residual(*p, *n, *al).unwrap_or_else(|| triple(values, s * row));
+        sum += w * dot3(r, r);
+    }
+    Ok(sum)
+}
+
 /// Solves `M x = b` for the leading `n × n` block of a symmetric positive-definite `M` (lower
 /// triangle given; overwritten by its Cholesky factor).
-fn cholesky_solve(
-    m: &mut [[f32; MAX_SHAPE_SOLVE]; MAX_SHAPE_SOLVE],
-    b: &[f32; MAX_SHAPE_SOLVE],
-    n: usize,
-) -> Result<[f32; MAX_SHAPE_SOLVE], FitError> {
-    let at = |m: &[[f32; MAX_SHAPE_SOLVE]; MAX_SHAPE_SOLVE], i: usize, j: usize| m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0);
+fn cholesky_solve(m: &mut [[f32; MAX_COLUMNS]; MAX_COLUMNS], b: &[f32; MAX_COLUMNS], n: usize) -> Result<[f32; MAX_COLUMNS], FitError> {
+    let at = |m: &[[f32; MAX_COLUMNS]; MAX_COLUMNS], i: usize, j: usize| m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0);
     for j in 0..n {
         let mut d = at(m, j, j);
         for l in 0..j {
@@ -403,7 +540,7 @@ fn cholesky_solve(
             }
         }
     }
-    let mut y = [0.0f32; MAX_SHAPE_SOLVE];
+    let mut y = [0.0f32; MAX_COLUMNS];
     for i in 0..n {
         let mut s = b.get(i).copied().unwrap_or(0.0);
         for l in 0..i {
@@ -413,7 +550,7 @@ fn cholesky_solve(
             *e = s / at(m, i, i);
         }
     }
-    let mut x = [0.0f32; MAX_SHAPE_SOLVE];
+    let mut x = [0.0f32; MAX_COLUMNS];
     for i in (0..n).rev() {
         let mut s = y.get(i).copied().unwrap_or(0.0);
         for l in i + 1..n {
