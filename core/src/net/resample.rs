@@ -66,6 +66,7 @@ pub fn sample_rgb8(src: &[u8], w: usize, h: usize, window: Window, side: usize, 
 }
 
 /// The one sampler: each output pixel's three channel values (0..=255) go to `store`.
+#[inline(always)]
 fn sample<'o, T: 'o>(
     src: &[u8],
     w: usize,
