@@ -64,7 +64,7 @@ pub enum FrameFitError {
     },
     /// The partition does not fit.
     #[error(
-        "the data partition needs {need} bytes (blob + fit job + init file + frame); the {profile} partition holds {have} (a blob with 8-bit bases, `gpmm quantize --bits 8`, or the m7 profile makes room)"
+        "the data partition needs {need} bytes (blob + fit job + init file + frame); the {profile} partition holds {have} (make room with a smaller blob: `gpmm quantize --bits 8` or lower --rank-shape/--rank-color; the m7's partition is 1 MiB)"
     )]
     TooLarge {
         /// Bytes needed.
