@@ -33,6 +33,11 @@ pub struct DeviceProfile {
     /// initializer is the finder's 96 × 96 × 3 input. They live on the detection's stack, not in
     /// the statics, so the fit's RAM is unchanged.
     pub net_scratch: usize,
+    /// Largest working side (px) of the landmark-free fit on the device (`gpmm device-fit --init`):
+    /// its crop of the camera frame (3 B a pixel) lives on the fit's stack next to everything the
+    /// fit itself uses, so on the `m4f` it is smaller than [`Self::image_side`] (firmware-sim/README.md,
+    /// "The landmark-free fit").
+    pub frame_fit_side: u32,
     /// Program flash (bytes), from address 0.
     pub flash_code_bytes: usize,
     /// Data partition (bytes) right after the program flash: the blob and the fit input.
@@ -59,6 +64,7 @@ pub const M4F: DeviceProfile = DeviceProfile {
     projected_pool: 1024,
     frame_cache_pixels: 7168,
     net_scratch: 96 * 96 * 3,
+    frame_fit_side: 72,
     flash_code_bytes: 512 * 1024,
     partition_bytes: 512 * 1024,
     ram_bytes: 192 * 1024,
@@ -79,6 +85,7 @@ pub const M7: DeviceProfile = DeviceProfile {
     projected_pool: 3072,
     frame_cache_pixels: 28672,
     net_scratch: 96 * 96 * 3,
+    frame_fit_side: 128,
     flash_code_bytes: 1024 * 1024,
     partition_bytes: 1024 * 1024,
     ram_bytes: 512 * 1024,

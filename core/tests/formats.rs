@@ -184,3 +184,48 @@ fn detection_record_round_trip_and_corruption() {
     let err = detection::write_record(&mut vec![0u8; 2048], &figures, &counts, &many, &[]).unwrap_err();
     assert_eq!(err, FormatError::TooMany("landmarks"));
 }
+
+#[test]
+fn frame_fit_job_round_trip_and_corruption() {
+    use gpmm_core::format::frame_fit;
+    let settings = FitSettings { landmarks: LandmarkSettings { sigma: 0.015, ..FitSettings::DEFAULT.landmarks }, ..FitSettings::DEFAULT };
+    let mut out = vec![0u8; frame_fit::buffer_len()];
+    let n = frame_fit::write(&mut out, 72, 99, &settings).unwrap();
+    out.truncate(n);
+    assert_eq!(&out[..4], b"GPFF");
+    let job = frame_fit::parse::<FitSettings>(&out, 72).unwrap();
+    assert_eq!((job.side, job.seed, job.len), (72, 99, n));
+    assert_eq!(job.settings, settings);
+    // A side beyond the reader's, a side below 16, a foreign section.
+    assert_eq!(frame_fit::parse::<FitSettings>(&out, 64).unwrap_err(), FormatError::BadField("working side"));
+    assert!(frame_fit::write(&mut vec![0u8; frame_fit::buffer_len()], 8, 0, &settings).is_err());
+    assert!(matches!(frame_fit::parse::<FitSettings>(b"GPFI\x04\0\0\0", 72), Err(FormatError::BadMagic { .. })));
+    refuses_corruption(&out, |b| frame_fit::parse::<FitSettings>(b, 72).is_ok());
+    assert_eq!(frame_fit::next_section(17), 32);
+}
+
+#[test]
+fn the_fit_crop_copies_pixels_at_one_to_one_and_maps_the_landmarks() {
+    use gpmm_core::net::crop::{crop_for_fit, fit_window, CROP_FACTOR};
+    let (w, h) = (160usize, 120usize);
+    let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i * 7 % 251) as u8).collect();
+    // A 20 px landmark box: the crop is 36 px; sampled into 36 px it is a copy of the frame.
+    let lm = [[50.0f32, 40.0], [70.0, 40.0], [60.0, 60.0]];
+    let side = (CROP_FACTOR * 20.0) as usize;
+    let win = fit_window(&lm, w, h, side).unwrap();
+    assert_eq!(win.step, 1.0);
+    let (mut px, mut work) = (vec![[0u8; 3]; side * side], vec![[0.0f32; 2]; 3]);
+    let got = crop_for_fit(&rgb, w, h, &lm, side, &mut px, &mut work).unwrap();
+    assert_eq!(got, win);
+    let (x0, y0) = (win.x0 as usize, win.y0 as usize);
+    assert_eq!((win.x0.fract(), win.y0.fract()), (0.0, 0.0), "{win:?}");
+    for (k, p) in px.iter().enumerate() {
+        let i = ((y0 + k / side) * w + x0 + k % side) * 3;
+        assert_eq!(p, &[rgb[i], rgb[i + 1], rgb[i + 2]], "pixel {k}");
+    }
+    assert_eq!(work[0], [50.0 - win.x0, 40.0 - win.y0]);
+    // A crop near the border is moved inside the frame; degenerate landmarks give no crop.
+    let edge = fit_window(&[[2.0, 2.0], [22.0, 22.0]], w, h, 36).unwrap();
+    assert_eq!((edge.x0, edge.y0), (0.0, 0.0));
+    assert!(crop_for_fit(&rgb, w, h, &[[5.0, 5.0]; 3], side, &mut px, &mut work).is_err());
+}

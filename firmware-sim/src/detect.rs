@@ -8,17 +8,14 @@
 //! on this function's stack, not in the statics: a detection and a fit never run in one boot, so
 //! the fit's static RAM and stack margin stay as they were.
 
+use crate::fit::instructions_now;
 use crate::{clock, fail, hexlog, stack, PROFILE};
 use gpmm_core::format::detection::{self, DetectCounts, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
 use gpmm_core::net::face::{find_face, is_face, read_landmarks, record_parts, Detection, FaceBox, InitFile};
 use gpmm_core::net::{NetError, NetScratch};
 
 /// Bytes of each activation buffer.
-const SCRATCH: usize = PROFILE.net_scratch;
-
-fn instructions_now() -> u64 {
-    clock::ticks() * u64::from(clock::INSTRUCTIONS_PER_TICK)
-}
+pub(crate) const SCRATCH: usize = PROFILE.net_scratch;
 
 /// Runs the detection on the init file and the frame in `part`; logs everything, fails on bad data.
 pub fn run(part: &'static [u8]) {
@@ -81,7 +78,7 @@ pub fn run(part: &'static [u8]) {
 
 /// The finder, then (if it found a face) the initializer, each timed; the scratch is this frame's.
 #[inline(never)]
-fn networks(init: &InitFile<'_>, frame: &Frame<'_>, counts: &mut DetectCounts) -> (FaceBox, Option<Detection>) {
+pub(crate) fn networks(init: &InitFile<'_>, frame: &Frame<'_>, counts: &mut DetectCounts) -> (FaceBox, Option<Detection>) {
     let mut scratch = NetScratch::<SCRATCH>::new();
     let (w, h) = (frame.width as usize, frame.height as usize);
     let (face, finder) = clock::measure(|| find_face(init, frame.rgb, w, h, &mut scratch));
@@ -99,7 +96,7 @@ fn networks(init: &InitFile<'_>, frame: &Frame<'_>, counts: &mut DetectCounts) -
 
 /// Encodes the record and logs it as hex lines, then the figures and a human summary.
 #[inline(never)]
-fn log_record(face: &FaceBox, det: Option<&Detection>, counts: &mut DetectCounts) {
+pub(crate) fn log_record(face: &FaceBox, det: Option<&Detection>, counts: &mut DetectCounts) {
     let (figures, landmarks, light) = record_parts(face, det);
     // Everything the detection used is behind us: the high-water mark is the detection's.
     counts.stack_peak_bytes = stack::peak_bytes();

@@ -12,10 +12,12 @@
 use crate::{clock, fail, hexlog, stack, Rasterizer, PROFILE};
 use gpmm_core::blob::ModelBlob;
 use gpmm_core::fit::{
-    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, Stage, StandardFit, TargetImage, MAX_LANDMARKS,
+    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, MorphableModel, Stage, StandardFit, TargetImage,
+    MAX_LANDMARKS,
 };
 use gpmm_core::format::fit_input::{self, FitInput};
-use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
+use gpmm_core::format::fit_record::{self, DeviceCounts};
+use gpmm_core::format::frame_fit;
 use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
 use gpmm_core::{ProjectedVertex, Vec3};
 use rand_core::SeedableRng;
@@ -29,19 +31,37 @@ pub const KC: usize = PROFILE.color_capacity;
 
 /// Instruction counter readings at the stage boundaries.
 #[derive(Default)]
-struct Marks {
+pub(crate) struct Marks {
     landmark_start: u64,
     landmark_end: u64,
     image_start: u64,
     image_end: u64,
+    /// Just before the fit.
+    pub fit_start: u64,
+    /// Just after it.
+    pub fit_end: u64,
 }
 
-fn instructions_now() -> u64 {
+/// The fit's static buffers: the `Vec3` pool, the projected vertices, the renderer, the frame cache.
+pub(crate) struct Buffers<'b> {
+    /// Three `Vec3` per model vertex.
+    pub pool: &'b mut [Vec3],
+    /// One projected vertex per model vertex.
+    pub projected: &'b mut [ProjectedVertex],
+    /// The renderer.
+    pub raster: &'b mut Rasterizer,
+    /// The compact frame cache.
+    pub cache: CompactBuffers<'b>,
+}
+
+pub(crate) fn instructions_now() -> u64 {
     clock::ticks() * u64::from(clock::INSTRUCTIONS_PER_TICK)
 }
 
-/// Fits the blob at the start of `part` to the fit input after it; logs everything, fails on bad data.
-pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVertex], raster: &mut Rasterizer, cache: CompactBuffers<'_>) {
+/// Fits the blob at the start of `part` to the section after it: a fit input (`GPFI`: image and
+/// landmarks) here, a landmark-free fit job (`GPFF`: init file and camera frame follow) in
+/// `frame_fit.rs`; logs everything, fails on bad data.
+pub fn run(part: &'static [u8], bufs: Buffers<'_>) {
     let t_start = instructions_now();
     // The blob may be followed by more data: its header says how long it is.
     let blob = match ModelBlob::parse(part) {
@@ -55,22 +75,68 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         Ok(m) => m,
         Err(e) => fit_failed("model blob", e),
     };
-    let input_at = (blob.len() + 15) & !15;
-    let parsed = part.get(input_at..).map(|rest| fit_input::parse::<FitSettings>(rest, PROFILE.image_side, MAX_LANDMARKS));
-    let input: FitInput<'_, FitSettings> = match parsed {
-        Some(Ok(i)) => i,
-        Some(Err(e)) => {
+    let input_at = frame_fit::next_section(blob.len());
+    let Some(rest) = part.get(input_at..) else {
+        defmt::error!("data partition: the blob fills it, no room for a fit input");
+        fail();
+    };
+    if rest.starts_with(&frame_fit::MAGIC) {
+        crate::frame_fit::run(part, &blob, &model, input_at, bufs, t_start);
+    } else {
+        landmark_fit(part, &blob, &model, rest, bufs, t_start);
+    }
+}
+
+/// The fit to a fit input's image and landmarks (its own frame: the landmark-free path's locals
+/// are not on its stack, nor its on theirs).
+#[inline(never)]
+fn landmark_fit(part: &[u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_, u16>, rest: &[u8], bufs: Buffers<'_>, t_start: u64) {
+    let input: FitInput<'_, FitSettings> = match fit_input::parse::<FitSettings>(rest, PROFILE.image_side, MAX_LANDMARKS) {
+        Ok(i) => i,
+        Err(e) => {
             defmt::error!("data partition: no valid fit input after the blob: {}", defmt::Display2Format(&e));
-            fail();
-        }
-        None => {
-            defmt::error!("data partition: the blob fills it, no room for a fit input");
             fail();
         }
     };
     let t_parsed = instructions_now();
-    let n = model.vertices();
+    let image = match TargetImage::new(input.pixels, input.width, input.height) {
+        Ok(i) => i,
+        Err(e) => fit_failed("target image", e),
+    };
+    let sizes = Sizes { blob_bytes: blob.len() as u32, partition_bytes: part.len() as u32, bits: u32::from(blob.bits()) };
+    fit_and_log(model, image, input.landmarks, &input.settings, input.seed, bufs, sizes, (t_parsed - t_start, t_start));
+}
 
+/// What the fit record says about the inputs.
+pub(crate) struct Sizes {
+    /// The blob's bytes.
+    pub blob_bytes: u32,
+    /// The data partition's bytes.
+    pub partition_bytes: u32,
+    /// Bits per basis value.
+    pub bits: u32,
+}
+
+/// The core's standard fit of `model` to `image` and `landmarks` (working px) on the device's
+/// buffers, then its record (`log_record`). `parse`: the instructions of parsing; the total counts
+/// from `t_origin`. The one caller of `standard_fit`, so the compiler inlines that here and builds
+/// the fit in place (with two callers it did not: 6 KB more stack), and the fit is never moved out
+/// of its `Result` (a `StandardFit` is kilobytes; each move is a copy on the stack).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fit_and_log(
+    model: &MorphableModel<'_, u16>,
+    image: TargetImage<'_>,
+    landmarks: &[[f32; 2]],
+    settings: &FitSettings,
+    seed: u64,
+    bufs: Buffers<'_>,
+    sizes: Sizes,
+    (parse, t_origin): (u64, u64),
+) {
+    let n = model.vertices();
+    let (width, height) = (image.width(), image.height());
+    let Buffers { pool, projected, raster, cache } = bufs;
     // Per-vertex buffers: three Vec3 slices from the pool, the projected vertices from the renderer's array.
     let (Some(vec3s), Some(projected)) = (pool.get_mut(..3 * n), projected.get_mut(..n)) else {
         defmt::error!(
@@ -88,12 +154,8 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         Ok(i) => i.with_frame_cache(FrameCache::compact(cache)),
         Err(e) => fit_failed("instance", e),
     };
-    let image = match TargetImage::new(input.pixels, input.width, input.height) {
-        Ok(i) => i,
-        Err(e) => fit_failed("target image", e),
-    };
     let valid = [true; MAX_LANDMARKS];
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(input.seed);
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut marks = Marks::default();
     let mut observer = |stage: Stage, done: u32, total: u32| {
         let mark = match (stage, done == 0, done == total) {
@@ -107,11 +169,11 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
     };
     let t_fit = instructions_now();
     let result = standard_fit(
-        &model,
+        model,
         image,
-        input.landmarks,
-        valid.get(..input.landmarks.len()).unwrap_or(&[]),
-        &input.settings,
+        landmarks,
+        valid.get(..landmarks.len()).unwrap_or(&[]),
+        settings,
         &mut instance,
         raster,
         &mut rng,
@@ -122,68 +184,52 @@ pub fn run(part: &'static [u8], pool: &mut [Vec3], projected: &mut [ProjectedVer
         Ok(f) => f,
         Err(e) => fit_failed("fit", e),
     };
+    marks.fit_start = t_fit;
+    marks.fit_end = t_end;
+    let mut counts = counts(settings, &marks, (instance.shape_updates, instance.color_updates), parse, t_end - t_origin);
+    counts.blob_bytes = sizes.blob_bytes;
+    counts.partition_bytes = sizes.partition_bytes;
+    counts.bits = sizes.bits;
+    log_record(model, &fit, width, height, counts);
+}
 
+/// The record's counts of a fit: its stages from `marks`, `parse` and `total` instructions; the
+/// sizes are the caller's to fill in.
+pub(crate) fn counts(settings: &FitSettings, marks: &Marks, (shape, color): (u32, u32), parse: u64, total: u64) -> DeviceCounts {
     let steps = |n: u32| u64::from(n.max(1));
     let (landmark, image_chain) =
         (marks.landmark_end.saturating_sub(marks.landmark_start), marks.image_end.saturating_sub(marks.image_start));
-    let counts = DeviceCounts {
-        instructions_parse: t_parsed - t_start,
+    DeviceCounts {
+        instructions_parse: parse,
         instructions_landmark_chain: landmark,
         instructions_light_and_start: marks.image_start.saturating_sub(marks.landmark_end),
         instructions_image_chain: image_chain,
-        instructions_per_landmark_step: if input.settings.landmarks.steps > 0 {
-            landmark / steps(input.settings.landmarks.steps)
-        } else {
-            0
-        },
-        instructions_per_image_step: if input.settings.image.steps > 0 { image_chain / steps(input.settings.image.steps) } else { 0 },
-        instructions_fit: t_end - t_fit,
-        instructions_total: t_end - t_start,
-        shape_updates: instance.shape_updates,
-        color_updates: instance.color_updates,
-        stack_peak_bytes: 0,
-        blob_bytes: blob.len() as u32,
-        partition_bytes: part.len() as u32,
-        model_vertices: n as u32,
-        model_triangles: model.triangles().len() as u32,
-        bits: u32::from(blob.bits()),
-        image_width: input.width,
-        image_height: input.height,
-    };
-    log_record(&model, &fit, &input, counts);
+        instructions_per_landmark_step: if settings.landmarks.steps > 0 { landmark / steps(settings.landmarks.steps) } else { 0 },
+        instructions_per_image_step: if settings.image.steps > 0 { image_chain / steps(settings.image.steps) } else { 0 },
+        instructions_fit: marks.fit_end - marks.fit_start,
+        instructions_total: total,
+        shape_updates: shape,
+        color_updates: color,
+        ..DeviceCounts::default()
+    }
 }
 
 /// Encodes the fit record and logs it as hex lines, then a human summary (a frame of its own, so
-/// the record's buffers are not on the stack during the fit).
+/// the record's buffers are not on the stack during the fit). `counts` gets the model's sizes,
+/// the image size and the stack peak here.
 #[inline(never)]
-fn log_record(
-    model: &gpmm_core::fit::MorphableModel<'_, u16>,
-    fit: &StandardFit<KS, KC>,
-    input: &FitInput<'_, FitSettings>,
-    mut counts: DeviceCounts,
-) {
+pub(crate) fn log_record(model: &MorphableModel<'_, u16>, fit: &StandardFit<KS, KC>, width: u32, height: u32, mut counts: DeviceCounts) {
     let p = fit.params();
     let mut lm = [[0.0f32; 2]; MAX_LANDMARKS];
-    let k = match project_landmarks(model, p, input.width, input.height, &mut lm) {
+    let k = match project_landmarks(model, p, width, height, &mut lm) {
         Ok(k) => k,
         Err(e) => fit_failed("landmark projection", e),
     };
-    let img = fit.image.best_image.unwrap_or(fit.start_image);
-    let figures = FitFigures {
-        yaw: p.pose.yaw,
-        pitch: p.pose.pitch,
-        roll: p.pose.roll,
-        focal: p.focal,
-        translation: p.pose.translation,
-        log_posterior: fit.image.best_log_posterior,
-        log_likelihood: img.log_likelihood,
-        landmark_log_likelihood: fit.image.best_landmarks.log_likelihood,
-        landmark_rmse_px: fit.image.best_landmarks.rmse(),
-        pixel_rmse: img.rmse(),
-        acceptance_landmark_chain: fit.landmark.acceptance.overall(),
-        acceptance_image_chain: fit.image.acceptance.overall(),
-        covered_pixels: img.covered,
-    };
+    let figures = fit.record_figures();
+    counts.model_vertices = model.vertices() as u32;
+    counts.model_triangles = model.triangles().len() as u32;
+    counts.image_width = width;
+    counts.image_height = height;
     // Everything the fit used is behind us: the high-water mark is the fit's.
     counts.stack_peak_bytes = stack::peak_bytes();
     let mut record = [0u8; fit_record::encoded_len(KS, KC, MAX_LANDMARKS)];
@@ -209,7 +255,8 @@ fn log_record(
     );
 }
 
-fn fit_failed(stage: &str, e: FitError) -> ! {
+/// Logs that the core refused `stage`'s input and fails.
+pub(crate) fn fit_failed(stage: &str, e: FitError) -> ! {
     defmt::error!("{=str}: the core refused the input: {}", stage, e);
     fail()
 }

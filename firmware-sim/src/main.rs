@@ -10,7 +10,8 @@
 //!    a device mesh (`gpmm_core::format::device_mesh`, magic `GPDM`) is rendered, an init file
 //!    (magic `GPMI`) and a frame (`gpmm_core::format::detection`) are detected in, anything else
 //!    must be a model blob followed by a fit input (`gpmm_core::format::fit_input`), which is
-//!    fitted (`fit.rs`);
+//!    fitted (`fit.rs`), or by a landmark-free fit job, an init file and a camera frame
+//!    (`gpmm_core::format::frame_fit`): the face is found, cropped and fitted (`frame_fit.rs`);
 //! 3. a device mesh: renders it with gpmm-core exactly as the host does: the vertex stage (normals,
 //!    SH shading, projection) into static buffers, then `TileRasterizer<32, 32, BIN>` into a
 //!    `FrameChecksum` sink; both stages are timed in instructions (`clock::measure`, ±4);
@@ -25,6 +26,7 @@
 mod clock;
 mod detect;
 mod fit;
+mod frame_fit;
 mod hexlog;
 mod partition;
 mod stack;
@@ -104,7 +106,8 @@ fn main() -> ! {
     } else if part.starts_with(&INIT_MAGIC) {
         detect::run(part);
     } else if !device_mesh::is_device_mesh(part) {
-        fit::run(part, NORMALS, PROJECTED, RASTERIZER, CompactBuffers { covered: CACHE_COVERED, triangles: CACHE_TRIANGLES });
+        let cache = CompactBuffers { covered: CACHE_COVERED, triangles: CACHE_TRIANGLES };
+        fit::run(part, fit::Buffers { pool: NORMALS, projected: PROJECTED, raster: RASTERIZER, cache });
     } else {
         let m = match device_mesh::parse(part, MAX_PROJECTED.min(MAX_VERTICES)) {
             Ok(m) => m,

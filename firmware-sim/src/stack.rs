@@ -35,3 +35,18 @@ pub fn peak_bytes() -> u32 {
     }
     (high - addr) as u32
 }
+
+/// Paints the stack again below the current stack pointer (less a small margin for this call), so
+/// that the next [`peak_bytes`] is the peak of what runs after it: the landmark-free fit measures
+/// its detection and its crop + fit apart.
+pub fn repaint() {
+    let (low, _) = bounds();
+    let sp = cortex_m::register::msp::read() as usize;
+    let mut addr = low;
+    while addr + 256 < sp {
+        // SAFETY: [low, sp - 256) is stack RAM below every live frame (the stack grows down and
+        // this function's frame is above sp - 256); nothing else uses it. Word-aligned.
+        unsafe { core::ptr::write_volatile(addr as *mut u32, STACK_PAINT_VALUE) };
+        addr += 4;
+    }
+}

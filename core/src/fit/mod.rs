@@ -60,7 +60,7 @@ pub use proposal::{Mixture, MixtureEntry, OneOf, Proposal, ProposalContext, Prop
 pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};
 pub use settings::{
     Drift, DriftSettings, FitSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, ProposalSettings, RankSettings,
-    StartSettings,
+    StartSettings, INIT_LANDMARK_SIGMA,
 };
 pub use shape_fit::{solve_shape, ShapeSolveConfig, ShapeSolveReport, MAX_SHAPE_SOLVE};
 

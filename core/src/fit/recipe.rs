@@ -39,6 +39,7 @@ use super::proposal::{Mixture, StandardProposal};
 use super::settings::FitSettings;
 use super::shape_fit::{solve_shape, ShapeSolveConfig};
 use super::FitError;
+use crate::format::fit_record::FitFigures;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
 use crate::render::shading::TriIndex;
@@ -394,4 +395,28 @@ pub fn project_landmarks<I: TriIndex, const KS: usize, const KC: usize>(
         *o = cam.project(params.pose.transform_point(*p)).map_or([f32::NAN; 2], |s| [s.x, s.y]);
     }
     Ok(n)
+}
+
+impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
+    /// The fit record's figures of this fit (`GPFR`): the firmware logs them and the host's parity
+    /// run writes the same, so two records are equal exactly when the fits are.
+    pub fn record_figures(&self) -> FitFigures {
+        let p = self.params();
+        let img = self.image.best_image.unwrap_or(self.start_image);
+        FitFigures {
+            yaw: p.pose.yaw,
+            pitch: p.pose.pitch,
+            roll: p.pose.roll,
+            focal: p.focal,
+            translation: p.pose.translation,
+            log_posterior: self.image.best_log_posterior,
+            log_likelihood: img.log_likelihood,
+            landmark_log_likelihood: self.image.best_landmarks.log_likelihood,
+            landmark_rmse_px: self.image.best_landmarks.rmse(),
+            pixel_rmse: img.rmse(),
+            acceptance_landmark_chain: self.landmark.acceptance.overall(),
+            acceptance_image_chain: self.image.acceptance.overall(),
+            covered_pixels: img.covered,
+        }
+    }
 }

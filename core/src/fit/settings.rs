@@ -8,6 +8,13 @@ use super::light_fit::LightSolveConfig;
 use super::FitError;
 use crate::{ShLight, Vec3};
 
+/// Landmark σ (fraction of the fit's image side) for landmarks read by the initializer of a
+/// landmark-free fit (`gpmm fit --init`, `gpmm device-fit --init`): looser than a face-mesh
+/// detector's default, as its points are (chosen on the Mitsuba development set: median |yaw
+/// error| 3.14° at the default 0.005, 2.56° at 0.015, 3.06° at 0.03; docs/evaluation.md,
+/// "Landmark-free start").
+pub const INIT_LANDMARK_SIGMA: f32 = 0.015;
+
 /// Settings of [`super::standard_fit`] (defaults: the documented default fit), in groups: the
 /// landmark chain, the image chain, the ranks fitted, the start, the proposal mixtures and the
 /// light solves.

@@ -4,7 +4,9 @@
 //! - [`device_mesh`]: a mesh instance plus the scene to render it in (`GPDM`);
 //! - [`fit_input`]: the target image, its landmarks, the seed and the whole fit settings (`GPFI`);
 //! - [`fit_record`]: the fit's result as the firmware reports it (`GPFR`);
-//! - [`detection`]: a camera frame to detect the face in (`GPDF`) and the detection (`GPDR`).
+//! - [`detection`]: a camera frame to detect the face in (`GPDF`) and the detection (`GPDR`);
+//! - [`frame_fit`]: the landmark-free fit's job (`GPFF`: working side, seed, settings) and the
+//!   partition layout blob + job + init file + frame.
 //!
 //! All are little-endian, 4-byte aligned where read in place, and end in (or carry) a CRC-32.
 //! Readers check everything before anything is used and return a [`FormatError`], never panic.
@@ -18,6 +20,8 @@ pub mod device_mesh;
 #[cfg(feature = "serde")]
 pub mod fit_input;
 pub mod fit_record;
+#[cfg(feature = "serde")]
+pub mod frame_fit;
 
 use core::fmt;
 

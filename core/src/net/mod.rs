@@ -13,6 +13,7 @@
 //! (1, 3 or 5), stride 1 or 2 and zero padding `kernel / 2` (output side `(in + 2·pad − k) / s + 1`),
 //! and a dense layer over the whole flattened tensor (`(y·W + x)·C + c` order).
 
+pub mod crop;
 pub mod face;
 pub mod resample;
 
@@ -42,6 +43,8 @@ pub enum NetError {
     LengthMismatch,
     /// The input image is empty or its pixel slice does not match its size.
     BadImage,
+    /// The landmarks a crop is cut around span no area or are not finite.
+    DegenerateLandmarks,
 }
 
 impl From<FormatError> for NetError {
@@ -59,6 +62,7 @@ impl fmt::Display for NetError {
             NetError::ScratchTooSmall { needed } => write!(f, "the network scratch is too small ({needed} bytes per buffer needed)"),
             NetError::LengthMismatch => write!(f, "the network's input or output slice has the wrong length"),
             NetError::BadImage => write!(f, "the image is empty or its pixels do not match its size"),
+            NetError::DegenerateLandmarks => write!(f, "the landmarks span no area or are not finite: no crop can be cut around them"),
         }
     }
 }

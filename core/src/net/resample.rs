@@ -50,11 +50,34 @@ const FRAC: u32 = 8;
 
 /// Samples `src` (RGB, `w × h`, row-major) into `out` (`side × side × 3`, `i8`) through `window`.
 pub fn sample_rgb(src: &[u8], w: usize, h: usize, window: Window, side: usize, out: &mut [i8]) -> Result<(), NetError> {
-    if w == 0 || h == 0 || w.checked_mul(h).and_then(|n| n.checked_mul(3)) != Some(src.len()) {
-        return Err(NetError::BadImage);
-    }
     if out.len() != side * side * 3 {
         return Err(NetError::LengthMismatch);
+    }
+    sample(src, w, h, window, side, out.chunks_exact_mut(3), |o, v| *o = (v - 128) as i8)
+}
+
+/// Samples `src` (RGB, `w × h`, row-major) into `out` (`side × side` RGB8 pixels) through `window`:
+/// the same samples as [`sample_rgb`], stored as bytes (the fit's working image, `net::crop`).
+pub fn sample_rgb8(src: &[u8], w: usize, h: usize, window: Window, side: usize, out: &mut [[u8; 3]]) -> Result<(), NetError> {
+    if out.len() != side * side {
+        return Err(NetError::LengthMismatch);
+    }
+    sample(src, w, h, window, side, out.iter_mut().map(|p| &mut p[..]), |o, v| *o = v as u8)
+}
+
+/// The one sampler: each output pixel's three channel values (0..=255) go to `store`.
+#[inline(always)]
+fn sample<'o, T: 'o>(
+    src: &[u8],
+    w: usize,
+    h: usize,
+    window: Window,
+    side: usize,
+    out: impl Iterator<Item = &'o mut [T]>,
+    store: impl Fn(&mut T, i32),
+) -> Result<(), NetError> {
+    if w == 0 || h == 0 || w.checked_mul(h).and_then(|n| n.checked_mul(3)) != Some(src.len()) {
+        return Err(NetError::BadImage);
     }
     if !(window.x0.is_finite() && window.y0.is_finite() && window.step.is_finite() && window.step > 0.0) {
         return Err(NetError::BadImage);
@@ -71,7 +94,7 @@ pub fn sample_rgb(src: &[u8], w: usize, h: usize, window: Window, side: usize, o
             _ => [128; 3],
         }
     };
-    for (p, px) in out.chunks_exact_mut(3).enumerate() {
+    for (p, px) in out.enumerate() {
         let (u, v) = ((p % side) as f32, (p / side) as f32);
         let mut sum = [0i32; 3];
         for j in 0..n {
@@ -100,7 +123,7 @@ pub fn sample_rgb(src: &[u8], w: usize, h: usize, window: Window, side: usize, o
         let count = (n * n) as i32 * one * one;
         for (o, s) in px.iter_mut().zip(sum) {
             let value = (s + count / 2) / count;
-            *o = (value.clamp(0, 255) - 128) as i8;
+            store(o, value.clamp(0, 255));
         }
     }
     Ok(())

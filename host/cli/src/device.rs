@@ -17,11 +17,38 @@ pub struct DeviceFitArgs {
     pub profile: String,
     /// The model blob (`gpmm quantize`).
     pub blob: PathBuf,
-    /// Photo: PNG, JPEG or PPM (cropped around the landmarks and resampled to the profile's image size).
+    /// Photo: PNG, JPEG or PPM. With --landmarks: cropped around them and resampled to the
+    /// profile's image size on the host. With --init: scaled to cover the device's camera frame
+    /// (--width x --height) and cut to it, as a camera would give; the device does the rest.
     pub image: PathBuf,
     /// Landmarks: iBUG .pts (68 points), 0-based continuous pixel coordinates.
-    #[arg(long, value_name = "PTS")]
-    pub landmarks: PathBuf,
+    #[arg(long, value_name = "PTS", required_unless_present = "init", conflicts_with = "init")]
+    pub landmarks: Option<PathBuf>,
+    /// No landmark file: everything on the device. The partition holds the blob, the fit job, this
+    /// init file (`gpmm train-init`) and the whole camera frame; the firmware finds the face,
+    /// reads its landmarks, cuts the working image (--side) around them and fits it with the
+    /// initializer's landmarks as the landmark term (σ: --init-landmark-sigma, as `gpmm fit --init`).
+    #[arg(long, value_name = "INIT")]
+    pub init: Option<PathBuf>,
+    /// With --init: the landmark σ (fraction of the working side) of the initializer's landmarks.
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::init::INIT_LANDMARK_SIGMA, requires = "init")]
+    pub init_landmark_sigma: f32,
+    /// With --init: the camera frame's width (px).
+    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_WIDTH, requires = "init")]
+    pub width: u32,
+    /// With --init: the camera frame's height (px).
+    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT, requires = "init")]
+    pub height: u32,
+    /// With --init: re-centre the initializer's crop on its landmarks this many times (0..=8).
+    #[arg(long, default_value_t = 1, requires = "init")]
+    pub refine: u32,
+    /// With --init: smallest finder score (0..1) counted as a face (below it: "no face found").
+    #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE, requires = "init")]
+    pub min_score: f32,
+    /// With --init: side (px) of the working image the device cuts around the face (default and
+    /// largest: the profile's, 72 on m4f, 128 on m7; its RAM sits next to the fit's stack).
+    #[arg(long, value_name = "PX", requires = "init")]
+    pub side: Option<u32>,
     /// The .pts file is 1-based (300-W / menpo convention).
     #[arg(long)]
     pub pts_one_based: bool,
@@ -192,10 +219,13 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", a.blob.display()))?;
     let profile =
         gpmm_core::profile::DeviceProfile::by_name(&a.profile).with_context(|| format!("unknown device profile {}", a.profile))?;
+    let Some(landmarks) = a.landmarks.clone() else {
+        return crate::device_frame::device_fit_init(&a, &blob, view.landmarks().len(), view.rank_shape(), view.rank_color(), &profile);
+    };
     let size = profile.image_side;
-    let pts = gpmm_host::photo::pts::read_pts(&a.landmarks, a.pts_one_based)?;
+    let pts = gpmm_host::photo::pts::read_pts(&landmarks, a.pts_one_based)?;
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
-    pts.check(&a.landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
+    pts.check(&landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
     let prepared = gpmm_host::fit::prepare(&photo, &pts.points, size)?;
     let settings = FitOptions {
         size,

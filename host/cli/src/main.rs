@@ -4,6 +4,7 @@
 mod build;
 mod demo;
 mod device;
+mod device_frame;
 mod eval;
 mod fit;
 mod h5;
@@ -98,6 +99,17 @@ pub enum Command {
     /// (instructions counted with -icount) and prints JSON: flash and RAM use against the
     /// profile's budget, instructions per stage and per image step, the fitted pose,
     /// log-likelihood and 68 landmarks. --compare-host runs the same fit on the host core too.
+    ///
+    /// With --init INIT instead of --landmarks, everything happens on the device: the partition
+    /// holds the blob, the fit job (working side, seed, settings), the init file and the whole
+    /// camera frame (the photo scaled to cover --width x --height, default 160x120); the firmware
+    /// finds the face, reads its landmarks, cuts the working image around them (72x72 on m4f,
+    /// whose RAM holds no larger one next to the fit; 128x128 on m7) and fits it with those
+    /// landmarks as the landmark term (σ --init-landmark-sigma). The JSON reports instructions per
+    /// stage (detection, crop, fit) and RAM; --compare-host checks detection and fit bit for bit
+    /// against the same core path on the host. A frame without a face reports "no face found".
+    /// On m4f the blob, init file and frame share a 512 KiB partition: use an 8-bit blob
+    /// (`gpmm quantize --bits 8`) with the default init file.
     /// Needs a gpmm source checkout (firmware-sim/) and installs QEMU and the toolchain if missing.
     DeviceFit(device::DeviceFitArgs),
     /// Find the face and read its landmarks on the simulated device: Cortex-M firmware under QEMU.

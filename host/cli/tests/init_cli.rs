@@ -199,3 +199,60 @@ fn device_detect_matches_the_host_bit_for_bit() {
     let err = fails(&gpmm(&["device-detect", s(&f.init), "--init", s(&f.init)]));
     assert!(err.contains("quick.init") && err.contains("image"), "{err}");
 }
+
+/// `gpmm device-fit BLOB IMAGE --init INIT` (no landmark file): detection, crop and fit on the
+/// device, both records bit-identical to the host's run; the working side is the profile's; a bad
+/// init file is refused by name before QEMU runs, and so is a side the m4f's RAM does not hold.
+/// Needs QEMU and the thumbv7em toolchain (firmware-sim/install-deps.sh).
+#[test]
+fn device_fit_without_landmarks_matches_the_host_bit_for_bit() {
+    let Some(f) = fixture() else { return };
+    let blob = f.dir.path().join("small8.blob");
+    ok(&gpmm(&["quantize", s(&f.model), "--profile", "m4f", "--bits", "8", "-o", s(&blob)]));
+    let image = f.synth.join("0000_yaw00.png");
+    let args = |extra: &[&str]| {
+        let mut v = vec![
+            "device-fit",
+            s(&blob),
+            s(&image),
+            "--init",
+            s(&f.init),
+            "--landmark-steps",
+            "300",
+            "--image-steps",
+            "20",
+            "--min-score",
+            "0",
+        ];
+        v.extend_from_slice(extra);
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let run = |extra: &[&str]| gpmm(&args(extra).iter().map(String::as_str).collect::<Vec<_>>());
+    let out = ok(&run(&["--compare-host"]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(json["parity"]["detection_bit_identical"], true, "{out}");
+    assert_eq!(json["parity"]["fit_bit_identical"], true, "{out}");
+    assert_eq!(json["crop"]["side"].as_u64(), Some(72), "{out}");
+    assert_eq!(json["fitted_landmarks_photo_px"].as_array().unwrap().len(), 68);
+    let st = &json["stage_instructions"];
+    for stage in ["detection", "crop", "fit"] {
+        assert!(st[stage].as_u64().unwrap() > 0, "{stage}: {st}");
+    }
+    assert!(json["ram"]["total_bytes"].as_u64().unwrap() <= json["ram"]["budget_bytes"].as_u64().unwrap(), "{out}");
+    // Refused before QEMU: a corrupted init file (by name), a working side beyond the m4f's.
+    let mut bytes = std::fs::read(&f.init).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x01;
+    let bad = f.dir.path().join("fit-bad.init");
+    std::fs::write(&bad, &bytes).unwrap();
+    let err = fails(&gpmm(&["device-fit", s(&blob), s(&image), "--init", s(&bad)]));
+    assert!(err.contains("fit-bad.init") && err.contains("CRC"), "{err}");
+    let err = fails(&run(&["--side", "96"]));
+    assert!(err.contains("working side 96") && err.contains("16..=72"), "{err}");
+    // No face at a minimum score no finder reaches: the report, then "no face found".
+    let out = gpmm(&["device-fit", s(&blob), s(&image), "--init", s(&f.init), "--min-score", "1"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        assert!(err.contains("no face found"), "{err}");
+    }
+}

@@ -117,11 +117,24 @@ pub fn host_fit(
     settings: &FitSettings,
     seed: u64,
 ) -> Result<(StandardFit<DEVICE_KS, DEVICE_KC>, Vec<[f32; 2]>), DeviceFitError> {
-    let view = blob.view().map_err(|e| DeviceFitError::Blob(e.to_string()))?;
-    let model = view.morphable().map_err(DeviceFitError::Core)?;
     let (w, h) = prepared.image.dimensions();
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
-    let image = TargetImage::new(&pixels, w, h).map_err(DeviceFitError::Core)?;
+    host_fit_pixels(blob, &pixels, w, h, &prepared.landmarks, settings, seed)
+}
+
+/// [`host_fit`] on a working image given as pixels (`w × h`, row-major) and its landmarks (px).
+pub fn host_fit_pixels(
+    blob: &BlobBuf,
+    pixels: &[[u8; 3]],
+    w: u32,
+    h: u32,
+    landmarks: &[[f32; 2]],
+    settings: &FitSettings,
+    seed: u64,
+) -> Result<(StandardFit<DEVICE_KS, DEVICE_KC>, Vec<[f32; 2]>), DeviceFitError> {
+    let view = blob.view().map_err(|e| DeviceFitError::Blob(e.to_string()))?;
+    let model = view.morphable().map_err(DeviceFitError::Core)?;
+    let image = TargetImage::new(pixels, w, h).map_err(DeviceFitError::Core)?;
     let n = model.vertices();
     let (mut pos, mut alb, mut nor, mut proj) =
         (vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n], vec![ProjectedVertex::INVALID; n]);
@@ -135,8 +148,8 @@ pub fn host_fit(
     .with_frame_cache(FrameCache::compact(CompactBuffers { covered: &mut covered, triangles: &mut ids }));
     let mut raster: Box<DeviceRasterizer> = Box::new(DeviceRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let valid = vec![true; prepared.landmarks.len()];
-    let fit = standard_fit(&model, image, &prepared.landmarks, &valid, settings, &mut inst, &mut raster, &mut rng, &mut |_, _, _| {})
+    let valid = vec![true; landmarks.len()];
+    let fit = standard_fit(&model, image, landmarks, &valid, settings, &mut inst, &mut raster, &mut rng, &mut |_, _, _| {})
         .map_err(DeviceFitError::Core)?;
     let mut lm = vec![[0.0f32; 2]; model.landmarks().len()];
     let k = project_landmarks(&model, fit.params(), w, h, &mut lm).map_err(DeviceFitError::Core)?;

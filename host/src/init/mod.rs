@@ -15,11 +15,9 @@ use std::path::{Path, PathBuf};
 /// Bytes of each activation buffer the host gives the networks.
 pub const HOST_NET_SCRATCH: usize = 64 * 1024;
 
-/// Landmark σ (fraction of the fit's image side) for landmarks read by the initializer: looser
-/// than a face-mesh detector's default, as its points are (chosen on the Mitsuba development set:
-/// median |yaw error| 3.14° at the default 0.005, 2.56° at 0.015, 3.06° at 0.03;
-/// docs/evaluation.md, "Landmark-free start").
-pub const INIT_LANDMARK_SIGMA: f32 = 0.015;
+/// Landmark σ (fraction of the fit's image side) for landmarks read by the initializer: the
+/// core's one definition, which `gpmm fit --init` and `gpmm device-fit --init` both default to.
+pub use gpmm_core::fit::INIT_LANDMARK_SIGMA;
 
 /// Why an init file could not be used.
 #[derive(Debug, thiserror::Error)]

@@ -16,10 +16,9 @@ use image::{imageops::FilterType, RgbImage};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// Crop side over the landmarks' larger bounding-box side.
-pub const CROP_FACTOR: f32 = 1.8;
-/// Upward shift of the crop centre, as a fraction of the landmarks' larger bounding-box side.
-pub const CROP_LIFT: f32 = 0.1;
+/// Crop side over the landmarks' larger bounding-box side, and the upward shift of the crop
+/// centre as a fraction of it: the core's, which the device's crop (`gpmm_core::net::crop`) uses.
+pub use gpmm_core::net::crop::{CROP_FACTOR, CROP_LIFT};
 /// Largest image side accepted (pixels).
 pub const MAX_PHOTO_SIDE: u32 = 16384;
 
