@@ -11,7 +11,8 @@
 use crate::device::quantize::BlobBuf;
 use crate::fit::Prepared;
 use gpmm_core::fit::{
-    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, RankSettings, StandardFit, TargetImage,
+    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, RankSettings, StandardFit, StartSettings,
+    TargetImage,
 };
 use gpmm_core::format::{fit_input, fit_record, FormatError};
 use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
@@ -78,13 +79,14 @@ pub enum DeviceFitError {
 }
 
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
-/// of both the device and the host's run of it.
+/// of both the device and the host's run of it, and no shape solve at the start (it needs the
+/// host's scratch: about 3 × 65 floats a sampled vertex, 1 MB with the template model).
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
     let ranks = RankSettings {
         shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),
         color: settings.ranks.color.min(profile.color_capacity).min(DEVICE_KC),
     };
-    FitSettings { ranks, ..*settings }
+    FitSettings { ranks, start: StartSettings { shape_rounds: 0, ..settings.start }, ..*settings }
 }
 
 /// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and
