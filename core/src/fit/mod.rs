@@ -23,6 +23,7 @@
 /// The parameter vector, under its old path (`gpmm_core::fit::params`); it lives in [`crate::model`].
 pub use crate::model::params;
 pub mod chain;
+mod cholesky;
 pub mod color_fit;
 pub mod contour;
 pub mod image;

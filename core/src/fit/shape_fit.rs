@@ -515,51 +515,9 @@ fn objective_at<I: TriIndex>(
 }
 
 /// Solves `M x = b` for the leading `n × n` block of a symmetric positive-definite `M` (lower
-/// triangle given; overwritten by its Cholesky factor).
+/// triangle given; overwritten by its Cholesky factor); a non-finite solution is refused.
 fn cholesky_solve(m: &mut [[f32; MAX_COLUMNS]; MAX_COLUMNS], b: &[f32; MAX_COLUMNS], n: usize) -> Result<[f32; MAX_COLUMNS], FitError> {
-    let at = |m: &[[f32; MAX_COLUMNS]; MAX_COLUMNS], i: usize, j: usize| m.get(i).and_then(|r| r.get(j)).copied().unwrap_or(0.0);
-    for j in 0..n {
-        let mut d = at(m, j, j);
-        for l in 0..j {
-            d -= at(m, j, l) * at(m, j, l);
-        }
-        if !(d > 0.0 && d.is_finite()) {
-            return Err(FitError::Singular);
-        }
-        let d = libm::sqrtf(d);
-        if let Some(e) = m.get_mut(j).and_then(|r| r.get_mut(j)) {
-            *e = d;
-        }
-        for i in j + 1..n {
-            let mut s = at(m, i, j);
-            for l in 0..j {
-                s -= at(m, i, l) * at(m, j, l);
-            }
-            if let Some(e) = m.get_mut(i).and_then(|r| r.get_mut(j)) {
-                *e = s / d;
-            }
-        }
-    }
-    let mut y = [0.0f32; MAX_COLUMNS];
-    for i in 0..n {
-        let mut s = b.get(i).copied().unwrap_or(0.0);
-        for l in 0..i {
-            s -= at(m, i, l) * y.get(l).copied().unwrap_or(0.0);
-        }
-        if let Some(e) = y.get_mut(i) {
-            *e = s / at(m, i, i);
-        }
-    }
-    let mut x = [0.0f32; MAX_COLUMNS];
-    for i in (0..n).rev() {
-        let mut s = y.get(i).copied().unwrap_or(0.0);
-        for l in i + 1..n {
-            s -= at(m, l, i) * x.get(l).copied().unwrap_or(0.0);
-        }
-        if let Some(e) = x.get_mut(i) {
-            *e = s / at(m, i, i);
-        }
-    }
+    let x = super::cholesky::solve(m, b, n)?;
     if x.iter().all(|v| v.is_finite()) {
         Ok(x)
     } else {
