@@ -137,6 +137,49 @@ fn reshading_gives_the_rendered_sums_to_the_bit() {
     assert_eq!((frames.reshaded, frames.recorded), (2, 5), "compact: re-shaded / rendered frames");
 }
 
+#[test]
+fn a_recomputed_shape_gets_its_serial_and_geometry_back() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let mut bufs = Buffers::new(synth.vertices());
+    let mut inst = bufs.instance();
+    let a = truth();
+    let mut b = a.clone();
+    b.shape_coeffs_mut()[0] += 0.3;
+    inst.update(&model, &a, W, H).unwrap();
+    let ka = inst.geometry();
+    let positions = inst.positions().to_vec();
+    inst.update(&model, &b, W, H).unwrap();
+    assert_ne!(inst.geometry(), ka);
+    // No spare buffers: `a` is recomputed, to the same bits, under the same key.
+    assert_eq!(inst.geometry_of(&a, W, H), ka);
+    inst.update(&model, &a, W, H).unwrap();
+    assert_eq!((inst.geometry(), inst.shape_updates), (ka, 3));
+    assert!(inst.positions().iter().zip(&positions).all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits)));
+}
+
+#[test]
+fn a_compact_cache_keeps_the_chains_frame() {
+    use gpmm_core::frame_cache::GeometryKey;
+    use gpmm_core::Pose;
+    let (mut covered, mut ids) = (vec![0u32; 512], vec![0u16; 64]);
+    let mut frames = FrameCache::compact(CompactBuffers { covered: &mut covered, triangles: &mut ids });
+    let pose = Pose { yaw: 0.1, pitch: 0.0, roll: 0.0, translation: [0.0, 0.0, -500.0] };
+    let chain = GeometryKey::new(1, &pose, 300.0, W, H);
+    let proposal = GeometryKey::new(1, &Pose { yaw: 0.2, ..pose }, 300.0, W, H);
+    frames.recorder(chain, None, &mut ()).finish();
+    assert!(frames.contains(&chain));
+    // A proposal's frame (another geometry than the chain's) is not recorded over it...
+    frames.recorder(proposal, Some(chain), &mut ()).finish();
+    assert!(frames.contains(&chain) && !frames.contains(&proposal));
+    // ... the chain's own frame is, and so is any frame without a chain state.
+    frames.recorder(proposal, Some(proposal), &mut ()).finish();
+    assert!(frames.contains(&proposal) && !frames.contains(&chain));
+    frames.recorder(chain, None, &mut ()).finish();
+    assert!(frames.contains(&chain));
+    assert_eq!(frames.recorded, 3);
+}
+
 #[derive(Clone, Copy, PartialEq)]
 enum Caches {
     None,

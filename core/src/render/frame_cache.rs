@@ -163,11 +163,19 @@ impl<'c> FrameCache<'c> {
     }
 
     /// A sink that passes every tile to `inner` and records the frame for geometry `key` in a
-    /// slot that does not hold `keep` (the chain's own frame), else the older one. Call
+    /// slot that does not hold `keep` (the chain's own frame), else the older one; a compact
+    /// cache (one slot) records only the chain's own frame (`keep` is `None` or `key`). Call
     /// [`Recorder::finish`] after a successful render: only then is the frame kept.
     pub fn recorder<'r, S>(&'r mut self, key: GeometryKey, keep: Option<GeometryKey>, inner: &'r mut S) -> Recorder<'r, 'c, S> {
         let [a, b] = &self.slots;
-        let older = if matches!(b.store, Store::Unused) {
+        let single = matches!(b.store, Store::Unused);
+        if single && keep.is_some() && keep != Some(key) {
+            // One slot: keep the chain's frame, do not record a proposal's (most are rejected,
+            // and a colour or light proposal after a rejection re-shades the chain's frame).
+            let [a, _] = &mut self.slots;
+            return Recorder { slot: a, inner, key, overflow: true, counter: &mut self.recorded };
+        }
+        let older = if single {
             0
         } else if keep.is_some() && a.key == keep {
             1
