@@ -180,6 +180,45 @@ fn a_compact_cache_keeps_the_chains_frame() {
     assert_eq!(frames.recorded, 3);
 }
 
+#[test]
+fn drawn_set_ups_and_stepped_edges_give_the_direct_weights() {
+    use gpmm_core::raster::FragmentSetup;
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let mut bufs = Buffers::new(synth.vertices());
+    let mut inst = bufs.instance();
+    inst.update(&model, &truth(), W, H).unwrap();
+    let v = inst.projected();
+    let bits = |w: Option<[f32; 3]>| w.map(|w| w.map(f32::to_bits));
+    let (mut covered, mut stepped) = (0, 0);
+    for tri in model.triangles() {
+        let Some(direct) = FragmentSetup::new(v, tri, W, H) else { continue };
+        let drawn = FragmentSetup::of_drawn(v, tri, W, H).unwrap();
+        assert_eq!(drawn.ids, direct.ids);
+        let (xs, ys) = (tri.map(|i| v[i as usize].x), tri.map(|i| v[i as usize].y));
+        let lo = |c: [f32; 3]| (c.iter().fold(f32::MAX, |a, &b| a.min(b)) as i64 - 2).clamp(0, W as i64) as u32;
+        let hi = |c: [f32; 3]| (c.iter().fold(f32::MIN, |a, &b| a.max(b)) as i64 + 2).clamp(0, W as i64) as u32;
+        for y in lo(ys)..hi(ys).min(H) {
+            let mut prev: Option<[i32; 3]> = None;
+            for x in lo(xs)..hi(xs) {
+                let want = direct.weights_at(x, y);
+                assert_eq!(bits(drawn.weights_at(x, y)), bits(want));
+                let e = drawn.small_edges(x, y);
+                if let Some(e) = e {
+                    assert_eq!(bits(drawn.weights_from(e)), bits(want));
+                    covered += usize::from(want.is_some());
+                    if let Some(p) = prev.filter(|p| drawn.weights_from(*p).is_some()) {
+                        assert_eq!(drawn.step_right(p), e, "triangle {tri:?} at ({x}, {y})");
+                        stepped += 1;
+                    }
+                }
+                prev = e;
+            }
+        }
+    }
+    assert!(covered > 2000 && stepped > 1000, "{covered} covered pixels, {stepped} steps");
+}
+
 #[derive(Clone, Copy, PartialEq)]
 enum Caches {
     None,
