@@ -339,22 +339,24 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
     }
     let [c0, c1, c2] = a.color;
     let inv_area = a.inv_area;
-    let (lx0, lx1) = (clip[0] as usize, clip[1] as usize);
+    // Exclusive ranges (an inclusive range's iterator costs more per step), and the tile rows
+    // touched only at pixels inside the triangle.
+    let (lx0, lx1) = (clip[0] as usize, clip[1] as usize + 1);
     let mut newly = 0u32;
-    for ly in clip[2] as usize..=clip[3] as usize {
-        let (Some(crow), Some(drow), Some(trow), Some(brow)) = (
-            tile.color.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-            tile.inv_w.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-            tile.tri.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-            tile.bary.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-        ) else {
+    for ly in clip[2] as usize..clip[3] as usize + 1 {
+        let (Some(crow), Some(drow), Some(trow), Some(brow)) =
+            (tile.color.get_mut(ly), tile.inv_w.get_mut(ly), tile.tri.get_mut(ly), tile.bary.get_mut(ly))
+        else {
             break;
         };
         let mut e = e_row;
-        for (((c, d), t), b) in crow.iter_mut().zip(drow.iter_mut()).zip(trow.iter_mut()).zip(brow.iter_mut()) {
+        for lx in lx0..lx1 {
             if (e[0] | e[1] | e[2]) >= E::ZERO {
                 let l = [(e[0] + bias[0]).to_f32() * inv_area, (e[1] + bias[1]).to_f32() * inv_area, (e[2] + bias[2]).to_f32() * inv_area];
                 let iw = interpolated_inv_w(l, a.inv_w);
+                let (Some(c), Some(d), Some(t), Some(b)) = (crow.get_mut(lx), drow.get_mut(lx), trow.get_mut(lx), brow.get_mut(lx)) else {
+                    break;
+                };
                 if iw > *d {
                     let [p0, p1, p2] = perspective_weights(l, a.inv_w, iw);
                     *d = iw;
