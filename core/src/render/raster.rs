@@ -673,15 +673,38 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
         if binned == Binned::Overflow {
             stats.overflow_rows += 1;
         }
+        let meets_row = |e: &BinEntry| i32::from(e.y1) >= ry0 && i32::from(e.y0) <= ry1;
+        // The frame's entries meeting this row, copied (in order) into the bin's unused tail if
+        // they fit there: the row's tiles then scan those instead of the whole frame's.
+        let (first, entries) = match binned {
+            Binned::Frame(n) => {
+                let (head, tail) = self.bin.split_at_mut(n.min(BIN));
+                let mut m = 0usize;
+                let mut fits = true;
+                for e in head.iter().filter(|e| meets_row(e)) {
+                    match tail.get_mut(m) {
+                        Some(slot) => *slot = *e,
+                        None => {
+                            fits = false;
+                            break;
+                        }
+                    }
+                    m += 1;
+                }
+                if fits {
+                    (n, m)
+                } else {
+                    (0, n)
+                }
+            }
+            Binned::Row(n) => (0, n),
+            Binned::Overflow => (0, 0),
+        };
         let mut tx0 = 0u32;
         while tx0 < f.width {
             let cols = tw.min(f.width - tx0);
             self.tile.reset(tx0, row.y0, cols, row.rows);
             let tx1 = tx0 + cols - 1;
-            let entries = match binned {
-                Binned::Frame(n) | Binned::Row(n) => n,
-                Binned::Overflow => 0,
-            };
             if binned == Binned::Overflow {
                 for (id, tri) in (0u32..).zip(f.triangles) {
                     let Some(v) = fetch(f.vertices, tri) else { continue };
@@ -693,9 +716,8 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
                     }
                 }
             }
-            for e in self.bin.iter().take(entries) {
-                let outside_x = u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1;
-                if outside_x || i32::from(e.y1) < ry0 || i32::from(e.y0) > ry1 {
+            for e in self.bin.iter().skip(first).take(entries) {
+                if !meets_row(e) || u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1 {
                     continue;
                 }
                 let Some(v) = f.triangles.get(e.tri as usize).and_then(|t| fetch(f.vertices, t)) else { continue };
