@@ -35,17 +35,19 @@ use crate::render::shading::{ProjectedVertex, TriIndex};
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 use crate::Vec3;
 
+pub use super::fragment::{fragment_weights, FragmentSetup};
+
 /// Fractional bits of the fixed-point vertex coordinates (1/256 pixel).
 pub const SUBPIXEL_BITS: u32 = 8;
-const ONE: i32 = 1 << SUBPIXEL_BITS;
-const HALF: i32 = ONE / 2;
+pub(super) const ONE: i32 = 1 << SUBPIXEL_BITS;
+pub(super) const HALF: i32 = ONE / 2;
 /// Vertices farther than this from the image origin (in pixels) reject their triangle (keeps `i64` exact).
 pub const GUARD_BAND: f32 = 2_097_152.0;
 /// Largest accepted image width or height in pixels.
 pub const MAX_IMAGE_SIZE: u32 = 1 << 15;
 /// Triangles whose fixed-point extent is below this in x and y (64 px) evaluate their edge
 /// functions exactly in `i32` (|E| < 2 · extent² < 2^29); larger ones use `i64`.
-const SMALL_EXTENT: i32 = 1 << 14;
+pub(super) const SMALL_EXTENT: i32 = 1 << 14;
 
 /// Which on-screen winding to discard.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -119,19 +121,19 @@ impl BinEntry {
 }
 
 /// Fixed-point triangle, oriented to positive area, with its pixel bounding box in the image.
-struct Setup {
+pub(super) struct Setup {
     /// Vertices in fixed point (`|p| <= 2^29`), reordered to positive area if `swapped`.
-    p: [[i32; 2]; 3],
-    swapped: bool,
-    area: i64,
+    pub(super) p: [[i32; 2]; 3],
+    pub(super) swapped: bool,
+    pub(super) area: i64,
     /// Inclusive pixel bounds `x0, x1, y0, y1`, clamped to the image.
     bbox: [i32; 4],
     /// Extent below [`SMALL_EXTENT`]: edge functions fit `i32`.
-    small: bool,
+    pub(super) small: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
-enum Reject {
+pub(super) enum Reject {
     Invalid,
     Guard,
     Culled,
@@ -139,7 +141,7 @@ enum Reject {
     OffScreen,
 }
 
-fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Option<[&'a ProjectedVertex; 3]> {
+pub(super) fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Option<[&'a ProjectedVertex; 3]> {
     let [a, b, c] = *tri;
     Some([vertices.get(a.index())?, vertices.get(b.index())?, vertices.get(c.index())?])
 }
@@ -147,7 +149,7 @@ fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Opti
 /// `roundf(x · 2^SUBPIXEL_BITS)` (half away from zero) for `|x| <= GUARD_BAND`, without `libm`
 /// or `i64`: the truncation and the fraction `s − trunc(s)` are exact in `f32`.
 #[inline(always)]
-fn snap(x: f32) -> i32 {
+pub(super) fn snap(x: f32) -> i32 {
     let s = x * ONE as f32;
     let t = s as i32;
     let f = s - t as f32;
@@ -188,6 +190,40 @@ fn validate_slow(v: [&ProjectedVertex; 3]) -> Result<(), Reject> {
     Ok(())
 }
 
+/// Vertices checked once per frame instead of once per triangle (each is in about six): a bit
+/// per vertex, set if it passes [`validate_slow`]'s tests (finite, in front, inside the guard
+/// band). A triangle of three such vertices passes [`validate`]. Frames of more vertices than
+/// the bits (2,048, 256 bytes of stack) validate per triangle.
+struct ValidVertices {
+    bits: [u32; 64],
+}
+
+impl ValidVertices {
+    /// The flags of `vertices` (`None` if there are too many).
+    fn of(vertices: &[ProjectedVertex]) -> Option<Self> {
+        let mut bits = [0u32; 64];
+        if vertices.len() > bits.len() * 32 {
+            return None;
+        }
+        for (word, chunk) in bits.iter_mut().zip(vertices.chunks(32)) {
+            for (k, p) in chunk.iter().enumerate() {
+                let ok = validate_slow([p, p, p]).is_ok();
+                *word |= u32::from(ok) << k;
+            }
+        }
+        Some(Self { bits })
+    }
+
+    /// Whether all three vertices of `tri` are valid.
+    #[inline(always)]
+    fn all<I: TriIndex>(&self, tri: &[I; 3]) -> bool {
+        tri.iter().all(|i| {
+            let i = i.index();
+            self.bits.get(i / 32).is_some_and(|w| w >> (i % 32) & 1 == 1)
+        })
+    }
+}
+
 /// Snapping, area, winding and bounding box of a triangle whose vertices passed [`validate`].
 #[inline(always)]
 fn geometry(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
@@ -226,14 +262,14 @@ fn geometry(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Re
 }
 
 /// Full set-up: [`validate`], then [`geometry`].
-fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
+pub(super) fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
     validate(v)?;
     geometry(v, cull, width, height)
 }
 
 /// Integer type of the edge functions: `i32` for small triangles, `i64` otherwise (both exact, so
 /// the `f32` conversions give the same bits).
-trait EdgeInt:
+pub(super) trait EdgeInt:
     Copy
     + core::ops::Add<Output = Self>
     + core::ops::Sub<Output = Self>
@@ -381,13 +417,13 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
 
 /// `1 / w` at a pixel with screen-space barycentrics `l` of vertices with reciprocal depths `inv_w`.
 #[inline(always)]
-fn interpolated_inv_w(l: [f32; 3], inv_w: [f32; 3]) -> f32 {
+pub(super) fn interpolated_inv_w(l: [f32; 3], inv_w: [f32; 3]) -> f32 {
     l[0] * inv_w[0] + l[1] * inv_w[1] + l[2] * inv_w[2]
 }
 
 /// Perspective-correct weights from screen-space barycentrics `l` (`iw`: [`interpolated_inv_w`]).
 #[inline(always)]
-fn perspective_weights(l: [f32; 3], inv_w: [f32; 3], iw: f32) -> [f32; 3] {
+pub(super) fn perspective_weights(l: [f32; 3], inv_w: [f32; 3], iw: f32) -> [f32; 3] {
     let r = 1.0 / iw;
     [l[0] * inv_w[0] * r, l[1] * inv_w[1] * r, l[2] * inv_w[2] * r]
 }
@@ -400,140 +436,6 @@ pub fn blend(p: [f32; 3], c: [Vec3; 3]) -> Vec3 {
     let [p0, p1, p2] = p;
     let [c0, c1, c2] = c;
     [p0 * c0[0] + p1 * c1[0] + p2 * c2[0], p0 * c0[1] + p1 * c1[1] + p2 * c2[1], p0 * c0[2] + p1 * c1[2] + p2 * c2[2]]
-}
-
-/// The vertex ids (in the rasterizer's set-up order) and perspective-correct weights with which
-/// triangle `tri` colours pixel `(x, y)` of a `width × height` frame, exactly as
-/// [`TileRasterizer::render`] computes them (edge functions evaluated directly instead of
-/// stepped: the same integers, so the same bits). `None` if the triangle would not be drawn.
-pub fn fragment_weights<I: TriIndex>(
-    vertices: &[ProjectedVertex],
-    tri: &[I; 3],
-    x: u32,
-    y: u32,
-    width: u32,
-    height: u32,
-) -> Option<([u32; 3], [f32; 3])> {
-    let f = FragmentSetup::new(vertices, tri, width, height)?;
-    Some((f.ids, f.weights_at(x, y)?))
-}
-
-/// One triangle's set-up for [`fragment_weights`], reusable for all its pixels.
-#[derive(Debug, Clone, Copy)]
-pub struct FragmentSetup {
-    /// Vertex ids in the rasterizer's set-up order.
-    pub ids: [u32; 3],
-    inv_w: [f32; 3],
-    p: [[i32; 2]; 3],
-    small: bool,
-    inv_area: f32,
-}
-
-impl FragmentSetup {
-    /// The set-up of triangle `tri` in a `width × height` frame (`None` if it would not be drawn).
-    pub fn new<I: TriIndex>(vertices: &[ProjectedVertex], tri: &[I; 3], width: u32, height: u32) -> Option<Self> {
-        let v = fetch(vertices, tri)?;
-        let s = setup(v, Cull::None, width, height).ok()?;
-        let [va, vb, vc] = v;
-        let [ia, ib, ic] = tri.map(|i| i.index() as u32);
-        let (ids, inv_w) =
-            if s.swapped { ([ia, ic, ib], [va.inv_w, vc.inv_w, vb.inv_w]) } else { ([ia, ib, ic], [va.inv_w, vb.inv_w, vc.inv_w]) };
-        // (The same value either way; `i64 as f32` is a library call on Cortex-M4.)
-        let area = if s.small { s.area as i32 as f32 } else { s.area as f32 };
-        Some(Self { ids, inv_w, p: s.p, small: s.small, inv_area: 1.0 / area })
-    }
-
-    /// The set-up of triangle `tri` as drawn in a frame already rendered with these vertex
-    /// positions (a re-shade): [`Self::new`] without the checks that frame passed (validity,
-    /// winding, bounding box), the same values. `None` if degenerate (never for a drawn one).
-    /// Colours are not looked at: a non-finite one shows in the blended colour.
-    pub fn of_drawn<I: TriIndex>(vertices: &[ProjectedVertex], tri: &[I; 3], width: u32, height: u32) -> Option<Self> {
-        let [va, vb, vc] = fetch(vertices, tri)?;
-        let (x0, y0, x1, y1, x2, y2) = (snap(va.x), snap(va.y), snap(vb.x), snap(vb.y), snap(vc.x), snap(vc.y));
-        let (min_x, max_x) = (x0.min(x1).min(x2), x0.max(x1).max(x2));
-        let (min_y, max_y) = (y0.min(y1).min(y2), y0.max(y1).max(y2));
-        let small = max_x - min_x < SMALL_EXTENT && max_y - min_y < SMALL_EXTENT;
-        let [ia, ib, ic] = tri.map(|i| i.index() as u32);
-        if small {
-            let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
-            let (ids, inv_w, p, area) = if area < 0 {
-                ([ia, ic, ib], [va.inv_w, vc.inv_w, vb.inv_w], [[x0, y0], [x2, y2], [x1, y1]], -area)
-            } else {
-                ([ia, ib, ic], [va.inv_w, vb.inv_w, vc.inv_w], [[x0, y0], [x1, y1], [x2, y2]], area)
-            };
-            (area != 0).then(|| Self { ids, inv_w, p, small, inv_area: 1.0 / area as f32 })
-        } else {
-            Self::new(vertices, tri, width, height)
-        }
-    }
-
-    /// The perspective-correct weights at pixel `(x, y)` (`None` if the triangle does not cover it).
-    pub fn weights_at(&self, x: u32, y: u32) -> Option<[f32; 3]> {
-        match self.small_edges(x, y) {
-            Some(e) => self.weights_from(e),
-            None => {
-                let l = self.edges::<i64>(x, y)?;
-                let iw = interpolated_inv_w(l, self.inv_w);
-                Some(perspective_weights(l, self.inv_w, iw))
-            }
-        }
-    }
-
-    /// The exact edge functions at the centre of `(x, y)` in `i32`, if the triangle is small and
-    /// the pixel near it (else `None`: use [`Self::weights_at`]). A run of pixels to the right
-    /// steps them with [`Self::step_right`] (the same integers) instead of evaluating each.
-    #[inline(always)]
-    pub fn small_edges(&self, x: u32, y: u32) -> Option<[i32; 3]> {
-        // i32 only near the triangle, where its products cannot overflow (a small triangle's
-        // pixels are within 2^14 of its vertices; a far pixel is simply not covered).
-        let [px, py] = self.p[0];
-        let near = |c: u32, p: i32| (i64::from(c) * i64::from(ONE) + i64::from(HALF) - i64::from(p)).abs() < 1 << 15;
-        if !(self.small && near(x, px) && near(y, py)) {
-            return None;
-        }
-        let (cx, cy) = (x as i32 * ONE + HALF, y as i32 * ONE + HALF);
-        let [a, b, c] = self.p;
-        let e = |pa: [i32; 2], pb: [i32; 2]| (pb[0] - pa[0]) * (cy - pa[1]) - (pb[1] - pa[1]) * (cx - pa[0]);
-        Some([e(b, c), e(c, a), e(a, b)])
-    }
-
-    /// Small edge values `e` of a pixel, one pixel to the right (see [`Self::small_edges`]).
-    #[inline(always)]
-    pub fn step_right(&self, e: [i32; 3]) -> [i32; 3] {
-        let [a, b, c] = self.p;
-        [e[0] - (c[1] - b[1]) * ONE, e[1] - (a[1] - c[1]) * ONE, e[2] - (b[1] - a[1]) * ONE]
-    }
-
-    /// The perspective-correct weights from a pixel's [`Self::small_edges`] (`None` if the
-    /// triangle does not cover it): [`Self::weights_at`]'s values.
-    #[inline(always)]
-    pub fn weights_from(&self, e: [i32; 3]) -> Option<[f32; 3]> {
-        if (e[0] | e[1] | e[2]) < 0 {
-            return None;
-        }
-        let l = e.map(|v| v as f32 * self.inv_area);
-        let iw = interpolated_inv_w(l, self.inv_w);
-        Some(perspective_weights(l, self.inv_w, iw))
-    }
-
-    /// The normalized edge functions at the centre of `(x, y)`, in `E` (exact in either type for
-    /// a small triangle, so the same `f32`s as the rasterizer's).
-    #[inline(always)]
-    fn edges<E: EdgeInt>(&self, x: u32, y: u32) -> Option<[f32; 3]> {
-        let (cx, cy) =
-            (E::from_i32(x as i32) * E::from_i32(ONE) + E::from_i32(HALF), E::from_i32(y as i32) * E::from_i32(ONE) + E::from_i32(HALF));
-        let mut l = [0.0f32; 3];
-        for (k, lk) in l.iter_mut().enumerate() {
-            let (pa, pb) = (self.p.get((k + 1) % 3)?, self.p.get((k + 2) % 3)?);
-            let (dx, dy) = (E::from_i32(pb[0] - pa[0]), E::from_i32(pb[1] - pa[1]));
-            let e = dx * (cy - E::from_i32(pa[1])) - dy * (cx - E::from_i32(pa[0]));
-            if e < E::ZERO {
-                return None;
-            }
-            *lk = e.to_f32() * self.inv_area;
-        }
-        Some(l)
-    }
 }
 
 /// The tile rasterizer: one `TW × TH` tile of buffers and a per-tile-row bin of `BIN` triangles.
@@ -613,9 +515,15 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
     fn bin_frame<I: TriIndex>(&mut self, f: &Frame<'_, I>, stats: &mut FrameStats) -> Result<Option<usize>, RasterError> {
         let mut n = 0usize;
         let mut overflow = false;
+        let valid = ValidVertices::of(f.vertices);
         for (id, tri) in (0u32..).zip(f.triangles) {
             let v = fetch(f.vertices, tri).ok_or(RasterError::IndexOutOfRange)?;
-            let s = setup(v, f.cull, f.width, f.height);
+            // Three valid vertices pass `validate`: only the geometry is left to do.
+            let s = if valid.as_ref().is_some_and(|ok| ok.all(tri)) {
+                geometry(v, f.cull, f.width, f.height)
+            } else {
+                setup(v, f.cull, f.width, f.height)
+            };
             classify_into(stats, s.as_ref().map(|_| ()).map_err(|r| *r));
             let Ok(s) = s else { continue };
             if overflow {
