@@ -137,6 +137,88 @@ fn reshading_gives_the_rendered_sums_to_the_bit() {
     assert_eq!((frames.reshaded, frames.recorded), (2, 5), "compact: re-shaded / rendered frames");
 }
 
+#[test]
+fn a_recomputed_shape_gets_its_serial_and_geometry_back() {
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let mut bufs = Buffers::new(synth.vertices());
+    let mut inst = bufs.instance();
+    let a = truth();
+    let mut b = a.clone();
+    b.shape_coeffs_mut()[0] += 0.3;
+    inst.update(&model, &a, W, H).unwrap();
+    let ka = inst.geometry();
+    let positions = inst.positions().to_vec();
+    inst.update(&model, &b, W, H).unwrap();
+    assert_ne!(inst.geometry(), ka);
+    // No spare buffers: `a` is recomputed, to the same bits, under the same key.
+    assert_eq!(inst.geometry_of(&a, W, H), ka);
+    inst.update(&model, &a, W, H).unwrap();
+    assert_eq!((inst.geometry(), inst.shape_updates), (ka, 3));
+    assert!(inst.positions().iter().zip(&positions).all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits)));
+}
+
+#[test]
+fn a_compact_cache_keeps_the_chains_frame() {
+    use gpmm_core::frame_cache::GeometryKey;
+    use gpmm_core::Pose;
+    let (mut covered, mut ids) = (vec![0u32; 512], vec![0u16; 64]);
+    let mut frames = FrameCache::compact(CompactBuffers { covered: &mut covered, triangles: &mut ids });
+    let pose = Pose { yaw: 0.1, pitch: 0.0, roll: 0.0, translation: [0.0, 0.0, -500.0] };
+    let chain = GeometryKey::new(1, &pose, 300.0, W, H);
+    let proposal = GeometryKey::new(1, &Pose { yaw: 0.2, ..pose }, 300.0, W, H);
+    frames.recorder(chain, None, &mut ()).finish();
+    assert!(frames.contains(&chain));
+    // A proposal's frame (another geometry than the chain's) is not recorded over it...
+    frames.recorder(proposal, Some(chain), &mut ()).finish();
+    assert!(frames.contains(&chain) && !frames.contains(&proposal));
+    // ... the chain's own frame is, and so is any frame without a chain state.
+    frames.recorder(proposal, Some(proposal), &mut ()).finish();
+    assert!(frames.contains(&proposal) && !frames.contains(&chain));
+    frames.recorder(chain, None, &mut ()).finish();
+    assert!(frames.contains(&chain));
+    assert_eq!(frames.recorded, 3);
+}
+
+#[test]
+fn drawn_set_ups_and_stepped_edges_give_the_direct_weights() {
+    use gpmm_core::raster::FragmentSetup;
+    let synth = Synth::new(11);
+    let model = synth.model();
+    let mut bufs = Buffers::new(synth.vertices());
+    let mut inst = bufs.instance();
+    inst.update(&model, &truth(), W, H).unwrap();
+    let v = inst.projected();
+    let bits = |w: Option<[f32; 3]>| w.map(|w| w.map(f32::to_bits));
+    let (mut covered, mut stepped) = (0, 0);
+    for tri in model.triangles() {
+        let Some(direct) = FragmentSetup::new(v, tri, W, H) else { continue };
+        let drawn = FragmentSetup::of_drawn(v, tri, W, H).unwrap();
+        assert_eq!(drawn.ids, direct.ids);
+        let (xs, ys) = (tri.map(|i| v[i as usize].x), tri.map(|i| v[i as usize].y));
+        let lo = |c: [f32; 3]| (c.iter().fold(f32::MAX, |a, &b| a.min(b)) as i64 - 2).clamp(0, W as i64) as u32;
+        let hi = |c: [f32; 3]| (c.iter().fold(f32::MIN, |a, &b| a.max(b)) as i64 + 2).clamp(0, W as i64) as u32;
+        for y in lo(ys)..hi(ys).min(H) {
+            let mut prev: Option<[i32; 3]> = None;
+            for x in lo(xs)..hi(xs) {
+                let want = direct.weights_at(x, y);
+                assert_eq!(bits(drawn.weights_at(x, y)), bits(want));
+                let e = drawn.small_edges(x, y);
+                if let Some(e) = e {
+                    assert_eq!(bits(drawn.weights_from(e)), bits(want));
+                    covered += usize::from(want.is_some());
+                    if let Some(p) = prev.filter(|p| drawn.weights_from(*p).is_some()) {
+                        assert_eq!(drawn.step_right(p), e, "triangle {tri:?} at ({x}, {y})");
+                        stepped += 1;
+                    }
+                }
+                prev = e;
+            }
+        }
+    }
+    assert!(covered > 2000 && stepped > 1000, "{covered} covered pixels, {stepped} steps");
+}
+
 #[derive(Clone, Copy, PartialEq)]
 enum Caches {
     None,

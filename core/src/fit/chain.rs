@@ -20,7 +20,7 @@
 use super::contour::{Silhouette, MAX_CONTOUR, NO_VERTEX};
 use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::landmark_pivot;
-use super::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
+use super::landmarks::{evaluate_landmarks_rotated, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
 use super::light_fit::{solve_light, LightSolveConfig};
 use super::likelihood::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
 use super::normal::{uniform, uniform_open0};
@@ -31,6 +31,7 @@ use super::proposal::{Mixture, Proposal, ProposalContext, StandardProposal};
 use super::FitError;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
+use crate::render::pose::PoseTrig;
 use crate::render::shading::TriIndex;
 use crate::{Cull, ShLight, TileRasterizer, Vec3};
 use rand_core::Rng;
@@ -97,6 +98,8 @@ pub struct ChainState<const KS: usize, const KC: usize> {
     pub params: FitParams<KS, KC>,
     lm: [Vec3; MAX_LANDMARKS],
     contour: [u32; MAX_CONTOUR],
+    /// The sines and cosines of `params.pose`'s angles.
+    trig: PoseTrig,
     /// Log prior.
     pub prior: f32,
     /// The landmark term.
@@ -113,8 +116,10 @@ impl<const KS: usize, const KC: usize> ChainState<KS, KC> {
         let mut contour = [NO_VERTEX; MAX_CONTOUR];
         silhouette_positions(problem, params, &mut lm, &mut contour, true, true)?;
         let cam = params.camera(problem.width, problem.height);
-        let landmarks = evaluate_landmarks(lm.get(..n).unwrap_or(&[]), &params.pose, &cam, &problem.landmarks)?;
-        Ok(Self { params: params.clone(), lm, contour, prior: problem.prior.log_density(params), landmarks, image: None })
+        let trig = PoseTrig::of(&params.pose);
+        let landmarks =
+            evaluate_landmarks_rotated(lm.get(..n).unwrap_or(&[]), &trig.rotation(), params.pose.translation, &cam, &problem.landmarks)?;
+        Ok(Self { params: params.clone(), lm, contour, trig, prior: problem.prior.log_density(params), landmarks, image: None })
     }
 
     /// The first stage's log density: prior plus landmarks.
@@ -197,29 +202,52 @@ pub fn filter_stage<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const
     hastings: f32,
     rng: &mut R,
 ) -> Result<Option<ChainState<KS, KC>>, FitError> {
+    let mut next = ChainState { params: prop.clone(), ..cur.clone() };
+    Ok(filter_into(problem, cur, &mut next, proposal, hastings, rng)?.then_some(next))
+}
+
+/// [`filter_stage`] into `next`, whose parameters are the proposal's (the rest of it is
+/// overwritten); `true` if accepted. The chain keeps two states and swaps their roles instead of
+/// moving a state of a few kilobytes per step.
+fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: usize, const KC: usize>(
+    problem: &Problem<'_, I, P>,
+    cur: &ChainState<KS, KC>,
+    next: &mut ChainState<KS, KC>,
+    proposal: &Q,
+    hastings: f32,
+    rng: &mut R,
+) -> Result<bool, FitError> {
     let u = libm::logf(uniform_open0(rng));
     if hastings == f32::NEG_INFINITY {
-        return Ok(None);
+        return Ok(false);
     }
-    let prior = problem.prior.log_density(prop);
+    let prior = problem.prior.log_density(&next.params);
     if prior == f32::NEG_INFINITY {
-        return Ok(None);
+        return Ok(false);
     }
-    let mut next = ChainState { params: prop.clone(), lm: cur.lm, contour: cur.contour, prior, landmarks: cur.landmarks, image: cur.image };
+    next.prior = prior;
+    next.landmarks = cur.landmarks;
+    next.image = cur.image;
+    next.contour = cur.contour;
+    next.trig = cur.trig.to(&next.params.pose);
     if proposal.changes_shape() {
-        problem.model.landmark_positions(prop.shape_coeffs(), &mut next.lm)?;
+        // Overwrites every landmark (the entries past the model's stay zero in every state).
+        problem.model.landmark_positions(next.params.shape_coeffs(), &mut next.lm)?;
+    } else {
+        next.lm = cur.lm;
     }
     if problem.silhouette.is_some() && proposal.changes_geometry() {
-        let moved = prop.pose != cur.params.pose || prop.focal != cur.params.focal;
-        silhouette_positions(problem, prop, &mut next.lm, &mut next.contour, moved, proposal.changes_shape())?;
+        let moved = next.params.pose != cur.params.pose || next.params.focal != cur.params.focal;
+        silhouette_positions(problem, &next.params, &mut next.lm, &mut next.contour, moved, proposal.changes_shape())?;
     }
     if proposal.changes_geometry() {
         let n = problem.model.landmarks().len();
-        let cam = prop.camera(problem.width, problem.height);
-        next.landmarks = evaluate_landmarks(next.lm.get(..n).unwrap_or(&[]), &prop.pose, &cam, &problem.landmarks)?;
+        let cam = next.params.camera(problem.width, problem.height);
+        let (r, t) = (next.trig.rotation(), next.params.pose.translation);
+        next.landmarks = evaluate_landmarks_rotated(next.lm.get(..n).unwrap_or(&[]), &r, t, &cam, &problem.landmarks)?;
     }
     let log_a = next.filter_term() - cur.filter_term() + hastings;
-    Ok(if u < log_a { Some(next) } else { None })
+    Ok(u < log_a)
 }
 
 /// The stage after the prior-and-landmark filter: nothing (the landmark chain) or the rendered
@@ -320,29 +348,28 @@ fn pick<R: Rng + ?Sized, P>(mixture: &Mixture<P>, rng: &mut R) -> Result<usize, 
 fn decide<R: Rng + ?Sized, I: TriIndex, P: Proposal, S: SecondStage<I, P, KS, KC>, const KS: usize, const KC: usize>(
     problem: &Problem<'_, I, P>,
     stage: &mut S,
-    cur: &mut ChainState<KS, KC>,
-    prop: &FitParams<KS, KC>,
+    cur: &ChainState<KS, KC>,
+    next: &mut ChainState<KS, KC>,
     proposal: &P,
     h: f32,
     rng: &mut R,
 ) -> Result<StepOutcome, FitError> {
     if !stage.active() {
-        return Ok(match filter_stage(problem, cur, prop, proposal, h, rng)? {
-            Some(next) => {
-                *cur = next;
-                StepOutcome::Accepted
-            }
-            None if h == f32::NEG_INFINITY => StepOutcome::Impossible,
-            None => StepOutcome::RejectedByFilter,
+        return Ok(if filter_into(problem, cur, next, proposal, h, rng)? {
+            StepOutcome::Accepted
+        } else if h == f32::NEG_INFINITY {
+            StepOutcome::Impossible
+        } else {
+            StepOutcome::RejectedByFilter
         });
     }
     if h == f32::NEG_INFINITY {
         return Ok(StepOutcome::Impossible);
     }
     // The Hastings term goes to the second stage (see the module docs).
-    let Some(mut next) = filter_stage(problem, cur, prop, proposal, 0.0, rng)? else {
+    if !filter_into(problem, cur, next, proposal, 0.0, rng)? {
         return Ok(StepOutcome::RejectedByFilter);
-    };
+    }
     let u = libm::logf(uniform_open0(rng));
     // A proposal the renderer refuses (e.g. non-finite positions) is rejected, not an error:
     // the start was rendered, so the inputs themselves are sound.
@@ -354,12 +381,7 @@ fn decide<R: Rng + ?Sized, I: TriIndex, P: Proposal, S: SecondStage<I, P, KS, KC
         }
         Err(_) => false,
     };
-    Ok(if accepted {
-        *cur = next;
-        StepOutcome::Accepted
-    } else {
-        StepOutcome::RejectedByImage
-    })
+    Ok(if accepted { StepOutcome::Accepted } else { StepOutcome::RejectedByImage })
 }
 
 /// The Metropolis-Hastings / delayed-acceptance loop: `steps` steps from `init`, the first stage
@@ -380,34 +402,48 @@ where
     O: ChainObserver,
 {
     check(problem, init)?;
-    let mut ctx = ProposalContext { pivot: landmark_pivot(&problem.model, Some(&problem.landmarks))?, light_solution: None };
-    let mut cur = ChainState::new(problem, init)?;
-    cur.image = stage.start(problem, init)?;
-    if !cur.log_posterior().is_finite() {
+    let mut ctx = ProposalContext { pivot: landmark_pivot(&problem.model, Some(&problem.landmarks))?, light_solution: None, trig: None };
+    let mut start = ChainState::new(problem, init)?;
+    start.image = stage.start(problem, init)?;
+    if !start.log_posterior().is_finite() {
         return Err(FitError::ImpossibleStart);
     }
     for (id, e) in problem.mixture.entries().iter().enumerate() {
         observer.component(id, e.proposal.name());
     }
-    let mut best = cur.clone();
+    let mut best = start.clone();
     let mut acc = Acceptance::new();
-    let mut prop = init.clone();
+    // The current state and the next one (the proposal), in turns: an accepted proposal
+    // becomes the current state by swapping the roles, not by a copy.
+    let mut states = [start.clone(), start];
+    let mut c = 0usize;
     for step in 0..steps {
         observer.progress(step);
         let id = pick(problem.mixture, rng)?;
         let Some(entry) = problem.mixture.entries().get(id) else { return Err(FitError::BadConfig) };
         let proposal = &entry.proposal;
-        ctx.light_solution = if proposal.needs_light_solution() { stage.light_solution(problem, &cur, rng) } else { None };
-        let h = proposal.propose(&cur.params, &ctx, rng, &mut prop);
-        let outcome = decide(problem, stage, &mut cur, &prop, proposal, h, rng)?;
+        let [a, b] = &mut states;
+        let (cur, next) = if c == 0 { (&*a, b) } else { (&*b, a) };
+        ctx.light_solution = if proposal.needs_light_solution() { stage.light_solution(problem, cur, rng) } else { None };
+        ctx.trig = Some(cur.trig);
+        let h = proposal.propose(&cur.params, &ctx, rng, &mut next.params);
+        let outcome = decide(problem, stage, cur, next, proposal, h, rng)?;
+        let cur = if outcome.accepted() {
+            c ^= 1;
+            &*next
+        } else {
+            cur
+        };
         if outcome.accepted() && cur.log_posterior() > best.log_posterior() {
-            best = cur.clone();
+            best.clone_from(cur);
         }
         let report = ProposalStep { step, id, name: proposal.name(), outcome, log_posterior: cur.log_posterior() };
         acc.proposal(&report);
         observer.proposal(&report);
     }
     observer.progress(steps);
+    let [a, b] = states;
+    let cur = if c == 0 { a } else { b };
     let (best_log_posterior, last_log_posterior) = (best.log_posterior(), cur.log_posterior());
     Ok(FitResult {
         best: best.params,

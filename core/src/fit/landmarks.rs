@@ -1,7 +1,7 @@
 //! Landmark likelihood: isotropic 2-D Gaussian between target points and projected model landmarks.
 
 use super::FitError;
-use crate::{Camera, Pose, Vec3};
+use crate::{Camera, Mat3, Pose, Vec3};
 
 /// Largest number of landmarks a model may have (iBUG-68 needs 68).
 pub use crate::model::MAX_LANDMARKS;
@@ -152,18 +152,27 @@ impl LandmarkEval {
 /// Evaluates the landmark likelihood of model landmark positions (`positions[i]` is landmark `i`,
 /// model space) under `pose` and `camera`.
 pub fn evaluate_landmarks(positions: &[Vec3], pose: &Pose, camera: &Camera, target: &LandmarkTarget<'_>) -> Result<LandmarkEval, FitError> {
+    evaluate_landmarks_rotated(positions, &pose.rotation(), pose.translation, camera, target)
+}
+
+/// [`evaluate_landmarks`] with the pose given as its rotation matrix `r` and translation `t`.
+pub fn evaluate_landmarks_rotated(
+    positions: &[Vec3],
+    r: &Mat3,
+    t: Vec3,
+    camera: &Camera,
+    target: &LandmarkTarget<'_>,
+) -> Result<LandmarkEval, FitError> {
     if positions.len() != target.len() {
         return Err(FitError::LengthMismatch);
     }
-    let r = pose.rotation();
-    let t = pose.translation;
     let mut sq = 0.0f32;
     let mut weighted = 0.0f32;
     let mut count = 0u32;
     let nu = target.nu;
     let nu_s2 = nu * target.sigma * target.sigma;
     for (i, ((p, tp), _)) in positions.iter().zip(target.points).zip(target.valid).enumerate().filter(|(_, (_, &v))| v) {
-        let q = crate::render::pose::mat_vec(&r, *p);
+        let q = crate::render::pose::mat_vec(r, *p);
         let Some(s) = camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) else {
             return Ok(LandmarkEval { log_likelihood: f32::NEG_INFINITY, sq_err: f32::INFINITY, count: count + 1 });
         };

@@ -113,10 +113,14 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
         for ((tri_row, col_row), y) in tile.triangles().iter().zip(tile.colors()).zip(y0..y0 + h) {
             let Some(target_row) = self.image.row(y) else { continue };
             let Some(target_row) = target_row.get(x0 as usize..) else { continue };
-            for ((t, c), p) in tri_row.iter().zip(col_row).zip(target_row).take(w as usize) {
+            // Colours and targets are read only where the model covers.
+            for (x, t) in tri_row.iter().enumerate().take(w as usize) {
                 if *t == NO_TRIANGLE {
                     continue;
                 }
+                let (Some(c), Some(p)) = (col_row.get(x), target_row.get(x)) else {
+                    break;
+                };
                 let (term, d2sum) = self.pixel_terms(*p, *c);
                 sq += d2sum;
                 sum += term;

@@ -98,6 +98,10 @@ struct ShadingKey {
 pub struct Instance<'b, const KS: usize, const KC: usize> {
     bufs: InstanceBuffers<'b>,
     shape_key: ShapeKey<KS>,
+    /// The shape instance the buffers held before the last recomputation (coefficients and
+    /// serial only): recomputing it gives the same positions, so it gets its serial back, and a
+    /// frame recorded for it stays valid (the chain's shape after a rejected shape proposal).
+    prev_shape: ShapeKey<KS>,
     color_key: ColorKey<KC>,
     spare: Option<Spare<'b, KS, KC>>,
     shading: Option<ShadingKey>,
@@ -122,6 +126,7 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
         Ok(Self {
             bufs,
             shape_key: None,
+            prev_shape: None,
             color_key: None,
             spare: None,
             shading: None,
@@ -233,8 +238,9 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
 
     /// The geometry key of `params` in a `width × height` image if its shape instance is kept.
     pub fn geometry_of(&self, params: &FitParams<KS, KC>, width: u32, height: u32) -> Option<GeometryKey> {
-        let serial =
-            serial_of(&self.shape_key, &params.shape).or_else(|| self.spare.as_ref().and_then(|sp| serial_of(&sp.shape, &params.shape)))?;
+        let serial = serial_of(&self.shape_key, &params.shape)
+            .or_else(|| self.spare.as_ref().and_then(|sp| serial_of(&sp.shape, &params.shape)))
+            .or_else(|| serial_of(&self.prev_shape, &params.shape))?;
         Some(GeometryKey::new(serial, &params.pose, params.focal, width, height))
     }
 
@@ -261,13 +267,23 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
                 return Ok(s);
             }
         }
-        self.shape_key = None;
+        let old = self.shape_key.take();
         model.shape_instance(params.shape_coeffs(), self.bufs.positions)?;
         vertex_normals(self.bufs.positions, model.triangles(), self.bufs.normals)?;
-        self.serial = self.serial.wrapping_add(1);
-        self.shape_key = Some((params.shape.clone(), self.serial));
+        // The same coefficients give the same positions and normals: the same serial.
+        let serial = match serial_of(&self.prev_shape, &params.shape) {
+            Some(s) => s,
+            None => {
+                self.serial = self.serial.wrapping_add(1);
+                self.serial
+            }
+        };
+        if old.is_some() {
+            self.prev_shape = old;
+        }
+        self.shape_key = Some((params.shape.clone(), serial));
         self.shape_updates = self.shape_updates.wrapping_add(1);
-        Ok(self.serial)
+        Ok(serial)
     }
 
     /// The colour instance of `params` in the current buffers; returns its serial.
@@ -336,6 +352,7 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
     /// Forgets the cache (the next update recomputes everything).
     pub fn invalidate(&mut self) {
         self.shape_key = None;
+        self.prev_shape = None;
         self.color_key = None;
         if let Some(sp) = self.spare.as_mut() {
             sp.shape = None;

@@ -163,11 +163,19 @@ impl<'c> FrameCache<'c> {
     }
 
     /// A sink that passes every tile to `inner` and records the frame for geometry `key` in a
-    /// slot that does not hold `keep` (the chain's own frame), else the older one. Call
+    /// slot that does not hold `keep` (the chain's own frame), else the older one; a compact
+    /// cache (one slot) records only the chain's own frame (`keep` is `None` or `key`). Call
     /// [`Recorder::finish`] after a successful render: only then is the frame kept.
     pub fn recorder<'r, S>(&'r mut self, key: GeometryKey, keep: Option<GeometryKey>, inner: &'r mut S) -> Recorder<'r, 'c, S> {
         let [a, b] = &self.slots;
-        let older = if matches!(b.store, Store::Unused) {
+        let single = matches!(b.store, Store::Unused);
+        if single && keep.is_some() && keep != Some(key) {
+            // One slot: keep the chain's frame, do not record a proposal's (most are rejected,
+            // and a colour or light proposal after a rejection re-shades the chain's frame).
+            let [a, _] = &mut self.slots;
+            return Recorder { slot: a, inner, key, overflow: true, counter: &mut self.recorded };
+        }
+        let older = if single {
             0
         } else if keep.is_some() && a.key == keep {
             1
@@ -281,6 +289,11 @@ fn reshade_compact<I: TriIndex, S: FragmentSink>(
     // The set-ups of recently seen triangles, direct-mapped by id: a pixel row of a tile crosses
     // a handful of triangles, and the next row mostly the same ones.
     let mut recent: [Option<(u16, FragmentSetup)>; SETUPS] = [None; SETUPS];
+    // The last pixel's triangle (its set-up and vertex colours), position and small edge
+    // values: the next pixel of the same triangle in the same row steps them instead of
+    // evaluating them, and the triangle is not looked up again.
+    let (mut cur, mut colors) = (None::<u16>, [[0.0f32; 3]; 3]);
+    let mut run: Option<(u32, [i32; 3])> = None;
     for ty0 in (0..h).step_by(th as usize) {
         for tx0 in (0..w).step_by(tw as usize) {
             for y in ty0..(ty0 + th).min(h) {
@@ -305,21 +318,38 @@ fn reshade_compact<I: TriIndex, S: FragmentSink>(
                             return false;
                         };
                         let f = match entry {
-                            Some((id, f)) if *id == t => f,
+                            Some((id, f)) if *id == t => &*f,
                             _ => {
-                                let Some(f) = triangles.get(usize::from(t)).and_then(|tri| FragmentSetup::new(vertices, tri, w, h)) else {
+                                let Some(f) = triangles.get(usize::from(t)).and_then(|tri| FragmentSetup::of_drawn(vertices, tri, w, h))
+                                else {
                                     return false;
                                 };
                                 &entry.insert((t, f)).1
                             }
                         };
-                        let [a, b, cc] = f.ids;
-                        let (Some(weights), Some(va), Some(vb), Some(vc)) =
-                            (f.weights_at(pixel - row, y), vertices.get(a as usize), vertices.get(b as usize), vertices.get(cc as usize))
-                        else {
+                        if cur != Some(t) {
+                            run = None;
+                            let [a, b, cc] = f.ids;
+                            let (Some(va), Some(vb), Some(vc)) =
+                                (vertices.get(a as usize), vertices.get(b as usize), vertices.get(cc as usize))
+                            else {
+                                return false;
+                            };
+                            (cur, colors) = (Some(t), [va.color, vb.color, vc.color]);
+                        }
+                        let edges = match run {
+                            Some((rp, e)) if rp + 1 == pixel && pixel > row => Some(f.step_right(e)),
+                            _ => f.small_edges(pixel - row, y),
+                        };
+                        run = edges.map(|e| (pixel, e));
+                        let weights = match edges {
+                            Some(e) => f.weights_from(e),
+                            None => f.weights_at(pixel - row, y),
+                        };
+                        let Some(weights) = weights else {
                             return false;
                         };
-                        let color = blend(weights, [va.color, vb.color, vc.color]);
+                        let color = blend(weights, colors);
                         if !color.iter().all(|v| v.is_finite()) {
                             return false;
                         }

@@ -4,6 +4,7 @@
 //! [`frame_cache`] that re-shades a frame whose geometry did not change.
 
 pub mod camera;
+mod fragment;
 pub mod frame_cache;
 pub mod light;
 pub mod pose;

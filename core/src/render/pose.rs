@@ -37,19 +37,53 @@ impl Pose {
 
     /// The rotation matrix `R = Rz(roll) · Ry(yaw) · Rx(pitch)`.
     pub fn rotation(&self) -> Mat3 {
-        let (sy, cy) = (libm::sinf(self.yaw), libm::cosf(self.yaw));
-        let (sp, cp) = (libm::sinf(self.pitch), libm::cosf(self.pitch));
-        let (sr, cr) = (libm::sinf(self.roll), libm::cosf(self.roll));
-        let rz = [[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]];
-        let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
-        let rx = [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]];
-        mat_mul(&mat_mul(&rz, &ry), &rx)
+        PoseTrig::of(self).rotation()
     }
 
     /// Maps a model-space point to camera space: `R · p + t`.
     pub fn transform_point(&self, p: Vec3) -> Vec3 {
         let r = mat_vec(&self.rotation(), p);
         [r[0] + self.translation[0], r[1] + self.translation[1], r[2] + self.translation[2]]
+    }
+}
+
+/// The sines and cosines of a pose's three angles, kept so that a pose differing in one angle
+/// (a rotation proposal) or none (any other) computes only what changed: `sinf`/`cosf` are
+/// double-precision library code on a Cortex-M4. The same values, so the same rotation bits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseTrig {
+    /// Bit patterns of yaw, pitch and roll.
+    angles: [u32; 3],
+    /// `(sin, cos)` of each.
+    sc: [[f32; 2]; 3],
+}
+
+impl PoseTrig {
+    /// The sines and cosines of `pose`'s angles.
+    pub fn of(pose: &Pose) -> Self {
+        let sc = |a: f32| [libm::sinf(a), libm::cosf(a)];
+        Self { angles: [pose.yaw, pose.pitch, pose.roll].map(f32::to_bits), sc: [sc(pose.yaw), sc(pose.pitch), sc(pose.roll)] }
+    }
+
+    /// Those of `pose`, reusing the angles whose bits are this one's.
+    pub fn to(&self, pose: &Pose) -> Self {
+        let mut next = *self;
+        for ((bits, sc), a) in next.angles.iter_mut().zip(next.sc.iter_mut()).zip([pose.yaw, pose.pitch, pose.roll]) {
+            if *bits != a.to_bits() {
+                *bits = a.to_bits();
+                *sc = [libm::sinf(a), libm::cosf(a)];
+            }
+        }
+        next
+    }
+
+    /// The rotation matrix `R = Rz(roll) · Ry(yaw) · Rx(pitch)` (see [`Pose::rotation`]).
+    pub fn rotation(&self) -> Mat3 {
+        let [[sy, cy], [sp, cp], [sr, cr]] = self.sc;
+        let rz = [[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]];
+        let ry = [[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]];
+        let rx = [[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]];
+        mat_mul(&mat_mul(&rz, &ry), &rx)
     }
 }
 

@@ -35,17 +35,19 @@ use crate::render::shading::{ProjectedVertex, TriIndex};
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 use crate::Vec3;
 
+pub use super::fragment::{fragment_weights, FragmentSetup};
+
 /// Fractional bits of the fixed-point vertex coordinates (1/256 pixel).
 pub const SUBPIXEL_BITS: u32 = 8;
-const ONE: i32 = 1 << SUBPIXEL_BITS;
-const HALF: i32 = ONE / 2;
+pub(super) const ONE: i32 = 1 << SUBPIXEL_BITS;
+pub(super) const HALF: i32 = ONE / 2;
 /// Vertices farther than this from the image origin (in pixels) reject their triangle (keeps `i64` exact).
 pub const GUARD_BAND: f32 = 2_097_152.0;
 /// Largest accepted image width or height in pixels.
 pub const MAX_IMAGE_SIZE: u32 = 1 << 15;
 /// Triangles whose fixed-point extent is below this in x and y (64 px) evaluate their edge
 /// functions exactly in `i32` (|E| < 2 · extent² < 2^29); larger ones use `i64`.
-const SMALL_EXTENT: i32 = 1 << 14;
+pub(super) const SMALL_EXTENT: i32 = 1 << 14;
 
 /// Which on-screen winding to discard.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -119,19 +121,19 @@ impl BinEntry {
 }
 
 /// Fixed-point triangle, oriented to positive area, with its pixel bounding box in the image.
-struct Setup {
+pub(super) struct Setup {
     /// Vertices in fixed point (`|p| <= 2^29`), reordered to positive area if `swapped`.
-    p: [[i32; 2]; 3],
-    swapped: bool,
-    area: i64,
+    pub(super) p: [[i32; 2]; 3],
+    pub(super) swapped: bool,
+    pub(super) area: i64,
     /// Inclusive pixel bounds `x0, x1, y0, y1`, clamped to the image.
     bbox: [i32; 4],
     /// Extent below [`SMALL_EXTENT`]: edge functions fit `i32`.
-    small: bool,
+    pub(super) small: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
-enum Reject {
+pub(super) enum Reject {
     Invalid,
     Guard,
     Culled,
@@ -139,7 +141,7 @@ enum Reject {
     OffScreen,
 }
 
-fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Option<[&'a ProjectedVertex; 3]> {
+pub(super) fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Option<[&'a ProjectedVertex; 3]> {
     let [a, b, c] = *tri;
     Some([vertices.get(a.index())?, vertices.get(b.index())?, vertices.get(c.index())?])
 }
@@ -147,7 +149,7 @@ fn fetch<'a, I: TriIndex>(vertices: &'a [ProjectedVertex], tri: &[I; 3]) -> Opti
 /// `roundf(x · 2^SUBPIXEL_BITS)` (half away from zero) for `|x| <= GUARD_BAND`, without `libm`
 /// or `i64`: the truncation and the fraction `s − trunc(s)` are exact in `f32`.
 #[inline(always)]
-fn snap(x: f32) -> i32 {
+pub(super) fn snap(x: f32) -> i32 {
     let s = x * ONE as f32;
     let t = s as i32;
     let f = s - t as f32;
@@ -188,6 +190,40 @@ fn validate_slow(v: [&ProjectedVertex; 3]) -> Result<(), Reject> {
     Ok(())
 }
 
+/// Vertices checked once per frame instead of once per triangle (each is in about six): a bit
+/// per vertex, set if it passes [`validate_slow`]'s tests (finite, in front, inside the guard
+/// band). A triangle of three such vertices passes [`validate`]. Frames of more vertices than
+/// the bits (2,048, 256 bytes of stack) validate per triangle.
+struct ValidVertices {
+    bits: [u32; 64],
+}
+
+impl ValidVertices {
+    /// The flags of `vertices` (`None` if there are too many).
+    fn of(vertices: &[ProjectedVertex]) -> Option<Self> {
+        let mut bits = [0u32; 64];
+        if vertices.len() > bits.len() * 32 {
+            return None;
+        }
+        for (word, chunk) in bits.iter_mut().zip(vertices.chunks(32)) {
+            for (k, p) in chunk.iter().enumerate() {
+                let ok = validate_slow([p, p, p]).is_ok();
+                *word |= u32::from(ok) << k;
+            }
+        }
+        Some(Self { bits })
+    }
+
+    /// Whether all three vertices of `tri` are valid.
+    #[inline(always)]
+    fn all<I: TriIndex>(&self, tri: &[I; 3]) -> bool {
+        tri.iter().all(|i| {
+            let i = i.index();
+            self.bits.get(i / 32).is_some_and(|w| w >> (i % 32) & 1 == 1)
+        })
+    }
+}
+
 /// Snapping, area, winding and bounding box of a triangle whose vertices passed [`validate`].
 #[inline(always)]
 fn geometry(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
@@ -226,14 +262,14 @@ fn geometry(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Re
 }
 
 /// Full set-up: [`validate`], then [`geometry`].
-fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
+pub(super) fn setup(v: [&ProjectedVertex; 3], cull: Cull, width: u32, height: u32) -> Result<Setup, Reject> {
     validate(v)?;
     geometry(v, cull, width, height)
 }
 
 /// Integer type of the edge functions: `i32` for small triangles, `i64` otherwise (both exact, so
 /// the `f32` conversions give the same bits).
-trait EdgeInt:
+pub(super) trait EdgeInt:
     Copy
     + core::ops::Add<Output = Self>
     + core::ops::Sub<Output = Self>
@@ -339,22 +375,24 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
     }
     let [c0, c1, c2] = a.color;
     let inv_area = a.inv_area;
-    let (lx0, lx1) = (clip[0] as usize, clip[1] as usize);
+    // Exclusive ranges (an inclusive range's iterator costs more per step), and the tile rows
+    // touched only at pixels inside the triangle.
+    let (lx0, lx1) = (clip[0] as usize, clip[1] as usize + 1);
     let mut newly = 0u32;
-    for ly in clip[2] as usize..=clip[3] as usize {
-        let (Some(crow), Some(drow), Some(trow), Some(brow)) = (
-            tile.color.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-            tile.inv_w.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-            tile.tri.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-            tile.bary.get_mut(ly).and_then(|r| r.get_mut(lx0..=lx1)),
-        ) else {
+    for ly in clip[2] as usize..clip[3] as usize + 1 {
+        let (Some(crow), Some(drow), Some(trow), Some(brow)) =
+            (tile.color.get_mut(ly), tile.inv_w.get_mut(ly), tile.tri.get_mut(ly), tile.bary.get_mut(ly))
+        else {
             break;
         };
         let mut e = e_row;
-        for (((c, d), t), b) in crow.iter_mut().zip(drow.iter_mut()).zip(trow.iter_mut()).zip(brow.iter_mut()) {
+        for lx in lx0..lx1 {
             if (e[0] | e[1] | e[2]) >= E::ZERO {
                 let l = [(e[0] + bias[0]).to_f32() * inv_area, (e[1] + bias[1]).to_f32() * inv_area, (e[2] + bias[2]).to_f32() * inv_area];
                 let iw = interpolated_inv_w(l, a.inv_w);
+                let (Some(c), Some(d), Some(t), Some(b)) = (crow.get_mut(lx), drow.get_mut(lx), trow.get_mut(lx), brow.get_mut(lx)) else {
+                    break;
+                };
                 if iw > *d {
                     let [p0, p1, p2] = perspective_weights(l, a.inv_w, iw);
                     *d = iw;
@@ -379,13 +417,13 @@ fn raster_edges<const TW: usize, const TH: usize, E: EdgeInt>(
 
 /// `1 / w` at a pixel with screen-space barycentrics `l` of vertices with reciprocal depths `inv_w`.
 #[inline(always)]
-fn interpolated_inv_w(l: [f32; 3], inv_w: [f32; 3]) -> f32 {
+pub(super) fn interpolated_inv_w(l: [f32; 3], inv_w: [f32; 3]) -> f32 {
     l[0] * inv_w[0] + l[1] * inv_w[1] + l[2] * inv_w[2]
 }
 
 /// Perspective-correct weights from screen-space barycentrics `l` (`iw`: [`interpolated_inv_w`]).
 #[inline(always)]
-fn perspective_weights(l: [f32; 3], inv_w: [f32; 3], iw: f32) -> [f32; 3] {
+pub(super) fn perspective_weights(l: [f32; 3], inv_w: [f32; 3], iw: f32) -> [f32; 3] {
     let r = 1.0 / iw;
     [l[0] * inv_w[0] * r, l[1] * inv_w[1] * r, l[2] * inv_w[2] * r]
 }
@@ -398,78 +436,6 @@ pub fn blend(p: [f32; 3], c: [Vec3; 3]) -> Vec3 {
     let [p0, p1, p2] = p;
     let [c0, c1, c2] = c;
     [p0 * c0[0] + p1 * c1[0] + p2 * c2[0], p0 * c0[1] + p1 * c1[1] + p2 * c2[1], p0 * c0[2] + p1 * c1[2] + p2 * c2[2]]
-}
-
-/// The vertex ids (in the rasterizer's set-up order) and perspective-correct weights with which
-/// triangle `tri` colours pixel `(x, y)` of a `width × height` frame, exactly as
-/// [`TileRasterizer::render`] computes them (edge functions evaluated directly instead of
-/// stepped: the same integers, so the same bits). `None` if the triangle would not be drawn.
-pub fn fragment_weights<I: TriIndex>(
-    vertices: &[ProjectedVertex],
-    tri: &[I; 3],
-    x: u32,
-    y: u32,
-    width: u32,
-    height: u32,
-) -> Option<([u32; 3], [f32; 3])> {
-    let f = FragmentSetup::new(vertices, tri, width, height)?;
-    Some((f.ids, f.weights_at(x, y)?))
-}
-
-/// One triangle's set-up for [`fragment_weights`], reusable for all its pixels.
-#[derive(Debug, Clone, Copy)]
-pub struct FragmentSetup {
-    /// Vertex ids in the rasterizer's set-up order.
-    pub ids: [u32; 3],
-    inv_w: [f32; 3],
-    p: [[i32; 2]; 3],
-    small: bool,
-    inv_area: f32,
-}
-
-impl FragmentSetup {
-    /// The set-up of triangle `tri` in a `width × height` frame (`None` if it would not be drawn).
-    pub fn new<I: TriIndex>(vertices: &[ProjectedVertex], tri: &[I; 3], width: u32, height: u32) -> Option<Self> {
-        let v = fetch(vertices, tri)?;
-        let s = setup(v, Cull::None, width, height).ok()?;
-        let [va, vb, vc] = v;
-        let [ia, ib, ic] = tri.map(|i| i.index() as u32);
-        let (ids, inv_w) =
-            if s.swapped { ([ia, ic, ib], [va.inv_w, vc.inv_w, vb.inv_w]) } else { ([ia, ib, ic], [va.inv_w, vb.inv_w, vc.inv_w]) };
-        // (The same value either way; `i64 as f32` is a library call on Cortex-M4.)
-        let area = if s.small { s.area as i32 as f32 } else { s.area as f32 };
-        Some(Self { ids, inv_w, p: s.p, small: s.small, inv_area: 1.0 / area })
-    }
-
-    /// The perspective-correct weights at pixel `(x, y)` (`None` if the triangle does not cover it).
-    pub fn weights_at(&self, x: u32, y: u32) -> Option<[f32; 3]> {
-        // i32 only near the triangle, where its products cannot overflow (a small triangle's
-        // pixels are within 2^14 of its vertices; a far pixel is simply not covered).
-        let [px, py] = self.p[0];
-        let near = |c: u32, p: i32| (i64::from(c) * i64::from(ONE) + i64::from(HALF) - i64::from(p)).abs() < 1 << 15;
-        let l = if self.small && near(x, px) && near(y, py) { self.edges::<i32>(x, y)? } else { self.edges::<i64>(x, y)? };
-        let iw = interpolated_inv_w(l, self.inv_w);
-        Some(perspective_weights(l, self.inv_w, iw))
-    }
-
-    /// The normalized edge functions at the centre of `(x, y)`, in `E` (exact in either type for
-    /// a small triangle, so the same `f32`s as the rasterizer's).
-    #[inline(always)]
-    fn edges<E: EdgeInt>(&self, x: u32, y: u32) -> Option<[f32; 3]> {
-        let (cx, cy) =
-            (E::from_i32(x as i32) * E::from_i32(ONE) + E::from_i32(HALF), E::from_i32(y as i32) * E::from_i32(ONE) + E::from_i32(HALF));
-        let mut l = [0.0f32; 3];
-        for (k, lk) in l.iter_mut().enumerate() {
-            let (pa, pb) = (self.p.get((k + 1) % 3)?, self.p.get((k + 2) % 3)?);
-            let (dx, dy) = (E::from_i32(pb[0] - pa[0]), E::from_i32(pb[1] - pa[1]));
-            let e = dx * (cy - E::from_i32(pa[1])) - dy * (cx - E::from_i32(pa[0]));
-            if e < E::ZERO {
-                return None;
-            }
-            *lk = e.to_f32() * self.inv_area;
-        }
-        Some(l)
-    }
 }
 
 /// The tile rasterizer: one `TW × TH` tile of buffers and a per-tile-row bin of `BIN` triangles.
@@ -549,9 +515,15 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
     fn bin_frame<I: TriIndex>(&mut self, f: &Frame<'_, I>, stats: &mut FrameStats) -> Result<Option<usize>, RasterError> {
         let mut n = 0usize;
         let mut overflow = false;
+        let valid = ValidVertices::of(f.vertices);
         for (id, tri) in (0u32..).zip(f.triangles) {
             let v = fetch(f.vertices, tri).ok_or(RasterError::IndexOutOfRange)?;
-            let s = setup(v, f.cull, f.width, f.height);
+            // Three valid vertices pass `validate`: only the geometry is left to do.
+            let s = if valid.as_ref().is_some_and(|ok| ok.all(tri)) {
+                geometry(v, f.cull, f.width, f.height)
+            } else {
+                setup(v, f.cull, f.width, f.height)
+            };
             classify_into(stats, s.as_ref().map(|_| ()).map_err(|r| *r));
             let Ok(s) = s else { continue };
             if overflow {
@@ -609,15 +581,38 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
         if binned == Binned::Overflow {
             stats.overflow_rows += 1;
         }
+        let meets_row = |e: &BinEntry| i32::from(e.y1) >= ry0 && i32::from(e.y0) <= ry1;
+        // The frame's entries meeting this row, copied (in order) into the bin's unused tail if
+        // they fit there: the row's tiles then scan those instead of the whole frame's.
+        let (first, entries) = match binned {
+            Binned::Frame(n) => {
+                let (head, tail) = self.bin.split_at_mut(n.min(BIN));
+                let mut m = 0usize;
+                let mut fits = true;
+                for e in head.iter().filter(|e| meets_row(e)) {
+                    match tail.get_mut(m) {
+                        Some(slot) => *slot = *e,
+                        None => {
+                            fits = false;
+                            break;
+                        }
+                    }
+                    m += 1;
+                }
+                if fits {
+                    (n, m)
+                } else {
+                    (0, n)
+                }
+            }
+            Binned::Row(n) => (0, n),
+            Binned::Overflow => (0, 0),
+        };
         let mut tx0 = 0u32;
         while tx0 < f.width {
             let cols = tw.min(f.width - tx0);
             self.tile.reset(tx0, row.y0, cols, row.rows);
             let tx1 = tx0 + cols - 1;
-            let entries = match binned {
-                Binned::Frame(n) | Binned::Row(n) => n,
-                Binned::Overflow => 0,
-            };
             if binned == Binned::Overflow {
                 for (id, tri) in (0u32..).zip(f.triangles) {
                     let Some(v) = fetch(f.vertices, tri) else { continue };
@@ -629,9 +624,8 @@ impl<const TW: usize, const TH: usize, const BIN: usize> TileRasterizer<TW, TH, 
                     }
                 }
             }
-            for e in self.bin.iter().take(entries) {
-                let outside_x = u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1;
-                if outside_x || i32::from(e.y1) < ry0 || i32::from(e.y0) > ry1 {
+            for e in self.bin.iter().skip(first).take(entries) {
+                if !meets_row(e) || u32::from(e.x1) < tx0 || u32::from(e.x0) > tx1 {
                     continue;
                 }
                 let Some(v) = f.triangles.get(e.tri as usize).and_then(|t| fetch(f.vertices, t)) else { continue };

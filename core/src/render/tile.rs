@@ -21,8 +21,8 @@ pub struct Fragment {
 /// A `TW × TH` tile of the frame: buffers in tile-local coordinates `[y][x]`.
 ///
 /// Only the top-left `size()` part is valid (tiles at the right/bottom border may be smaller).
-/// Uncovered pixels have colour 0, depth 0 and triangle [`NO_TRIANGLE`] (their barycentrics are
-/// left from earlier tiles).
+/// Uncovered pixels have depth 0 and triangle [`NO_TRIANGLE`] (their colours and barycentrics
+/// are left from earlier tiles: read them only where a triangle covers).
 #[derive(Debug, Clone)]
 pub struct Tile<const TW: usize, const TH: usize> {
     pub(crate) x0: u32,
@@ -78,7 +78,7 @@ impl<const TW: usize, const TH: usize> Tile<TW, TH> {
         x < self.width as usize && y < self.height as usize && self.tri.get(y).and_then(|r| r.get(x)).is_some_and(|&t| t != NO_TRIANGLE)
     }
 
-    /// Colour buffer `[y][x]` (0 where uncovered).
+    /// Colour buffer `[y][x]` (valid only where covered: see [`Tile::triangles`]).
     pub fn colors(&self) -> &[[Vec3; TW]; TH] {
         &self.color
     }
@@ -105,16 +105,13 @@ impl<const TW: usize, const TH: usize> Tile<TW, TH> {
         self.y0 = y0;
         self.width = width;
         self.height = height;
-        for row in self.color.iter_mut() {
-            row.fill([0.0; 3]);
-        }
         for row in self.inv_w.iter_mut() {
             row.fill(0.0);
         }
         for row in self.tri.iter_mut() {
             row.fill(NO_TRIANGLE);
         }
-        // Barycentrics are read only where a triangle covers (written there): not cleared.
+        // Colours and barycentrics are read only where a triangle covers (written there): not cleared.
     }
 }
 

@@ -12,6 +12,7 @@ pub mod standard;
 pub use standard::{ProposalKind, Scale, StandardProposal};
 
 use super::params::FitParams;
+use crate::render::pose::PoseTrig;
 use crate::{ShLight, Vec3};
 use rand_core::Rng;
 
@@ -24,6 +25,9 @@ pub struct ProposalContext {
     /// whose [`Proposal::needs_light_solution`] is true (`None` if the solve failed, and always in
     /// the landmark chain).
     pub light_solution: Option<ShLight>,
+    /// The sines and cosines of the current state's angles, if the chain keeps them (then a
+    /// proposal's rotations recompute only the angles it changes; the same bits either way).
+    pub trig: Option<PoseTrig>,
 }
 
 /// A Metropolis-Hastings proposal: draws a new state from the current one.

@@ -26,7 +26,7 @@ use crate::fit::normal::{add_normals, standard_normal};
 use crate::fit::params::FitParams;
 use crate::fit::settings::{Drift, DriftSettings, MixtureShares};
 use crate::fit::FitError;
-use crate::render::pose::mat_vec;
+use crate::render::pose::{mat_vec, PoseTrig};
 use crate::Vec3;
 use rand_core::Rng;
 
@@ -255,8 +255,10 @@ impl Mixture<StandardProposal> {
     }
 }
 
-fn camera_point<const KS: usize, const KC: usize>(p: &FitParams<KS, KC>, v: Vec3) -> Vec3 {
-    let q = mat_vec(&p.pose.rotation(), v);
+/// `p`'s camera-space image of model point `v` (its angles' sines and cosines from `trig` where they match).
+fn camera_point<const KS: usize, const KC: usize>(p: &FitParams<KS, KC>, v: Vec3, trig: Option<&PoseTrig>) -> Vec3 {
+    let trig = trig.map_or_else(|| PoseTrig::of(&p.pose), |t| t.to(&p.pose));
+    let q = mat_vec(&trig.rotation(), v);
     let t = p.pose.translation;
     [q[0] + t[0], q[1] + t[1], q[2] + t[2]]
 }
@@ -297,21 +299,21 @@ impl Proposal for StandardProposal {
         let s = self.sigma;
         match self.kind {
             ProposalKind::Yaw | ProposalKind::Pitch | ProposalKind::Roll => {
-                let before = camera_point(current, ctx.pivot);
+                let before = camera_point(current, ctx.pivot, ctx.trig.as_ref());
                 let d = s * standard_normal(rng);
                 match self.kind {
                     ProposalKind::Yaw => out.pose.yaw += d,
                     ProposalKind::Pitch => out.pose.pitch += d,
                     _ => out.pose.roll += d,
                 }
-                let after = camera_point(out, ctx.pivot);
+                let after = camera_point(out, ctx.pivot, ctx.trig.as_ref());
                 for ((t, b), a) in out.pose.translation.iter_mut().zip(before).zip(after) {
                     *t += b - a;
                 }
                 0.0
             }
             ProposalKind::Distance => {
-                let w = -camera_point(current, ctx.pivot)[2];
+                let w = -camera_point(current, ctx.pivot, ctx.trig.as_ref())[2];
                 let d = s * standard_normal(rng);
                 let w2 = w + d;
                 if !(w > 0.0 && w2 > 0.0) {
@@ -327,7 +329,7 @@ impl Proposal for StandardProposal {
                 d
             }
             ProposalKind::Translation => {
-                let w = -camera_point(current, ctx.pivot)[2];
+                let w = -camera_point(current, ctx.pivot, ctx.trig.as_ref())[2];
                 let mm_per_px = if current.focal > 0.0 { libm::fabsf(w) / current.focal } else { 0.0 };
                 add_normals(rng, s * mm_per_px, out.pose.translation.get_mut(..2).unwrap_or(&mut []));
                 0.0
@@ -388,13 +390,13 @@ mod tests {
     #[test]
     fn rotations_keep_the_pivot_fixed() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
-        let ctx = ProposalContext { pivot: [10.0, 20.0, 30.0], light_solution: None };
+        let ctx = ProposalContext { pivot: [10.0, 20.0, 30.0], light_solution: None, trig: None };
         let p = params();
         let mut out = p.clone();
         for kind in [ProposalKind::Yaw, ProposalKind::Pitch, ProposalKind::Roll] {
             let h = StandardProposal::new(kind, Scale::Coarse, 0.5).unwrap().propose(&p, &ctx, &mut rng, &mut out);
             assert_eq!(h, 0.0);
-            let (a, b) = (camera_point(&p, ctx.pivot), camera_point(&out, ctx.pivot));
+            let (a, b) = (camera_point(&p, ctx.pivot, None), camera_point(&out, ctx.pivot, None));
             for i in 0..3 {
                 assert!((a[i] - b[i]).abs() < 1e-3, "{kind:?} {a:?} {b:?}");
             }
@@ -405,7 +407,7 @@ mod tests {
     #[test]
     fn leading_blocks_move_only_the_leading_coefficients() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
+        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None, trig: None };
         let p = params();
         for kind in [ProposalKind::Shape, ProposalKind::Color] {
             let coeffs =
@@ -434,7 +436,7 @@ mod tests {
     #[test]
     fn distance_keeps_image_scale_and_reports_jacobian() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(4);
-        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
+        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None, trig: None };
         let p = params();
         let mut out = p.clone();
         let h = StandardProposal::new(ProposalKind::Distance, Scale::Coarse, 50.0).unwrap().propose(&p, &ctx, &mut rng, &mut out);
@@ -516,7 +518,7 @@ mod tests {
     #[test]
     fn light_solve_without_solution_is_impossible_and_mixture_chooses_by_weight() {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None };
+        let ctx = ProposalContext { pivot: [0.0; 3], light_solution: None, trig: None };
         let p = params();
         let mut out = p.clone();
         let pr = StandardProposal::new(ProposalKind::LightSolve, Scale::Fine, 0.1).unwrap();
