@@ -5,11 +5,12 @@ mod common;
 mod fit_support;
 
 use fit_support::*;
+use gpmm_core::fit::LandmarkTarget;
 use gpmm_core::fit::{
     solve_shape, FitError, FitParams, Instance, InstanceBuffers, ShapeSolveConfig, SolveScratch, SpareBuffers, TargetImage,
     DEFAULT_PIXEL_SIGMA,
 };
-use gpmm_core::{ProjectedVertex, Vec3};
+use gpmm_core::Vec3;
 
 /// Per-vertex buffers with a spare instance, plus the solve's scratch.
 struct Room {
@@ -44,6 +45,34 @@ impl Room {
     }
 }
 
+/// The synthetic model's face rendered at the truth, with its exact landmarks.
+struct Rendered {
+    synth: Synth,
+    truth: FitParams<KS, KC>,
+    pixels: Vec<[u8; 3]>,
+    points: Vec<[f32; 2]>,
+    valid: Vec<bool>,
+}
+
+impl Rendered {
+    fn new() -> Self {
+        let synth = Synth::new(11);
+        let truth = truth();
+        let pixels = render_target(&synth, &truth);
+        let points = project_landmarks(&synth.model(), &truth);
+        let valid = all_valid(points.len());
+        Self { synth, truth, pixels, points, valid }
+    }
+
+    fn image(&self) -> TargetImage<'_> {
+        TargetImage::new(&self.pixels, W, H).unwrap()
+    }
+
+    fn landmarks(&self) -> LandmarkTarget<'_> {
+        target(&self.points, &self.valid)
+    }
+}
+
 fn config() -> ShapeSolveConfig {
     ShapeSolveConfig { stride: 1, min_cos: 0.2, pixel_sigma: DEFAULT_PIXEL_SIGMA, weight: 1.0, components: KS, iterations: 6, pose: false }
 }
@@ -61,11 +90,9 @@ fn start() -> FitParams<KS, KC> {
 
 #[test]
 fn shape_solve_moves_the_shape_toward_the_rendered_one() {
-    let synth = Synth::new(11);
+    let r = Rendered::new();
+    let (synth, truth, image) = (&r.synth, &r.truth, r.image());
     let model = synth.model();
-    let truth = truth();
-    let pixels = render_target(&synth, &truth);
-    let image = TargetImage::new(&pixels, W, H).unwrap();
     let mut room = Room::new(synth.vertices());
     let mut inst = room.instance(true);
     let mut p = start();
@@ -89,14 +116,9 @@ fn shape_solve_moves_the_shape_toward_the_rendered_one() {
 
 #[test]
 fn shape_solve_with_landmarks_agrees_with_both() {
-    let synth = Synth::new(11);
+    let r = Rendered::new();
+    let (synth, truth, image, lm) = (&r.synth, &r.truth, r.image(), r.landmarks());
     let model = synth.model();
-    let truth = truth();
-    let pixels = render_target(&synth, &truth);
-    let image = TargetImage::new(&pixels, W, H).unwrap();
-    let points = project_landmarks(&model, &truth);
-    let valid = all_valid(points.len());
-    let lm = target(&points, &valid);
     let mut room = Room::new(synth.vertices());
     let mut inst = room.instance(true);
     let mut p = start();
@@ -106,8 +128,8 @@ fn shape_solve_with_landmarks_agrees_with_both() {
     eprintln!("{report:?}: {before:.3} -> {after:.3}");
     assert!(after < 0.4 * before, "{before} -> {after}");
     // Landmarks pulled elsewhere (shifted 3 px) move the solution away from the image's.
-    let shifted: Vec<[f32; 2]> = points.iter().map(|q| [q[0] + 3.0, q[1]]).collect();
-    let lm_shifted = target(&shifted, &valid);
+    let shifted: Vec<[f32; 2]> = r.points.iter().map(|q| [q[0] + 3.0, q[1]]).collect();
+    let lm_shifted = target(&shifted, &r.valid);
     let mut q = start();
     solve_shape(&model, &mut inst, &mut q, &image, Some(&lm_shifted), &config()).unwrap();
     assert!(distance(q.shape_coeffs(), p.shape_coeffs()) > 0.05, "{:?} vs {:?}", q.shape_coeffs(), p.shape_coeffs());
@@ -115,10 +137,9 @@ fn shape_solve_with_landmarks_agrees_with_both() {
 
 #[test]
 fn shape_solve_refuses_bad_settings_and_missing_room() {
-    let synth = Synth::new(11);
+    let r = Rendered::new();
+    let (synth, image) = (&r.synth, r.image());
     let model = synth.model();
-    let pixels = render_target(&synth, &truth());
-    let image = TargetImage::new(&pixels, W, H).unwrap();
     let mut room = Room::new(synth.vertices());
     let mut p = start();
     {
@@ -144,19 +165,13 @@ fn shape_solve_refuses_bad_settings_and_missing_room() {
     let mut nan = start();
     nan.shape_coeffs_mut()[0] = f32::NAN;
     assert!(solve_shape(&model, &mut inst, &mut nan, &image, None, &config()).is_err());
-    let _ = ProjectedVertex::INVALID;
 }
 
 #[test]
 fn shape_solve_with_the_pose_recovers_a_turned_start() {
-    let synth = Synth::new(11);
+    let r = Rendered::new();
+    let (synth, truth, image, lm) = (&r.synth, &r.truth, r.image(), r.landmarks());
     let model = synth.model();
-    let truth = truth();
-    let pixels = render_target(&synth, &truth);
-    let image = TargetImage::new(&pixels, W, H).unwrap();
-    let points = project_landmarks(&model, &truth);
-    let valid = all_valid(points.len());
-    let lm = target(&points, &valid);
     let mut room = Room::new(synth.vertices());
     let mut inst = room.instance(true);
     let turned = || {
