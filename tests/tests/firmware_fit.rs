@@ -73,7 +73,9 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let (q, blob) = models();
     let face = &faces(1, 11)[1];
     let prep = prepared(face);
-    let settings = FitOptions { fit: CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), ..FitOptions::DEFAULT };
+    // The device runs no shape solve (device_settings): the float fit compares like with like.
+    let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
+    let settings = FitOptions { fit, ..FitOptions::DEFAULT };
 
     let device = device_settings(&settings.core(), &M4F);
     let (host, host_lm) = host_fit(blob, &prep, &device, settings.seed).expect("host fit");
@@ -120,7 +122,9 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
 #[test]
 fn float_model_and_blob_fit_the_same_landmarks() {
     let (q, blob) = models();
-    let settings = FitOptions { fit: CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), ..FitOptions::DEFAULT };
+    // The device runs no shape solve (device_settings): the float fit compares like with like.
+    let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
+    let settings = FitOptions { fit, ..FitOptions::DEFAULT };
     let (mut worst, mut same, mut worst_quality) = (0.0f32, 0, 0.0f32);
     let faces = faces(3, 5);
     for face in &faces {
@@ -222,6 +226,6 @@ fn firmware_fit_uses_every_setting() {
     assert!(d <= 1e-3, "fitted landmarks differ by {d} px between host and firmware");
     assert!(rel <= 1e-5, "log-likelihood differs by {rel}");
     assert_eq!((dev.shape.len(), dev.color.len()), (30, 20), "the ranks reached the device");
-    let (default_fit, _) = host_fit(blob, &prep, &defaults.with_ranks(30, 20), seed).expect("default fit");
+    let (default_fit, _) = host_fit(blob, &prep, &device_settings(&defaults.with_ranks(30, 20), &M4F), seed).expect("default fit");
     assert_ne!(default_fit.params().pose.yaw, host.params().pose.yaw, "the settings changed nothing");
 }
