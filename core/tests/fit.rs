@@ -69,24 +69,6 @@ fn start_pose_and_landmark_chain_recover_the_pose() {
     assert!(start.best_landmarks.rmse() > 1.5 * fit.best_landmarks.rmse().max(0.3));
 }
 
-struct Scene {
-    synth: Synth,
-    pixels: Vec<[u8; 3]>,
-    points: Vec<[f32; 2]>,
-    valid: Vec<bool>,
-}
-
-impl Scene {
-    fn new() -> Self {
-        let synth = Synth::new(11);
-        let truth = truth();
-        let pixels = render_target(&synth, &truth);
-        let points = project_landmarks(&synth.model(), &truth);
-        let valid = all_valid(points.len());
-        Self { synth, pixels, points, valid }
-    }
-}
-
 #[test]
 fn image_likelihood_is_highest_at_the_truth() {
     let scene = Scene::new();

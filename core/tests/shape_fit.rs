@@ -5,10 +5,8 @@ mod common;
 mod fit_support;
 
 use fit_support::*;
-use gpmm_core::fit::LandmarkTarget;
 use gpmm_core::fit::{
-    solve_shape, FitError, FitParams, Instance, InstanceBuffers, ShapeSolveConfig, SolveScratch, SpareBuffers, TargetImage,
-    DEFAULT_PIXEL_SIGMA,
+    solve_shape, FitError, FitParams, Instance, InstanceBuffers, ShapeSolveConfig, SolveScratch, SpareBuffers, DEFAULT_PIXEL_SIGMA,
 };
 use gpmm_core::Vec3;
 
@@ -45,34 +43,6 @@ impl Room {
     }
 }
 
-/// The synthetic model's face rendered at the truth, with its exact landmarks.
-struct Rendered {
-    synth: Synth,
-    truth: FitParams<KS, KC>,
-    pixels: Vec<[u8; 3]>,
-    points: Vec<[f32; 2]>,
-    valid: Vec<bool>,
-}
-
-impl Rendered {
-    fn new() -> Self {
-        let synth = Synth::new(11);
-        let truth = truth();
-        let pixels = render_target(&synth, &truth);
-        let points = project_landmarks(&synth.model(), &truth);
-        let valid = all_valid(points.len());
-        Self { synth, truth, pixels, points, valid }
-    }
-
-    fn image(&self) -> TargetImage<'_> {
-        TargetImage::new(&self.pixels, W, H).unwrap()
-    }
-
-    fn landmarks(&self) -> LandmarkTarget<'_> {
-        target(&self.points, &self.valid)
-    }
-}
-
 fn config() -> ShapeSolveConfig {
     ShapeSolveConfig { stride: 1, min_cos: 0.2, pixel_sigma: DEFAULT_PIXEL_SIGMA, weight: 1.0, components: KS, iterations: 6, pose: false }
 }
@@ -90,7 +60,7 @@ fn start() -> FitParams<KS, KC> {
 
 #[test]
 fn shape_solve_moves_the_shape_toward_the_rendered_one() {
-    let r = Rendered::new();
+    let r = Scene::new();
     let (synth, truth, image) = (&r.synth, &r.truth, r.image());
     let model = synth.model();
     let mut room = Room::new(synth.vertices());
@@ -116,7 +86,7 @@ fn shape_solve_moves_the_shape_toward_the_rendered_one() {
 
 #[test]
 fn shape_solve_with_landmarks_agrees_with_both() {
-    let r = Rendered::new();
+    let r = Scene::new();
     let (synth, truth, image, lm) = (&r.synth, &r.truth, r.image(), r.landmarks());
     let model = synth.model();
     let mut room = Room::new(synth.vertices());
@@ -137,7 +107,7 @@ fn shape_solve_with_landmarks_agrees_with_both() {
 
 #[test]
 fn shape_solve_refuses_bad_settings_and_missing_room() {
-    let r = Rendered::new();
+    let r = Scene::new();
     let (synth, image) = (&r.synth, r.image());
     let model = synth.model();
     let mut room = Room::new(synth.vertices());
@@ -169,7 +139,7 @@ fn shape_solve_refuses_bad_settings_and_missing_room() {
 
 #[test]
 fn shape_solve_with_the_pose_recovers_a_turned_start() {
-    let r = Rendered::new();
+    let r = Scene::new();
     let (synth, truth, image, lm) = (&r.synth, &r.truth, r.image(), r.landmarks());
     let model = synth.model();
     let mut room = Room::new(synth.vertices());

@@ -145,3 +145,31 @@ pub fn all_valid(n: usize) -> Vec<bool> {
 pub fn target<'a>(points: &'a [[f32; 2]], valid: &'a [bool]) -> LandmarkTarget<'a> {
     LandmarkTarget::new(points, valid, LandmarkTarget::default_sigma(W, H)).unwrap()
 }
+
+/// The synthetic model's face rendered at [`truth`], with its exact landmarks.
+pub struct Scene {
+    pub synth: Synth,
+    pub truth: FitParams<KS, KC>,
+    pub pixels: Vec<[u8; 3]>,
+    pub points: Vec<[f32; 2]>,
+    pub valid: Vec<bool>,
+}
+
+impl Scene {
+    pub fn new() -> Self {
+        let synth = Synth::new(11);
+        let truth = truth();
+        let pixels = render_target(&synth, &truth);
+        let points = project_landmarks(&synth.model(), &truth);
+        let valid = all_valid(points.len());
+        Self { synth, truth, pixels, points, valid }
+    }
+
+    pub fn image(&self) -> gpmm_core::fit::TargetImage<'_> {
+        gpmm_core::fit::TargetImage::new(&self.pixels, W, H).unwrap()
+    }
+
+    pub fn landmarks(&self) -> LandmarkTarget<'_> {
+        target(&self.points, &self.valid)
+    }
+}
