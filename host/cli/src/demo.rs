@@ -131,6 +131,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             image: photo,
             landmarks: pts,
             pts_one_based: false,
+            landmark_calibration: None,
             settings: FitOptions { fit: FitSettings::DEFAULT.with_steps(landmark_steps, image_steps), ..FitOptions::DEFAULT },
             out_dir: out.join("fit"),
             timing: true,

@@ -127,6 +127,10 @@ pub struct RecognitionArgs {
     /// instead of the exact ones; the identities and yaws stay the set's.
     #[arg(long, value_name = "DIR")]
     pub landmarks_dir: Option<PathBuf>,
+    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`: the
+    /// detector's systematic, view-dependent offsets learned on renders) before fitting.
+    #[arg(long, value_name = "FILE")]
+    pub landmark_calibration: Option<PathBuf>,
     /// Models.
     #[command(flatten)]
     pub models: EvalModelArgs,
@@ -263,7 +267,8 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     if !a.synth.is_dir() {
         bail!("synth directory {} not found (make one with `gpmm synth --count 50 --seed 1 -o DIR`)", a.synth.display());
     }
-    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?.with_landmarks_dir(a.landmarks_dir.clone());
+    let landmarks = gpmm_host::eval::LandmarkSource::new(a.landmarks_dir.clone(), a.landmark_calibration.as_deref())?;
+    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?.with_landmarks(landmarks);
     let mut sel = eval_selection(&a.models)?;
     sel.kde = a.kde.map(|n| n as usize);
     if a.all {

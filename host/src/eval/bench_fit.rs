@@ -19,6 +19,7 @@
 //! (negative: the fit turns the face toward frontal), beside the median pitch and roll errors.
 
 use crate::eval::synth::{read_truth, ImageTruth};
+use crate::eval::LandmarkSource;
 use crate::fit::{fit_prepared, load_photo, FitOptions};
 use crate::gp::model::GpModel;
 use rayon::prelude::*;
@@ -201,17 +202,18 @@ fn iod_error(fit: &[[f32; 2]], truth: &[[f32; 2]]) -> f32 {
 }
 
 /// Fits one synthetic image (the `gpmm fit` path) and compares with its truth. Its landmarks are
-/// its `.pts` file in `dir`, or the file of the same name in `landmarks_dir`.
+/// its `.pts` file in `dir`, or the file of the same name in `landmarks.dir` (corrected with its calibration).
 pub fn bench_one(
     model: &GpModel,
     dir: &Path,
     truth: &ImageTruth,
     settings: &FitOptions,
-    landmarks_dir: Option<&Path>,
+    landmarks: &LandmarkSource,
 ) -> Result<BenchImage, String> {
     let t0 = Instant::now();
-    let pts = landmarks_dir.unwrap_or(dir).join(&truth.landmarks_file);
-    let prepared = load_photo(model, &dir.join(&truth.image), &pts, false, settings.size).map_err(|e| format!("{}: {e}", truth.image))?;
+    let pts = landmarks.file(dir, &truth.landmarks_file);
+    let prepared = load_photo(model, &dir.join(&truth.image), &pts, false, settings.size, landmarks.calibration())
+        .map_err(|e| format!("{}: {e}", truth.image))?;
     let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", truth.image))?;
     let seconds = t0.elapsed().as_secs_f64();
     let size = settings.size;
@@ -241,14 +243,14 @@ pub fn bench_one(
 }
 
 /// Runs the benchmark on `dir` (a `gpmm synth` output): the first `limit` images, `jobs` threads,
-/// landmarks from `landmarks_dir` when given (else the set's exact ones).
+/// landmarks from `landmarks` (the set's exact ones, or another directory's, maybe calibrated).
 /// `progress(done, total)` is called after each image; failed fits are returned as messages.
 #[allow(clippy::too_many_arguments)]
 pub fn bench(
     model: &GpModel,
     dir: &Path,
     settings: &FitOptions,
-    landmarks_dir: Option<&Path>,
+    landmarks: &LandmarkSource,
     limit: Option<usize>,
     jobs: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
@@ -271,7 +273,7 @@ pub fn bench(
         images
             .par_iter()
             .map(|t| {
-                let r = bench_one(model, dir, t, settings, landmarks_dir);
+                let r = bench_one(model, dir, t, settings, landmarks);
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 progress(d, total);
                 r
@@ -309,7 +311,7 @@ pub fn bench(
         pixel_rmse_after_image_chain: stat(&col(&|b| f64::from(b.pixel_rmse))),
         image_chain_lowered_rmse_fraction: lowered,
         per_yaw: per_yaw(&ok),
-        landmarks: landmarks_dir.map_or_else(|| "exact".to_string(), |d| d.display().to_string()),
+        landmarks: landmarks.describe(),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
         jobs,

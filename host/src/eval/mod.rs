@@ -106,6 +106,50 @@ pub fn cosine(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
+/// Where a synthetic set's fits read their landmarks: the set's exact `.pts` or the files of the
+/// same names in another directory (e.g. a detector's), optionally corrected with a detector
+/// calibration.
+#[derive(Debug, Clone, Default)]
+pub struct LandmarkSource {
+    /// Directory of the landmark files (`None`: the set's own, exact ones).
+    pub dir: Option<PathBuf>,
+    /// The calibration file and its contents (`None`: the points as read).
+    pub calibration: Option<(PathBuf, crate::photo::calibration::LandmarkCalibration)>,
+}
+
+impl LandmarkSource {
+    /// Landmarks from `dir` (or the set's), corrected with the calibration file `calibration` if given.
+    pub fn new(dir: Option<PathBuf>, calibration: Option<&Path>) -> Result<Self, EvalError> {
+        let calibration = match calibration {
+            Some(p) => Some((
+                p.to_path_buf(),
+                crate::photo::calibration::LandmarkCalibration::read(p).map_err(|e| EvalError::Invalid(e.to_string()))?,
+            )),
+            None => None,
+        };
+        Ok(Self { dir, calibration })
+    }
+
+    /// The landmark file of an image whose own file is `set_dir/file`.
+    pub fn file(&self, set_dir: &Path, file: &str) -> PathBuf {
+        self.dir.as_deref().unwrap_or(set_dir).join(file)
+    }
+
+    /// The calibration to correct the points with.
+    pub fn calibration(&self) -> Option<&crate::photo::calibration::LandmarkCalibration> {
+        self.calibration.as_ref().map(|(_, c)| c)
+    }
+
+    /// "exact", or the directory, with the calibration file if any (for reports and cache keys).
+    pub fn describe(&self) -> String {
+        let base = self.dir.as_ref().map_or_else(|| "exact".to_string(), |d| d.display().to_string());
+        match &self.calibration {
+            Some((p, _)) => format!("{base}, calibrated with {}", p.display()),
+            None => base,
+        }
+    }
+}
+
 /// SHA-256 of a file's bytes, hex (identifies a model in the fit cache).
 pub fn file_sha256(path: &Path) -> Result<String, EvalError> {
     use sha2::{Digest, Sha256};

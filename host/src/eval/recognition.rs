@@ -23,7 +23,7 @@ use crate::eval::synth::{read_truth, ImageTruth};
 use crate::fit::{fit_prepared, load_photo, FitOptions};
 
 use super::plot::{line_chart, Chart, Series};
-use super::{create_dir, wilson_interval, write_text, EvalError};
+use super::{create_dir, wilson_interval, write_text, EvalError, LandmarkSource};
 
 /// One fitted image.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -184,9 +184,8 @@ pub struct SynthSet {
     pub identities: Vec<usize>,
     /// The world options used to render them.
     pub options: crate::eval::synth::SynthOptions,
-    /// Where the landmarks are read from: `None` for the set's exact `.pts`, else a directory
-    /// with files of the same names (e.g. a detector's).
-    pub landmarks_dir: Option<PathBuf>,
+    /// Where the landmarks are read from (the set's exact `.pts` unless told otherwise).
+    pub landmarks: LandmarkSource,
 }
 
 impl SynthSet {
@@ -214,13 +213,13 @@ impl SynthSet {
             images,
             identities,
             options: truth.options,
-            landmarks_dir: None,
+            landmarks: LandmarkSource::default(),
         })
     }
 
-    /// The same set, fitted with the landmark files of `dir` instead of the exact ones.
-    pub fn with_landmarks_dir(self, dir: Option<PathBuf>) -> Self {
-        Self { landmarks_dir: dir, ..self }
+    /// The same set, fitted with the landmarks of `landmarks` instead of the exact ones.
+    pub fn with_landmarks(self, landmarks: LandmarkSource) -> Self {
+        Self { landmarks, ..self }
     }
 
     /// The probe yaws (all but 0, ascending).
@@ -234,8 +233,9 @@ impl SynthSet {
 
 fn fit_one(model: &crate::gp::model::GpModel, set: &SynthSet, t: &ImageTruth, settings: &FitOptions) -> Result<ImageFit, String> {
     let t0 = Instant::now();
-    let pts = set.landmarks_dir.as_deref().unwrap_or(&set.dir).join(&t.landmarks_file);
-    let prepared = load_photo(model, &set.dir.join(&t.image), &pts, false, settings.size).map_err(|e| format!("{}: {e}", t.image))?;
+    let pts = set.landmarks.file(&set.dir, &t.landmarks_file);
+    let prepared = load_photo(model, &set.dir.join(&t.image), &pts, false, settings.size, set.landmarks.calibration())
+        .map_err(|e| format!("{}: {e}", t.image))?;
     let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", t.image))?;
     Ok(ImageFit {
         image: t.image.clone(),
@@ -268,8 +268,12 @@ pub fn fit_set(
         "images": set.images.iter().map(|t| t.image.as_str()).collect::<Vec<_>>(),
     });
     let mut key = key;
-    if let Some(d) = &set.landmarks_dir {
+    if let Some(d) = &set.landmarks.dir {
         key["landmarks_dir"] = serde_json::Value::String(d.display().to_string());
+    }
+    if let Some((_, c)) = &set.landmarks.calibration {
+        // The contents, not the path: a re-learned calibration must not reuse old fits.
+        key["landmark_calibration"] = serde_json::to_value(c).map_err(|e| EvalError::Invalid(e.to_string()))?;
     }
     if let Ok(text) = std::fs::read_to_string(cache) {
         if let Ok(cached) = serde_json::from_str::<FitSet>(&text) {

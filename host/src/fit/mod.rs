@@ -21,6 +21,7 @@ mod overrides;
 pub mod register;
 
 use crate::gp::model::GpModel;
+use crate::photo::calibration::{CalibrationError, LandmarkCalibration};
 use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
@@ -57,6 +58,14 @@ pub enum FitRunError {
     /// The photo was refused.
     #[error(transparent)]
     Photo(#[from] PhotoError),
+    /// The landmarks could not be corrected with the detector calibration.
+    #[error("{}: {error}", path.display())]
+    Calibration {
+        /// The landmark file (or the calibration file, when it could not be read).
+        path: std::path::PathBuf,
+        /// What went wrong.
+        error: CalibrationError,
+    },
     /// The settings are out of range.
     #[error("{0}")]
     Settings(String),
@@ -402,6 +411,9 @@ pub struct FitReport {
     pub image: String,
     /// Landmark file as given.
     pub landmarks_file: String,
+    /// The detector calibration the landmarks were corrected with (absent: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landmark_calibration: Option<String>,
     /// Every setting of the fit (as `gpmm fit --set` names them; absent in older files).
     #[serde(default)]
     pub settings: FitSettings,
@@ -478,6 +490,8 @@ pub struct ReportInputs<'a> {
     pub pts_path: &'a str,
     /// Whether the landmarks were read 1-based.
     pub pts_one_based: bool,
+    /// The detector calibration file as given, if the landmarks were corrected with one.
+    pub landmark_calibration: Option<&'a str>,
 }
 
 /// Builds `fit.json`'s content; `seconds` is the total wall time (None: no timing fields).
@@ -508,6 +522,7 @@ pub fn report(
         fitted_ranks: [p.shape_len(), p.color_len()],
         image: inputs.image_path.to_string(),
         landmarks_file: inputs.pts_path.to_string(),
+        landmark_calibration: inputs.landmark_calibration.map(str::to_string),
         settings: settings.fit,
         pts_one_based: inputs.pts_one_based,
         image_size: prepared.original_size,
@@ -633,6 +648,8 @@ pub struct FitJob {
     pub landmarks: std::path::PathBuf,
     /// Read the landmark file as 1-based.
     pub pts_one_based: bool,
+    /// A detector calibration (`gpmm calibrate-landmarks`) to correct the landmarks with.
+    pub landmark_calibration: Option<std::path::PathBuf>,
     /// Fit settings.
     pub settings: FitOptions,
     /// Output directory (created if needed).
@@ -660,19 +677,30 @@ pub enum FitFilesError {
     },
 }
 
-/// Loads a photo and its landmarks, checked against the model (count, inside the image), and prepares it.
+/// Loads a photo and its landmarks, checked against the model (count, inside the image), and
+/// prepares it; with a detector `calibration` the landmarks are corrected first (and kept inside
+/// the image).
 pub fn load_photo(
     model: &GpModel,
     image: &std::path::Path,
     landmarks: &std::path::Path,
     one_based: bool,
     size: u32,
+    calibration: Option<&LandmarkCalibration>,
 ) -> Result<Prepared, FitRunError> {
     check_landmarks(model)?;
     let pts = crate::photo::pts::read_pts(landmarks, one_based)?;
     let photo = crate::photo::load_rgb(image)?;
     pts.check(landmarks, model.landmarks.len(), &model.metadata.landmark_scheme, photo.width(), photo.height(), one_based)?;
-    prepare(&photo, &pts.points, size)
+    let points = match calibration {
+        None => pts.points,
+        Some(c) => {
+            let (w, h) = (photo.width() as f32, photo.height() as f32);
+            let fixed = c.correct(&pts.points).map_err(|error| FitRunError::Calibration { path: landmarks.to_path_buf(), error })?;
+            fixed.into_iter().map(|p| [p[0].clamp(0.0, w), p[1].clamp(0.0, h)]).collect()
+        }
+    };
+    prepare(&photo, &points, size)
 }
 
 /// Refuses a model without landmarks (e.g. a statismo import without usable ones) before any
@@ -715,14 +743,20 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     job.settings.validate()?;
     let model = crate::gp::model_io::load(&job.model)?;
     let t0 = Instant::now();
-    let prepared = load_photo(&model, &job.image, &job.landmarks, job.pts_one_based, job.settings.size)?;
+    let calibration = match &job.landmark_calibration {
+        Some(path) => Some(LandmarkCalibration::read(path).map_err(|error| FitRunError::Calibration { path: path.clone(), error })?),
+        None => None,
+    };
+    let prepared = load_photo(&model, &job.image, &job.landmarks, job.pts_one_based, job.settings.size, calibration.as_ref())?;
     let outcome = fit_prepared(&model, &prepared, &job.settings, progress)?;
     let seconds = t0.elapsed().as_secs_f64();
+    let calibration_name = job.landmark_calibration.as_ref().map(|p| p.display().to_string());
     let inputs = ReportInputs {
         model_path: &job.model.display().to_string(),
         image_path: &job.image.display().to_string(),
         pts_path: &job.landmarks.display().to_string(),
         pts_one_based: job.pts_one_based,
+        landmark_calibration: calibration_name.as_deref(),
     };
     let rep = report(&model, &inputs, &prepared, &job.settings, &outcome, job.timing.then_some(seconds));
     let dir = &job.out_dir;

@@ -10,6 +10,7 @@
 //! when shrinking, so it does not alias). Coordinates map exactly: working = (original − corner) ·
 //! size / S in continuous pixel coordinates (centres at +0.5 in both images).
 
+pub mod calibration;
 pub mod pts;
 
 use image::{imageops::FilterType, RgbImage};
