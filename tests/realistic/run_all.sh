@@ -4,7 +4,11 @@
 # exact and with the detector's landmarks. Data goes to $REALISTIC_DATA (default
 # /tmp/gpmm-realistic), never into the repository.
 #
-#   bash tests/realistic/run_all.sh [--quick] [--model MODEL.gpmm] [--seed S] [--count N]
+#   bash tests/realistic/run_all.sh [--quick] [--model MODEL.gpmm] [--seed S] [--count N] [--calibration CAL.json]
+#
+# --calibration: also fit with the detector's landmarks corrected by a landmark calibration
+# (`gpmm calibrate-landmarks`), learned on ANOTHER set (e.g. the seed-21 development set), never
+# on this one.
 #
 # Needs: python3 with venv (a venv with mitsuba==3.6.4 and mediapipe==0.10.21 is made in
 # $REALISTIC_VENV, default /tmp/gpmm-realistic-venv), a built gpmm (cargo build --release -p gpmm)
@@ -16,13 +20,14 @@ data="${GPMM_DATA:-$(cd "$root/.." && pwd)/shared/data}"
 out="${REALISTIC_DATA:-/tmp/gpmm-realistic}"
 venv="${REALISTIC_VENV:-/tmp/gpmm-realistic-venv}"
 gpmm="${GPMM_BIN:-$root/target/release/gpmm}"
-count=50; yaws="-45,-30,-15,0,15,30,45"; spp=64; model=""; seed=11
+count=50; yaws="-45,-30,-15,0,15,30,45"; spp=64; model=""; seed=11; calibration=""
 while [ $# -gt 0 ]; do
     case "$1" in
         --quick) count=2; yaws="0,30"; spp=16; shift ;;
         --model) model="$2"; shift 2 ;;
         --seed) seed="$2"; shift 2 ;;
         --count) count="$2"; shift 2 ;;
+        --calibration) calibration="$2"; shift 2 ;;
         *) echo "unknown argument $1" >&2; exit 2 ;;
     esac
 done
@@ -51,4 +56,10 @@ echo "== exact landmarks"
 "$gpmm" bench-fit "$out/set" --model "$model" --no-write > "$out/bench-exact.json"
 echo "== detector landmarks"
 "$gpmm" bench-fit "$out/set" --model "$model" --no-write --landmarks-dir "$out/set/detector" > "$out/bench-detector.json" || true
+if [ -n "$calibration" ]; then
+    echo "== detector landmarks corrected with $calibration"
+    "$gpmm" bench-fit "$out/set" --model "$model" --no-write --landmarks-dir "$out/set/detector" \
+        --landmark-calibration "$calibration" > "$out/bench-detector-calibrated.json" || true
+fi
 echo "results in $out (bench-exact.json, bench-detector.json, detector.json)"
+echo "a landmark calibration from this set (to use on another): $gpmm calibrate-landmarks --exact $out/set --detected $out/set/detector -o CAL.json"
