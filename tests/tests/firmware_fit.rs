@@ -190,6 +190,7 @@ fn firmware_fit_uses_every_setting() {
             shape_components: 12,
             shape_iterations: 2,
             shape_stride: 3,
+            shape_min_cos: 0.5,
             shape_weight: 0.5,
             shape_landmarks: false,
             shape_pose: true,
@@ -208,10 +209,10 @@ fn firmware_fit_uses_every_setting() {
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
     // Every top-level field and group differs from the default except `start.shape_rounds`
-    // (the device refuses the shape solve; see above). A new field must be added here; 94 fields
+    // (the device refuses the shape solve; see above). A new field must be added here; 95 fields
     // counting the groups' own.
     let fields = format!("{settings:?}");
-    assert_eq!(fields.matches(": ").count(), 94, "update this test for the new settings: {fields}");
+    assert_eq!(fields.matches(": ").count(), 95, "update this test for the new settings: {fields}");
     let seed = 99;
     let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;

@@ -312,7 +312,7 @@ fn shape_rounds<I: TriIndex, const KS: usize, const KC: usize>(
     }
     let config = ShapeSolveConfig {
         stride: s.shape_stride,
-        min_cos: settings.light.min_cos,
+        min_cos: s.shape_min_cos,
         pixel_sigma: settings.image.pixel_sigma,
         weight: s.shape_weight,
         components: s.shape_components,
