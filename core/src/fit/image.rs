@@ -100,6 +100,7 @@ impl<'a> TargetImage<'a> {
     }
 }
 
+#[inline]
 pub(crate) fn to_linear(p: [u8; 3]) -> Vec3 {
     p.map(|c| f32::from(c) * (1.0 / 255.0))
 }
