@@ -302,7 +302,7 @@ fn range_basis(a: MatRef<'_, f32>, dim: usize, seed: u64) -> Mat<f32> {
 }
 
 /// Points of the estimate of [`bank_nystrom`]'s split (the first of the farthest-point sample).
-const ESTIMATE_POINTS: usize = 500;
+const ESTIMATE_POINTS: usize = 300;
 
 /// How many pairs each kernel needs for the `count` largest components (kernel `k`'s value `i`
 /// counted `directions[k]` times), judged from estimated values (descending per kernel), with a
