@@ -72,7 +72,13 @@ mod tests {
         let coeffs: std::vec::Vec<f32> = (0..rank).map(|k| if k % 5 == 3 { 0.0 } else { 3.0 * next() }).collect();
         let mean: std::vec::Vec<Vec3> = (0..n).map(|_| [next() + 2.0, next(), next() - 2.0]).collect();
         let bits = |v: &[Vec3]| v.iter().flat_map(|p| p.map(f32::to_bits)).collect::<std::vec::Vec<_>>();
-        let axes = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [0.577_350_3; 3], [0.707_106_8, -0.707_106_8, 0.0]];
+        let axes = [
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, -1.0],
+            [0.577_350_3; 3],
+            [core::f32::consts::FRAC_1_SQRT_2, -core::f32::consts::FRAC_1_SQRT_2, 0.0],
+        ];
         for kinds in [3, axes.len()] {
             let dirs: std::vec::Vec<Vec3> = (0..rank).map(|k| axes[(k * 7) % kinds]).collect();
             let comps = || {
