@@ -100,10 +100,12 @@ impl<'a> TargetImage<'a> {
     }
 }
 
+#[inline]
 pub(crate) fn to_linear(p: [u8; 3]) -> Vec3 {
     p.map(|c| f32::from(c) * (1.0 / 255.0))
 }
 
+#[inline]
 fn bin(p: [u8; 3]) -> usize {
     (usize::from(p[0] >> BG_SHIFT) * BG_BINS + usize::from(p[1] >> BG_SHIFT)) * BG_BINS + usize::from(p[2] >> BG_SHIFT)
 }
@@ -143,6 +145,7 @@ impl BackgroundModel {
     }
 
     /// `log b(colour)` of an 8-bit colour.
+    #[inline]
     pub fn log_density(&self, p: [u8; 3]) -> f32 {
         self.log_density.get(bin(p)).copied().unwrap_or(0.0)
     }

@@ -29,6 +29,7 @@ pub trait BackgroundLikelihood {
 }
 
 impl BackgroundLikelihood for BackgroundModel {
+    #[inline]
     fn log_density(&self, target: [u8; 3]) -> f32 {
         BackgroundModel::log_density(self, target)
     }

@@ -193,15 +193,19 @@ fn validate_slow(v: [&ProjectedVertex; 3]) -> Result<(), Reject> {
 /// Vertices checked once per frame instead of once per triangle (each is in about six): a bit
 /// per vertex, set if it passes [`validate_slow`]'s tests (finite, in front, inside the guard
 /// band). A triangle of three such vertices passes [`validate`]. Frames of more vertices than
-/// the bits (2,048, 256 bytes of stack) validate per triangle.
+/// the bits validate per triangle.
 struct ValidVertices {
-    bits: [u32; 64],
+    bits: [u32; VALID_WORDS],
 }
+
+/// Words of [`ValidVertices`]: 2,048 vertices (256 bytes of stack) on the devices, 8,192 (1 KiB)
+/// elsewhere, for the host's full-resolution models.
+const VALID_WORDS: usize = if cfg!(target_os = "none") { 64 } else { 256 };
 
 impl ValidVertices {
     /// The flags of `vertices` (`None` if there are too many).
     fn of(vertices: &[ProjectedVertex]) -> Option<Self> {
-        let mut bits = [0u32; 64];
+        let mut bits = [0u32; VALID_WORDS];
         if vertices.len() > bits.len() * 32 {
             return None;
         }

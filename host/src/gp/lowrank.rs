@@ -154,19 +154,31 @@ pub fn sample_points(points: &[KernelPoint], m: usize, seed: u64) -> Vec<usize> 
 
 /// Nyström eigendecomposition of one scalar kernel over `points`, keeping at most `max_rank` pairs.
 pub fn scalar_nystrom(kernel: &ScalarKernel, points: &[KernelPoint], opts: &NystromOptions, max_rank: usize) -> ScalarEigen {
-    let mut all = bank_nystrom(std::slice::from_ref(kernel), points, opts, &[max_rank]);
+    let mut all = bank_nystrom(std::slice::from_ref(kernel), points, opts, &[max_rank], None);
     all.pop().unwrap_or_else(|| ScalarEigen { values: Vec::new(), vectors: Mat::zeros(points.len(), 0), trace: 0.0 })
 }
 
 /// Nyström eigendecompositions of several scalar kernels over the same points and sample,
 /// sharing every kernel evaluation (see [`KernelBank`]); kernel `k` keeps at most `max_ranks[k]` pairs.
 ///
+/// With `split = Some((count, directions))` only the `count` largest components of the merged
+/// kernel are wanted, kernel `k`'s pairs counting `directions[k]` times: the exact eigenvalues of
+/// each kernel over the first [`ESTIMATE_POINTS`] sampled points estimate how many pairs each
+/// kernel contributes to them, and a kernel's range finder, extension and Rayleigh–Ritz step are
+/// sized for that estimate with a margin (see [`split_bounds`]) instead of `max_ranks[k]`.
+///
 /// With [`NystromOptions::refine`] (the default): `K_NZ` in single precision, a basis of the
 /// leading subspace of `K_ZZ` from a randomized range finder (single precision too), its Nyström
 /// extensions `Y = K_NZ U`, and a Rayleigh–Ritz step in double precision against the exact
 /// kernel matrix ([`rayleigh_ritz_bank`]). The single-precision steps only choose the subspace:
 /// the eigenpairs are exact Ritz pairs of `K` within it.
-pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &NystromOptions, max_ranks: &[usize]) -> Vec<ScalarEigen> {
+pub fn bank_nystrom(
+    kernels: &[ScalarKernel],
+    points: &[KernelPoint],
+    opts: &NystromOptions,
+    max_ranks: &[usize],
+    split: Option<(usize, &[usize])>,
+) -> Vec<ScalarEigen> {
     let n = points.len();
     let c = kernels.len();
     assert_eq!(max_ranks.len(), c, "bank_nystrom: one rank per kernel");
@@ -180,6 +192,22 @@ pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &Nys
     let t0 = std::time::Instant::now();
     let m = opts.points.clamp(1, n);
     let mut z = sample_points(points, m, opts.seed);
+    let bounds = match split {
+        Some((count, directions)) if opts.refine => {
+            let ids = &z[..z.len().min(ESTIMATE_POINTS)];
+            let values: Vec<Vec<f64>> = kernels
+                .iter()
+                .map(|k| {
+                    // The lower triangle only (all the eigensolver reads).
+                    let a = Mat::from_fn(ids.len(), ids.len(), |i, j| if j <= i { k.eval(&points[ids[i]], &points[ids[j]]) } else { 0.0 });
+                    a.self_adjoint_eigenvalues(Side::Lower).map(|v| v.into_iter().rev().collect()).unwrap_or_default()
+                })
+                .collect();
+            split_bounds(count, directions, &values, max_ranks)
+        }
+        _ => max_ranks.to_vec(),
+    };
+    log::debug!("nystrom: pairs sized for {bounds:?} of at most {max_ranks:?} ({:.2?})", t0.elapsed());
     z.sort_unstable();
     let columns = PointColumns::new(points);
     // Kernel k's K_NZ in column-major order with column stride c · n (column j of every kernel together).
@@ -195,14 +223,17 @@ pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &Nys
     }
     let knz = kernel_columns(&bank, &columns, points, &z, |v| v as f32);
     log::debug!("nystrom: N={n} m={m} classes={c}: K_NZ ({:.2?})", t0.elapsed());
-    let bases: Vec<Mat<f64>> = (0..c)
-        .map(|k| {
-            // Twice the rank (Rayleigh–Ritz needs room to converge) and 10 more for the range finder, at most the sample.
-            let dim = m.min(max_ranks[k].saturating_mul(2).saturating_add(20));
-            let knz = MatRef::from_column_major_slice_with_stride(&knz[k * n..], n, m, c * n);
-            let kzz = Mat::from_fn(m, m, |a, b| knz[(z[a], b)]);
+    let knz_of = |k: usize| MatRef::from_column_major_slice_with_stride(&knz[k * n..], n, m, c * n);
+    // Twice the rank (Rayleigh–Ritz needs room to converge) and 20 more, at most the sample.
+    let dim_for = |rank: usize| m.min(rank.saturating_mul(2).saturating_add(20));
+    let bases: Vec<Mat<f64>> = bounds
+        .iter()
+        .enumerate()
+        .map(|(k, &bound)| {
+            let dim = dim_for(bound);
+            let kzz = Mat::from_fn(m, m, |a, b| knz_of(k)[(z[a], b)]);
             let u = range_basis(kzz.as_ref(), dim, opts.seed ^ (k as u64));
-            let y = knz * &u;
+            let y = knz_of(k) * &u;
             let mut y = Mat::from_fn(n, dim, |i, j| f64::from(y[(i, j)]));
             for j in 0..dim {
                 let norm = y.col(j).norm_l2();
@@ -215,7 +246,7 @@ pub fn bank_nystrom(kernels: &[ScalarKernel], points: &[KernelPoint], opts: &Nys
         .collect();
     drop(knz);
     log::debug!("nystrom: subspaces ({:.2?})", t0.elapsed());
-    let refined = rayleigh_ritz_bank(&bank, &columns, points, &bases, max_ranks);
+    let refined = rayleigh_ritz_bank(&bank, &columns, points, &bases, &bounds);
     log::debug!("nystrom: rayleigh-ritz ({:.2?})", t0.elapsed());
     refined
         .into_iter()
@@ -250,7 +281,7 @@ fn kernel_columns<T: Copy + Default + Send>(
 }
 
 /// Power iterations of [`range_basis`].
-const POWER_ITERATIONS: usize = 4;
+const POWER_ITERATIONS: usize = 3;
 
 /// An orthonormal basis (`m × dim`) of the leading subspace of the symmetric positive
 /// semi-definite `a`, by a randomized range finder with [`POWER_ITERATIONS`] power iterations
@@ -268,6 +299,36 @@ fn range_basis(a: MatRef<'_, f32>, dim: usize, seed: u64) -> Mat<f32> {
         q = (a * &q).qr().compute_thin_Q();
     }
     q
+}
+
+/// Points of the estimate of [`bank_nystrom`]'s split (the first of the farthest-point sample).
+const ESTIMATE_POINTS: usize = 300;
+
+/// How many pairs each kernel needs for the `count` largest components (kernel `k`'s value `i`
+/// counted `directions[k]` times), judged from estimated values (descending per kernel), with a
+/// quarter and 10 pairs more as a margin; at most `max_ranks[k]`. A kernel keeps its
+/// `max_ranks[k]` if the estimate cannot tell: too few values in all, or more than half of its
+/// own needed.
+fn split_bounds(count: usize, directions: &[usize], values: &[Vec<f64>], max_ranks: &[usize]) -> Vec<usize> {
+    if values.iter().zip(directions).map(|(v, d)| v.len() * d).sum::<usize>() <= count {
+        return max_ranks.to_vec();
+    }
+    let mut merged: Vec<(f64, usize)> =
+        values.iter().enumerate().flat_map(|(k, v)| v.iter().flat_map(move |&x| std::iter::repeat_n((x, k), directions[k]))).collect();
+    merged.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let mut components = vec![0usize; values.len()];
+    for &(_, k) in merged.iter().take(count) {
+        components[k] += 1;
+    }
+    (0..values.len())
+        .map(|k| {
+            let pairs = components[k].div_ceil(directions[k].max(1));
+            if 2 * pairs > values[k].len() {
+                return max_ranks[k];
+            }
+            max_ranks[k].min(pairs + pairs / 4 + 10)
+        })
+        .collect()
 }
 
 /// Plain Nyström: `K̃ = B Bᵀ` with `B = K_NZ U Λ^{-1/2}` (`K_ZZ = U Λ Uᵀ`, eigenvalues below
@@ -417,7 +478,12 @@ pub fn low_rank(
     let mut candidates: Vec<(f64, usize, usize, usize)> = Vec::new(); // (value, class, pair, direction)
     let kernels: Vec<ScalarKernel> = classes.iter().map(|c| c.kernel.clone()).collect();
     progress(0, 1);
-    let eigens = bank_nystrom(&kernels, points, opts, &max_ranks);
+    let directions: Vec<usize> = classes.iter().map(|c| c.directions.len()).collect();
+    let split = match rank {
+        RankSpec::Count(k) => Some((k, directions.as_slice())),
+        RankSpec::Captured(_) => None,
+    };
+    let eigens = bank_nystrom(&kernels, points, opts, &max_ranks, split);
     progress(1, 1);
     let mut trace = 0.0;
     for (ci, (class, e)) in classes.iter().zip(&eigens).enumerate() {
@@ -454,6 +520,8 @@ pub fn low_rank(
             field: eigens[ci].vectors.col(pi).iter().copied().collect(),
         })
         .collect();
+    let per_class: Vec<usize> = (0..classes.len()).map(|ci| candidates[..keep].iter().filter(|c| c.1 == ci).count()).collect();
+    log::debug!("low rank: components kept per class {per_class:?}");
     let lr = LowRank { components, trace };
     log::debug!("low rank: {keep} components, captured {:.6}", lr.captured());
     lr
