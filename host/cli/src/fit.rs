@@ -31,8 +31,9 @@ pub struct FitArgs {
     #[arg(long)]
     pub pts_one_based: bool,
     /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`: the
-    /// detector's systematic, view-dependent offsets learned on renders) before fitting.
-    #[arg(long, value_name = "FILE", requires = "landmarks")]
+    /// detector's systematic, view-dependent offsets learned on renders) before fitting. With
+    /// --init it corrects the initializer's landmarks (learn it from `gpmm eval detect --pts-dir`).
+    #[arg(long, value_name = "FILE")]
     pub landmark_calibration: Option<PathBuf>,
     /// Fit settings.
     #[command(flatten)]

@@ -137,6 +137,48 @@ fn fit_without_landmarks_detects_them_first() {
         "5",
     ]));
     assert!((sigma(&out2) - 0.02).abs() < 1e-6, "{}", sigma(&out2));
+    // A calibration of the initializer's landmarks (here: every point 0.1 IOD along the eye line)
+    // corrects them before the fit, and fit.json names it.
+    let cal = f.dir.path().join("init.cal.json");
+    let offsets: Vec<Vec<[f32; 2]>> = vec![vec![[0.1, 0.0]]; 68];
+    let body = serde_json::json!({"format": "gpmm-landmark-calibration", "version": 1, "detector": "test", "degree": 0,
+        "turn_range": [-1.0, 1.0], "offsets": offsets,
+        "training": {"images": 0, "median_rms_px_before": 0.0, "median_rms_px_after": 0.0}});
+    std::fs::write(&cal, body.to_string()).unwrap();
+    let out3 = f.dir.path().join("fit-init-cal");
+    let steps = ["--landmark-steps", "100", "--image-steps", "5"];
+    ok(&gpmm(
+        &[
+            &[
+                "fit",
+                s(&f.model),
+                s(&image),
+                "--init",
+                s(&f.init),
+                "--landmark-calibration",
+                s(&cal),
+                "--init-landmark-sigma",
+                "0.02",
+                "-o",
+                s(&out3),
+            ][..],
+            &steps,
+        ]
+        .concat(),
+    ));
+    let json = |dir: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap()
+    };
+    assert_eq!(json(&out3)["landmark_calibration"], s(&cal));
+    let mean_x = |j: &serde_json::Value| {
+        let v = j["fitted_landmarks"].as_array().unwrap();
+        v.iter().map(|p| p[0].as_f64().unwrap()).sum::<f64>() / v.len() as f64
+    };
+    let shift = mean_x(&json(&out3)) - mean_x(&json(&out2));
+    let detected = gpmm_host::photo::pts::read_pts(&out3.join("detected.pts"), false).unwrap().points;
+    let iod = f64::from((detected[45][0] - detected[36][0]).hypot(detected[45][1] - detected[36][1]));
+    // The fit follows the moved points at least halfway (short chains, σ 0.02 of the side).
+    assert!(shift > 0.05 * iod, "the calibrated landmarks must move the fit right: {shift} px, IOD {iod} px");
     // Neither landmarks nor an init file: clap says what is missing.
     let err = fails(&gpmm(&["fit", s(&f.model), s(&image), "-o", s(&out)]));
     assert!(err.contains("--landmarks") && err.contains("--init"), "{err}");
