@@ -8,6 +8,7 @@ use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
 use gpmm_host::fit::{fit_image, overlay, report, FitOptions, ReportInputs};
 use gpmm_host::gp::model::{GpModel, PartBasis};
 use gpmm_host::gp::{model_io, statismo};
+use gpmm_host::photo::calibration::LandmarkCalibration;
 use gpmm_host::render::light::{light_from_rows, parse_background, parse_light};
 use gpmm_host::render::{render_model, RenderSettings, View};
 use pyo3::prelude::*;
@@ -256,9 +257,11 @@ impl Model {
     /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
     /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
     /// `acceptance`, RMSEs, `crop`) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
-    /// `working_image` (the crop the chains saw).
+    /// `working_image` (the crop the chains saw). `landmark_calibration`: a detector calibration file
+    /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
     #[pyo3(signature = (image, landmarks, *, seed = None, size = None, landmark_steps = None, image_steps = None,
-        shape_rank = None, color_rank = None, landmark_sigma = None, contour_sigma = None, set = None))]
+        shape_rank = None, color_rank = None, landmark_sigma = None, contour_sigma = None, set = None,
+        landmark_calibration = None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
@@ -274,6 +277,7 @@ impl Model {
         landmark_sigma: Option<f32>,
         contour_sigma: Option<f32>,
         set: Option<Vec<String>>,
+        landmark_calibration: Option<PathBuf>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let d = FitOptions::DEFAULT;
         let opts = FitOptions::from_flags(
@@ -289,7 +293,20 @@ impl Model {
         )
         .map_err(err)?;
         let photo = numpy_to_rgb(image)?;
-        let points = numpy_to_points(py, landmarks)?;
+        let mut points = numpy_to_points(py, landmarks)?;
+        let calibration_name = landmark_calibration.as_ref().map(|p| p.display().to_string());
+        if let Some(path) = &landmark_calibration {
+            let cal = LandmarkCalibration::read(path).map_err(err)?;
+            let fixed = cal.correct(&points).map_err(|e| err_msg(format!("landmarks: {e}")))?;
+            let (w, h) = (photo.width() as f32, photo.height() as f32);
+            let inside = |p: &[f32; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h;
+            // Points outside stay as they were, so the fit refuses them as it would without a calibration.
+            for (p, f) in points.iter_mut().zip(fixed) {
+                if inside(p) {
+                    *p = [f[0].clamp(0.0, w), f[1].clamp(0.0, h)];
+                }
+            }
+        }
         let m = self.inner.clone();
         let source = self.source.clone();
         let (rep, prepared, outcome) = py
@@ -301,7 +318,7 @@ impl Model {
                     image_path: "<array>",
                     pts_path: "<array>",
                     pts_one_based: false,
-                    landmark_calibration: None,
+                    landmark_calibration: calibration_name.as_deref(),
                 };
                 let rep = report(&m, &inputs, &prepared, &opts, &outcome, Some(t0.elapsed().as_secs_f64()));
                 Ok::<_, gpmm_host::fit::FitRunError>((rep, prepared, outcome))

@@ -51,7 +51,7 @@ def test_fit_outputs(py_fit):
     assert py_fit["acceptance"]["image_chain"], "the image chain ran"
 
 
-def test_fit_settings_and_errors(small_model_path, astronaut):
+def test_fit_settings_and_errors(small_model_path, astronaut, tmp_path):
     model = gpmm.load(small_model_path)
     img, pts = astronaut
     image, points = gpmm.load_image(img), gpmm.read_pts(pts)
@@ -61,6 +61,22 @@ def test_fit_settings_and_errors(small_model_path, astronaut):
         model.fit(image, points + 1000, landmark_steps=10, image_steps=0)
     with pytest.raises(gpmm.GpmmError, match="no.such"):
         model.fit(image, points, set=["no.such=1"])
+    # A detector calibration (here: every point 0.2 inter-ocular distances to the right) is removed
+    # from the landmarks first; a broken file is refused with its name.
+    cal = tmp_path / "det.cal.json"
+    cal.write_text(json.dumps({"format": "gpmm-landmark-calibration", "version": 1, "detector": "test", "degree": 0,
+                               "turn_range": [-1.0, 1.0], "offsets": [[[0.2, 0.0]]] * 68,
+                               "training": {"images": 0, "median_rms_px_before": 0.0, "median_rms_px_after": 0.0}}))
+    plain = model.fit(image, points, landmark_steps=300, image_steps=0)
+    moved = model.fit(image, points, landmark_steps=300, image_steps=0, landmark_calibration=str(cal))
+    assert moved["landmark_calibration"] == str(cal) and "landmark_calibration" not in plain
+    iod = float(np.linalg.norm(points[45] - points[36]))
+    shift = float(np.mean(moved["fitted_landmarks"][:, 0] - plain["fitted_landmarks"][:, 0]))
+    assert shift > 0.1 * iod, (shift, iod)
+    broken = tmp_path / "broken.json"
+    broken.write_text("{}")
+    with pytest.raises(gpmm.GpmmError, match="broken.json"):
+        model.fit(image, points, landmark_steps=10, image_steps=0, landmark_calibration=str(broken))
     a = model.fit(image, points, landmark_steps=200, image_steps=5, seed=1, set=["image.pixel_sigma=0.05"])
     b = model.fit(image, points, landmark_steps=200, image_steps=5, seed=2)
     assert a["shape"].tolist() != b["shape"].tolist(), "seeds and settings reach the fit"

@@ -110,6 +110,7 @@ class Model:
         landmark_sigma: Optional[float] = None,
         contour_sigma: Optional[float] = None,
         set: Optional[Sequence[str]] = None,
+        landmark_calibration: Optional[Union[str, PathLike[str]]] = None,
     ) -> dict[str, Any]:
         """Fits the model to a photo as `gpmm fit` does; fit.json's fields plus 'overlay', 'render', 'working_image'."""
     def quantize(
