@@ -297,15 +297,10 @@ impl Model {
         let calibration_name = landmark_calibration.as_ref().map(|p| p.display().to_string());
         if let Some(path) = &landmark_calibration {
             let cal = LandmarkCalibration::read(path).map_err(err)?;
-            let fixed = cal.correct(&points).map_err(|e| err_msg(format!("landmarks: {e}")))?;
-            let (w, h) = (photo.width() as f32, photo.height() as f32);
-            let inside = |p: &[f32; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w && p[1] <= h;
             // Points outside stay as they were, so the fit refuses them as it would without a calibration.
-            for (p, f) in points.iter_mut().zip(fixed) {
-                if inside(p) {
-                    *p = [f[0].clamp(0.0, w), f[1].clamp(0.0, h)];
-                }
-            }
+            points = cal
+                .correct_in_image(&points, photo.width() as f32, photo.height() as f32)
+                .map_err(|e| err_msg(format!("landmarks: {e}")))?;
         }
         let m = self.inner.clone();
         let source = self.source.clone();

@@ -694,11 +694,9 @@ pub fn load_photo(
     pts.check(landmarks, model.landmarks.len(), &model.metadata.landmark_scheme, photo.width(), photo.height(), one_based)?;
     let points = match calibration {
         None => pts.points,
-        Some(c) => {
-            let (w, h) = (photo.width() as f32, photo.height() as f32);
-            let fixed = c.correct(&pts.points).map_err(|error| FitRunError::Calibration { path: landmarks.to_path_buf(), error })?;
-            fixed.into_iter().map(|p| [p[0].clamp(0.0, w), p[1].clamp(0.0, h)]).collect()
-        }
+        Some(c) => c
+            .correct_in_image(&pts.points, photo.width() as f32, photo.height() as f32)
+            .map_err(|error| FitRunError::Calibration { path: landmarks.to_path_buf(), error })?,
     };
     prepare(&photo, &points, size)
 }

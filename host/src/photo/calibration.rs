@@ -258,6 +258,17 @@ impl LandmarkCalibration {
             .collect())
     }
 
+    /// [`Self::correct`] for the points of a `width × height` image: corrected points are kept
+    /// inside it; a point that was already outside stays as it was (so the usual check refuses it).
+    pub fn correct_in_image(&self, detected: &[[f32; 2]], width: f32, height: f32) -> Result<Vec<[f32; 2]>, CalibrationError> {
+        let inside = |p: &[f32; 2]| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= width && p[1] <= height;
+        Ok(detected
+            .iter()
+            .zip(self.correct(detected)?)
+            .map(|(d, c)| if inside(d) { [c[0].clamp(0.0, width), c[1].clamp(0.0, height)] } else { *d })
+            .collect())
+    }
+
     /// Checks the fields a file could get wrong (format, version, shapes, finite numbers).
     fn validate(&self) -> Result<(), String> {
         if self.format != CALIBRATION_FORMAT {
@@ -383,6 +394,14 @@ mod tests {
         let e = LandmarkCalibration::learn(&same, 2, "x").unwrap_err().to_string();
         assert!(e.contains("distinct views"), "{e}");
         let cal = LandmarkCalibration::learn(&same, 0, "x").unwrap();
+        // In an image: a corrected point stays inside it, one already outside is left for the check.
+        let mut shifted = cal.clone();
+        shifted.offsets = vec![vec![[1.0, 0.0]]; IBUG68];
+        let mut pts = face(0.0, 30.0, 0.0, [50.0, 50.0]);
+        pts[0] = [200.0, 50.0];
+        let fixed = shifted.correct_in_image(&pts, 70.0, 100.0).unwrap();
+        assert_eq!(fixed[0], [200.0, 50.0]);
+        assert!(fixed.iter().skip(1).all(|p| p[0] <= 70.0) && fixed.iter().any(|p| p[0] == 70.0), "{fixed:?}");
         assert!(cal.correct(&face(0.0, 30.0, 0.0, [1.0, 1.0])[..60]).unwrap_err().to_string().contains("60 landmarks"));
         let mut nan = face(0.0, 30.0, 0.0, [1.0, 1.0]);
         nan[NOSE_TIP][0] = f32::NAN;
