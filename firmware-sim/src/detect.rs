@@ -17,6 +17,22 @@ use gpmm_core::net::{NetError, NetScratch};
 /// Bytes of each activation buffer.
 pub(crate) const SCRATCH: usize = PROFILE.net_scratch;
 
+/// The detection frame at byte `at` of `part` (after the init file); logs and fails if it is
+/// missing or invalid.
+pub(crate) fn frame_at(part: &'static [u8], at: usize) -> Frame<'static> {
+    match part.get(at..).map(detection::parse_frame) {
+        Some(Ok(f)) => f,
+        Some(Err(e)) => {
+            defmt::error!("data partition: no valid detection frame after the init file: {}", defmt::Display2Format(&e));
+            fail();
+        }
+        None => {
+            defmt::error!("data partition: the init file fills it, no room for a detection frame");
+            fail();
+        }
+    }
+}
+
 /// Runs the detection on the init file and the frame in `part`; logs everything, fails on bad data.
 pub fn run(part: &'static [u8]) {
     let t_start = instructions_now();
@@ -28,17 +44,7 @@ pub fn run(part: &'static [u8]) {
         }
     };
     let init_len = InitFile::byte_len(part).unwrap_or(part.len());
-    let frame = match part.get(detection::frame_offset(init_len)..).map(detection::parse_frame) {
-        Some(Ok(f)) => f,
-        Some(Err(e)) => {
-            defmt::error!("data partition: no valid detection frame after the init file: {}", defmt::Display2Format(&e));
-            fail();
-        }
-        None => {
-            defmt::error!("data partition: the init file fills it, no room for a detection frame");
-            fail();
-        }
-    };
+    let frame = frame_at(part, detection::frame_offset(init_len));
     let t_parsed = instructions_now();
     let needed = init.scratch_bytes();
     defmt::info!(

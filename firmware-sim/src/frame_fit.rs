@@ -16,7 +16,7 @@ use crate::{clock, detect, fail, PROFILE};
 
 use gpmm_core::blob::ModelBlob;
 use gpmm_core::fit::{FitSettings, MorphableModel, TargetImage};
-use gpmm_core::format::detection::{self, DetectCounts, Frame};
+use gpmm_core::format::detection::{DetectCounts, Frame};
 use gpmm_core::format::frame_fit::{self, FrameFitJob};
 use gpmm_core::net::crop::crop_for_fit;
 use gpmm_core::net::face::{Detection, InitFile, MAX_INIT_LANDMARKS};
@@ -49,17 +49,7 @@ pub fn run(part: &'static [u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_,
         }
     };
     let init_len = InitFile::byte_len(init_bytes).unwrap_or(init_bytes.len());
-    let frame = match part.get(frame_fit::next_section(init_at + init_len)..).map(detection::parse_frame) {
-        Some(Ok(f)) => f,
-        Some(Err(e)) => {
-            defmt::error!("data partition: no valid detection frame after the init file: {}", defmt::Display2Format(&e));
-            fail();
-        }
-        None => {
-            defmt::error!("data partition: the init file fills it, no room for a detection frame");
-            fail();
-        }
-    };
+    let frame = detect::frame_at(part, frame_fit::next_section(init_at + init_len));
     if init.landmarks != model.landmarks().len() {
         defmt::error!(
             "data partition: the init file reads {=u32} landmarks but the model has {=u32}: they do not belong together",
