@@ -183,6 +183,23 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
     Ok(())
 }
 
+/// Prints `gpmm bench-fit`'s per-|yaw| table (pitch and roll with the median offsets `off` removed).
+fn print_per_yaw(rows: &[gpmm_host::eval::bench_fit::YawRow], off: [f64; 3]) {
+    eprintln!("  median offsets removed below: pitch {:+.2}, roll {:+.2} deg (yaw's: {:+.2})", off[1], off[2], off[0]);
+    eprintln!("  |yaw|  images  median |yaw err|  toward-profile bias  median |pitch err|  median |roll err|  (degrees)");
+    for r in rows {
+        eprintln!(
+            "  {:>5}  {:>6}  {:>16.2}  {:>19.2}  {:>18.2}  {:>17.2}",
+            r.abs_yaw_deg,
+            r.images,
+            r.yaw_error_deg.median,
+            r.mean_outward_yaw_error_deg,
+            r.pitch_error_centred_deg.median,
+            r.roll_error_centred_deg.median
+        );
+    }
+}
+
 /// Runs `gpmm bench-fit`.
 pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
     let model = model_io::load(&a.model)?;
@@ -209,19 +226,19 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     eprintln!("landmarks: {}", summary.landmarks);
-    let off = summary.median_signed_error_deg;
-    eprintln!("median offsets removed below: pitch {:+.2}, roll {:+.2} deg", off[1], off[2]);
-    eprintln!("|yaw|  images  median |yaw err|  toward-profile bias  median |pitch err|  median |roll err|  (degrees, offsets removed)");
-    for r in &summary.per_yaw {
-        eprintln!(
-            "{:>4}  {:>6}  {:>16.2}  {:>19.2}  {:>18.2}  {:>17.2}",
-            r.abs_yaw_deg,
-            r.images,
-            r.yaw_error_deg.median,
-            r.mean_outward_yaw_error_deg,
-            r.pitch_error_centred_deg.median,
-            r.roll_error_centred_deg.median
-        );
+    eprintln!("truth in the synthetic identities' face frames:");
+    print_per_yaw(&summary.per_yaw, summary.median_signed_error_deg);
+    match (&summary.model_frame, &summary.model_frame_error) {
+        (Some(m), _) => {
+            let a = m.median_alignment_deg;
+            eprintln!(
+                "truth in the model's frame (median alignment yaw {:+.2}, pitch {:+.2}, roll {:+.2} deg; {}):",
+                a[0], a[1], a[2], m.alignment
+            );
+            print_per_yaw(&m.per_yaw, m.median_signed_error_deg);
+        }
+        (None, Some(e)) => eprintln!("no figures in the model's frame: {e}"),
+        (None, None) => {}
     }
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())

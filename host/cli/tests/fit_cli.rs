@@ -226,6 +226,13 @@ fn bench_fit_prints_the_statistics() {
     assert_eq!(j["landmarks"], "exact");
     let rows = j["per_yaw"].as_array().unwrap();
     assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{j}");
+    // The same errors against the truth in the model's frame: one rotation between the two mean
+    // faces, a few degrees (the template's chin → nose-bridge axis against ICT's), same rows.
+    let m = &j["model_frame"];
+    let align: Vec<f64> = m["median_alignment_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!(align.iter().all(|a| a.abs() < 15.0) && align.iter().any(|a| a.abs() > 0.1), "{m}");
+    let rows = m["per_yaw"].as_array().unwrap();
+    assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{m}");
 
     // Landmarks from another directory (here: the exact ones shifted 3 px right): the fit follows them.
     let other = f.synth.parent().unwrap().join("shifted-landmarks");
@@ -356,4 +363,26 @@ fn bench_fit_recovers_yaw_without_a_frontal_bias() {
     let signed = j["mean_signed_error_deg"][0].as_f64().unwrap();
     assert!(median < 3.0, "median yaw error {median}°: {j}");
     assert!(signed > -2.5, "yaw compressed toward frontal: mean signed error {signed}°: {j}");
+
+    // Without the world's data the model-frame figures are missing, and the summary says why.
+    let truth_path = synth.join("truth.json");
+    let mut truth = read_json(&truth_path);
+    truth["options"]["ict_dir"] = serde_json::Value::from("/nonexistent-ict");
+    std::fs::write(&truth_path, truth.to_string()).unwrap();
+    let out = ok(&gpmm(&[
+        "bench-fit",
+        s(&synth),
+        "--model",
+        s(&f.model),
+        "--landmark-steps",
+        "200",
+        "--image-steps",
+        "2",
+        "--no-write",
+        "--limit",
+        "1",
+    ]));
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(j["model_frame"].is_null(), "{j}");
+    assert!(j["model_frame_error"].as_str().unwrap().contains("/nonexistent-ict"), "{j}");
 }

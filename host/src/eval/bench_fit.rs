@@ -18,6 +18,7 @@
 //! row per true |yaw|: the median |yaw error| and the mean signed yaw error toward the profile
 //! (negative: the fit turns the face toward frontal), beside the median pitch and roll errors.
 
+use crate::eval::model_frame::{ModelFrame, ALIGNED_LANDMARKS};
 use crate::eval::synth::{read_truth, ImageTruth};
 use crate::eval::LandmarkSource;
 use crate::fit::{fit_prepared, load_photo, FitOptions};
@@ -36,6 +37,9 @@ pub struct BenchImage {
     pub truth_deg: [f32; 3],
     /// Fitted yaw, pitch, roll (degrees).
     pub fit_deg: [f32; 3],
+    /// True yaw, pitch, roll in the model's frame (degrees; see [`crate::eval::model_frame`]).
+    #[serde(default)]
+    pub truth_model_frame_deg: Option<[f32; 3]>,
     /// Landmark error in % of the inter-ocular (outer eye corner) distance.
     pub landmark_error_iod_pct: f32,
     /// Landmark error of the landmark-only result, in % of the inter-ocular distance.
@@ -84,23 +88,33 @@ pub struct YawRow {
 
 /// Median signed (fitted − true) yaw, pitch and roll errors of `images` (degrees).
 pub fn median_offsets(images: &[BenchImage]) -> [f64; 3] {
-    let signed = |k: usize| images.iter().map(|b| f64::from(b.fit_deg[k] - b.truth_deg[k])).collect::<Vec<_>>();
+    median_offsets_against(images, &|b| b.truth_deg)
+}
+
+/// Median signed (fitted − `truth`) yaw, pitch and roll errors of `images` (degrees).
+fn median_offsets_against(images: &[BenchImage], truth: &dyn Fn(&BenchImage) -> [f32; 3]) -> [f64; 3] {
+    let signed = |k: usize| images.iter().map(|b| f64::from(b.fit_deg[k] - truth(b)[k])).collect::<Vec<_>>();
     [stat(&signed(0)).median, stat(&signed(1)).median, stat(&signed(2)).median]
 }
 
 /// One row per true |yaw|, in increasing order.
 pub fn per_yaw(images: &[BenchImage]) -> Vec<YawRow> {
+    per_yaw_against(images, &|b| b.truth_deg)
+}
+
+/// One row per true |yaw| (of `truth_deg`: the rows stay those of the set), errors against `truth`.
+fn per_yaw_against(images: &[BenchImage], truth: &dyn Fn(&BenchImage) -> [f32; 3]) -> Vec<YawRow> {
     let mut keys: Vec<i32> = images.iter().map(|b| b.truth_deg[0].abs().round() as i32).collect();
     keys.sort_unstable();
     keys.dedup();
-    let offset = median_offsets(images);
+    let offset = median_offsets_against(images, truth);
     keys.into_iter()
         .map(|k| {
             let row: Vec<&BenchImage> = images.iter().filter(|b| b.truth_deg[0].abs().round() as i32 == k).collect();
             let n = row.len().max(1) as f64;
-            let err = |i: usize| row.iter().map(|b| f64::from((b.fit_deg[i] - b.truth_deg[i]).abs())).collect::<Vec<_>>();
-            let centred = |i: usize| row.iter().map(|b| (f64::from(b.fit_deg[i] - b.truth_deg[i]) - offset[i]).abs()).collect::<Vec<_>>();
-            let signed = |b: &&BenchImage| f64::from(b.fit_deg[0] - b.truth_deg[0]);
+            let err = |i: usize| row.iter().map(|b| f64::from((b.fit_deg[i] - truth(b)[i]).abs())).collect::<Vec<_>>();
+            let centred = |i: usize| row.iter().map(|b| (f64::from(b.fit_deg[i] - truth(b)[i]) - offset[i]).abs()).collect::<Vec<_>>();
+            let signed = |b: &&BenchImage| f64::from(b.fit_deg[0] - truth(b)[0]);
             let sign = |b: &&BenchImage| if b.truth_deg[0].abs() < 0.5 { 1.0 } else { f64::from(b.truth_deg[0].signum()) };
             YawRow {
                 abs_yaw_deg: k,
@@ -149,6 +163,11 @@ pub struct BenchSummary {
     pub image_chain_lowered_rmse_fraction: f64,
     /// Per true |yaw|: yaw error, its bias toward frontal, pitch and roll errors.
     pub per_yaw: Vec<YawRow>,
+    /// The same errors against the truth in the model's frame (`None` if it could not be made).
+    pub model_frame: Option<ModelFrameSummary>,
+    /// Why there is no `model_frame` (e.g. the set's ICT data is not where `truth.json` says).
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub model_frame_error: Option<String>,
     /// Where the landmarks came from: `exact` (the set's) or the landmark directory.
     pub landmarks: String,
     /// Seconds per fit (each fit on one thread).
@@ -157,6 +176,21 @@ pub struct BenchSummary {
     pub wall_seconds: f64,
     /// Threads used.
     pub jobs: usize,
+}
+
+/// Pose errors against the truth in the model's frame ([`crate::eval::model_frame`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelFrameSummary {
+    /// How the truth was put into the model's frame, in words.
+    pub alignment: String,
+    /// The alignment rotation's yaw, pitch, roll at the images' poses (median over the images, degrees).
+    pub median_alignment_deg: [f64; 3],
+    /// |yaw| error (degrees).
+    pub yaw_error_deg: Stat,
+    /// Median signed yaw, pitch and roll error (degrees): the offsets removed in the `*_centred_deg` figures.
+    pub median_signed_error_deg: [f64; 3],
+    /// Per true |yaw| (rows of the set's truth): the errors against the truth in the model's frame.
+    pub per_yaw: Vec<YawRow>,
 }
 
 /// Why the benchmark could not run.
@@ -209,6 +243,7 @@ pub fn bench_one(
     truth: &ImageTruth,
     settings: &FitOptions,
     landmarks: &LandmarkSource,
+    frame: Option<&ModelFrame>,
 ) -> Result<BenchImage, String> {
     let t0 = Instant::now();
     let pts = landmarks.file(dir, &truth.landmarks_file);
@@ -225,6 +260,7 @@ pub fn bench_one(
         image: truth.image.clone(),
         truth_deg: [truth.yaw_deg, truth.pitch_deg, truth.roll_deg],
         // The fit's pose is relative to the crop's centre as optical axis; the truth is the photo camera's.
+        truth_model_frame_deg: frame.map(|f| f.truth_in_model_frame([truth.yaw_deg, truth.pitch_deg, truth.roll_deg])),
         fit_deg: crate::photo::pose_in_photo_frame(
             [p.yaw, p.pitch, p.roll],
             o.params.focal,
@@ -239,6 +275,26 @@ pub fn bench_one(
         pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,
         pixel_rmse: o.pixel_rmse,
         seconds,
+    })
+}
+
+/// The errors against the truth in the model's frame, if every image has it.
+fn model_frame_summary(images: &[BenchImage]) -> Option<ModelFrameSummary> {
+    if images.iter().any(|b| b.truth_model_frame_deg.is_none()) {
+        return None;
+    }
+    let truth = |b: &BenchImage| b.truth_model_frame_deg.unwrap_or(b.truth_deg);
+    let align = |k: usize| images.iter().map(|b| f64::from(truth(b)[k] - b.truth_deg[k])).collect::<Vec<_>>();
+    Some(ModelFrameSummary {
+        alignment: format!(
+            "least-squares rotation of the model's mean inner landmarks (iBUG {}-{}) onto the world's mean face's",
+            ALIGNED_LANDMARKS.start,
+            ALIGNED_LANDMARKS.end - 1
+        ),
+        median_alignment_deg: [stat(&align(0)).median, stat(&align(1)).median, stat(&align(2)).median],
+        yaw_error_deg: stat(&images.iter().map(|b| f64::from((b.fit_deg[0] - truth(b)[0]).abs())).collect::<Vec<_>>()),
+        median_signed_error_deg: median_offsets_against(images, &truth),
+        per_yaw: per_yaw_against(images, &truth),
     })
 }
 
@@ -264,6 +320,7 @@ pub fn bench(
     if images.is_empty() {
         return Err(BenchError::Empty(dir.display().to_string()));
     }
+    let frame = ModelFrame::new(model, &truth.options);
     let jobs = jobs.max(1);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs).build().map_err(|e| BenchError::Threads(jobs, e.to_string()))?;
     let total = images.len();
@@ -273,7 +330,7 @@ pub fn bench(
         images
             .par_iter()
             .map(|t| {
-                let r = bench_one(model, dir, t, settings, landmarks);
+                let r = bench_one(model, dir, t, settings, landmarks, frame.as_ref().ok());
                 let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 progress(d, total);
                 r
@@ -311,6 +368,8 @@ pub fn bench(
         pixel_rmse_after_image_chain: stat(&col(&|b| f64::from(b.pixel_rmse))),
         image_chain_lowered_rmse_fraction: lowered,
         per_yaw: per_yaw(&ok),
+        model_frame: frame.as_ref().ok().and_then(|_| model_frame_summary(&ok)),
+        model_frame_error: frame.err(),
         landmarks: landmarks.describe(),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
@@ -337,6 +396,7 @@ mod tests {
             image: String::new(),
             truth_deg: [t, 1.0, 0.0],
             fit_deg: [f, 2.0, 0.5],
+            truth_model_frame_deg: None,
             landmark_error_iod_pct: 0.0,
             landmark_error_iod_pct_after_landmark_chain: 0.0,
             pixel_rmse_after_landmark_chain: 0.0,
@@ -351,5 +411,30 @@ mod tests {
         assert!((r45.mean_outward_yaw_error_deg + 4.0).abs() < 1e-9 && r45.mean_signed_yaw_error_deg.abs() < 1e-9);
         assert!((r45.yaw_error_deg.median - 4.0).abs() < 1e-9 && (r45.pitch_error_deg.median - 1.0).abs() < 1e-9);
         assert!((rows[1].mean_outward_yaw_error_deg - 1.0).abs() < 1e-9);
+        assert_eq!(model_frame_summary(&[img(45.0, 41.0)]), None, "no model-frame truth, no summary");
+    }
+
+    #[test]
+    fn model_frame_rows_keep_the_sets_yaws_and_measure_against_the_moved_truth() {
+        // The model's frame is turned by +1° yaw and +4° pitch against the identities': a fit
+        // that lands there has no error in it, and the rows are still the set's |yaw| 45 and 0.
+        let img = |t: f32| BenchImage {
+            image: String::new(),
+            truth_deg: [t, 0.0, 0.0],
+            fit_deg: [t + 1.0, 4.0, 0.0],
+            truth_model_frame_deg: Some([t + 1.0, 4.0, 0.0]),
+            landmark_error_iod_pct: 0.0,
+            landmark_error_iod_pct_after_landmark_chain: 0.0,
+            pixel_rmse_after_landmark_chain: 0.0,
+            pixel_rmse: 0.0,
+            seconds: 0.0,
+        };
+        let images = [img(45.0), img(-45.0), img(0.0)];
+        let m = model_frame_summary(&images).expect("every image has the model-frame truth");
+        assert_eq!(m.per_yaw.iter().map(|r| r.abs_yaw_deg).collect::<Vec<_>>(), [0, 45]);
+        assert!(m.per_yaw.iter().all(|r| r.yaw_error_deg.median.abs() < 1e-6 && r.pitch_error_deg.median.abs() < 1e-6));
+        assert!((m.median_alignment_deg[0] - 1.0).abs() < 1e-6 && (m.median_alignment_deg[1] - 4.0).abs() < 1e-6);
+        // Against the identities' frames the same fits are 1° off in yaw.
+        assert!(per_yaw(&images).iter().all(|r| (r.yaw_error_deg.median - 1.0).abs() < 1e-6));
     }
 }

@@ -9,6 +9,7 @@
 
 pub mod bench_fit;
 pub mod kde;
+pub mod model_frame;
 pub mod models;
 pub mod npy;
 pub mod pca;

@@ -201,11 +201,17 @@ pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u
             *v = (0..3).map(|k| q[i][k] * r[k][j]).sum();
         }
     }
-    // R = Rz(roll) · Ry(yaw) · Rx(pitch): R[2][0] = −sin(yaw), R[2][1..] = cos(yaw) (sin, cos)(pitch).
+    euler_angles(&m).map(|a| a as f32)
+}
+
+/// Yaw, pitch and roll (radians) of a rotation `m` (rows) in the core's convention
+/// `R = Rz(roll) · Ry(yaw) · Rx(pitch)` ([`gpmm_core::Pose::rotation`]).
+pub fn euler_angles(m: &[[f64; 3]; 3]) -> [f64; 3] {
+    // R[2][0] = −sin(yaw), R[2][1..] = cos(yaw) (sin, cos)(pitch).
     let yaw = (-m[2][0]).clamp(-1.0, 1.0).asin();
     let pitch = m[2][1].atan2(m[2][2]);
     let roll = m[1][0].atan2(m[0][0]);
-    [yaw as f32, pitch as f32, roll as f32]
+    [yaw, pitch, roll]
 }
 
 #[cfg(test)]
