@@ -11,7 +11,8 @@
 //! Its Jacobian is taken by forward differences, one component at a time: the instance is linear
 //! in the coefficients (`x + h U_k`), the normals are recomputed over the whole mesh. A damped
 //! (Levenberg–Marquardt) step is kept only if the objective on the same samples falls.
-//! Visibility is a back-facing test only, as in the colour and light solves.
+//! Visibility: a back-facing test (as in the colour and light solves) and an occlusion test on a
+//! coarse depth grid of the instance's vertices ([`DepthGrid`]).
 //!
 //! Memory: the caller's spare shape buffers and solve scratch ([`Instance::with_solve_scratch`]:
 //! `3 (components + 1)` values a sample) and two `MAX_SHAPE_SOLVE²` matrices on the stack; it runs
@@ -79,12 +80,16 @@ struct Frame<'s, 'i> {
 }
 
 impl Frame<'_, '_> {
+    /// Model-space point `p` in camera space.
+    fn to_camera(&self, p: Vec3) -> Vec3 {
+        let q = mat_vec(&self.rotation, p);
+        [q[0] + self.translation[0], q[1] + self.translation[1], q[2] + self.translation[2]]
+    }
+
     /// The residual of a vertex at position `p` with normal `n` and albedo `a` (model space), if
     /// it projects into the image.
     fn residual(&self, p: Vec3, n: Vec3, a: Vec3) -> Option<Vec3> {
-        let q = mat_vec(&self.rotation, p);
-        let pc = [q[0] + self.translation[0], q[1] + self.translation[1], q[2] + self.translation[2]];
-        let s = self.camera.project(pc)?;
+        let s = self.camera.project(self.to_camera(p))?;
         let target = self.image.sample_bilinear(s.x, s.y)?;
         let e = self.light.irradiance(mat_vec(&self.rotation, n));
         Some([target[0] - a[0] * e[0], target[1] - a[1] * e[1], target[2] - a[2] * e[2]])
@@ -92,12 +97,62 @@ impl Frame<'_, '_> {
 
     /// Whether a vertex faces the camera by at least `min_cos`.
     fn faces(&self, p: Vec3, n: Vec3, min_cos: f32) -> bool {
-        let q = mat_vec(&self.rotation, p);
-        let pc = [q[0] + self.translation[0], q[1] + self.translation[1], q[2] + self.translation[2]];
+        let pc = self.to_camera(p);
         let nc = mat_vec(&self.rotation, n);
         let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
         let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
         cos >= min_cos
+    }
+}
+
+/// Cells per side of the solve's depth grid (its occlusion test).
+const DEPTH_GRID: usize = 64;
+/// How far (mm) behind the nearest vertex of its cell a sample may lie and still count as seen:
+/// the surface's own depth change across a cell at the samples' slopes stays below it, a nose in
+/// front of a cheek does not.
+const OCCLUSION_TOLERANCE_MM: f32 = 5.0;
+
+/// The nearest vertex depth in each cell of a coarse grid over the image (cells of
+/// `side / DEPTH_GRID` pixels, at least one): a z-buffer of vertex splats. A sample farther than
+/// [`OCCLUSION_TOLERANCE_MM`] behind its cell's nearest vertex is hidden by another part of the
+/// face (the nose, at 30–45° yaw, hides the far cheek's vertices that still face the camera).
+struct DepthGrid {
+    cell: f32,
+    depth: [[f32; DEPTH_GRID]; DEPTH_GRID],
+}
+
+impl DepthGrid {
+    /// The grid of `positions` (model space) seen through `frame` in a `width × height` image.
+    fn new(frame: &Frame<'_, '_>, positions: &[Vec3], width: u32, height: u32) -> Self {
+        let cell = (width.max(height) as f32 / DEPTH_GRID as f32).max(1.0);
+        let mut grid = Self { cell, depth: [[f32::INFINITY; DEPTH_GRID]; DEPTH_GRID] };
+        for p in positions {
+            if let Some((i, j, d)) = grid.locate(frame, *p) {
+                if let Some(c) = grid.depth.get_mut(j).and_then(|r| r.get_mut(i)) {
+                    *c = c.min(d);
+                }
+            }
+        }
+        grid
+    }
+
+    /// The cell and depth (mm along the view axis) of model-space point `p`.
+    fn locate(&self, frame: &Frame<'_, '_>, p: Vec3) -> Option<(usize, usize, f32)> {
+        let pc = frame.to_camera(p);
+        let s = frame.camera.project(pc)?;
+        if !(s.x >= 0.0 && s.y >= 0.0) {
+            return None;
+        }
+        // Saturating float-to-integer casts; cells past the grid are refused by the bounds below.
+        let (i, j) = ((s.x / self.cell) as usize, (s.y / self.cell) as usize);
+        (i < DEPTH_GRID && j < DEPTH_GRID).then_some((i, j, -pc[2]))
+    }
+
+    /// Whether `p` is within the tolerance of its cell's nearest vertex.
+    fn seen(&self, frame: &Frame<'_, '_>, p: Vec3) -> bool {
+        self.locate(frame, p)
+            .and_then(|(i, j, d)| self.depth.get(j).and_then(|r| r.get(i)).map(|near| d <= near + OCCLUSION_TOLERANCE_MM))
+            .unwrap_or(false)
     }
 }
 
@@ -236,9 +291,8 @@ fn landmark_residuals<I: TriIndex>(
     let mut lm = [[0.0f32; 3]; MAX_LANDMARKS];
     let n = model.landmark_positions(coeffs, &mut lm)?.min(target.len());
     for (i, (o, p)) in out.iter_mut().zip(lm.iter()).enumerate().take(n) {
-        let q = mat_vec(&frame.rotation, *p);
-        let pc = [q[0] + frame.translation[0], q[1] + frame.translation[1], q[2] + frame.translation[2]];
-        let (Some(t), Some(true), Some(s)) = (target.points().get(i), target.valid().get(i), frame.camera.project(pc)) else {
+        let (Some(t), Some(true), Some(s)) = (target.points().get(i), target.valid().get(i), frame.camera.project(frame.to_camera(*p)))
+        else {
             *o = [0.0; 2];
             continue;
         };
@@ -326,14 +380,15 @@ fn iterate<I: TriIndex>(
     full.copy_from_slice(coeffs);
     let lm = LandmarkRows::new(model, scene, landmarks, full, columns)?;
     let at = |v: usize| (positions.get(v).copied(), normals.get(v).copied(), albedos.get(v).copied());
-    // The samples and their residuals.
+    // The samples and their residuals: vertices facing the camera and not hidden by the face.
+    let grid = DepthGrid::new(&frame, positions, scene.image.width(), scene.image.height());
     let mut count = 0usize;
     for v in (0..positions.len()).step_by(config.stride) {
         if count >= cap {
             break;
         }
         let (Some(p), Some(n), Some(a)) = at(v) else { continue };
-        if !frame.faces(p, n, config.min_cos) {
+        if !frame.faces(p, n, config.min_cos) || !grid.seen(&frame, p) {
             continue;
         }
         let Some(r) = frame.residual(p, n, a) else { continue };
@@ -522,5 +577,28 @@ fn cholesky_solve(m: &mut [[f32; MAX_COLUMNS]; MAX_COLUMNS], b: &[f32; MAX_COLUM
         Ok(x)
     } else {
         Err(FitError::Singular)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_depth_grid_hides_what_lies_behind_a_nearer_vertex_only() {
+        let pixels = [[0u8; 3]; 64 * 64];
+        let image = TargetImage::new(&pixels, 64, 64).unwrap();
+        let identity = Pose { yaw: 0.0, pitch: 0.0, roll: 0.0, translation: [0.0, 0.0, -500.0] };
+        let scene = Scene { pose: identity, camera: Camera::centered(64, 64, 500.0), light: ShLight::zero(), image: &image };
+        let frame = scene.frame(&scene.pose);
+        // A nose tip 20 mm in front of a cheek point on the same line of sight, a lone point
+        // elsewhere, and a point 3 mm behind the nose tip (the surface's own slope).
+        let (nose, cheek, lone, slope) = ([0.0, 0.0, 20.0], [0.0, 0.0, 0.0], [30.0, 10.0, 0.0], [0.0, 0.0, 17.0]);
+        let grid = DepthGrid::new(&frame, &[nose, cheek, lone, slope], 64, 64);
+        assert!(grid.seen(&frame, nose) && grid.seen(&frame, lone) && grid.seen(&frame, slope));
+        assert!(!grid.seen(&frame, cheek), "the cheek lies 20 mm behind the nose in its cell");
+        // Outside the image nothing is seen (no panic on any point).
+        assert!(!grid.seen(&frame, [1e6, 0.0, 0.0]) && !grid.seen(&frame, [f32::NAN, 0.0, 0.0]));
     }
 }
