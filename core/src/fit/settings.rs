@@ -125,7 +125,9 @@ pub struct StartSettings {
     /// shape solve (in [−1, 1)): grazing vertices (near the outline, where the image shows hair,
     /// ears or background and a pixel's error is large) are left out.
     pub shape_min_cos: f32,
-    /// Pixels a sampled vertex stands for in the shape solve's data term (> 0).
+    /// Pixels a sampled vertex stands for in the shape solve's data term (> 0). Small (0.003):
+    /// the landmark term leads the solve and the image refines it (chosen on the development set,
+    /// docs/evaluation.md "The solve's weight").
     pub shape_weight: f32,
     /// Whether the shape solve's objective has the landmark term (Gaussian, the chain's σ).
     pub shape_landmarks: bool,
@@ -148,7 +150,7 @@ impl StartSettings {
         shape_iterations: 3,
         shape_stride: 2,
         shape_min_cos: 0.8,
-        shape_weight: 0.05,
+        shape_weight: 0.003,
         shape_landmarks: true,
         shape_pose: false,
     };
