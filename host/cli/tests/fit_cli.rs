@@ -201,6 +201,19 @@ fn bad_input_gives_clear_errors() {
     assert!(!out.join("fit.json").exists(), "no output on bad input");
 }
 
+/// The `.pts` file at `path` with every point moved by `(dx, dy)` pixels (a detector's offset).
+fn shifted_pts(path: &std::path::Path, dx: f32, dy: f32) -> String {
+    let text = std::fs::read_to_string(path).unwrap();
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| match l.split_whitespace().map(str::parse::<f32>).collect::<Result<Vec<_>, _>>() {
+            Ok(v) if v.len() == 2 => format!("{:.3} {:.3}", v[0] + dx, v[1] + dy),
+            _ => l.to_string(),
+        })
+        .collect();
+    lines.join("\n") + "\n"
+}
+
 #[test]
 fn bench_fit_prints_the_statistics() {
     let Some(f) = fixture() else { return };
@@ -240,15 +253,7 @@ fn bench_fit_prints_the_statistics() {
     for entry in std::fs::read_dir(&f.synth).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "pts") {
-            let text = std::fs::read_to_string(&path).unwrap();
-            let shifted: Vec<String> = text
-                .lines()
-                .map(|l| match l.split_whitespace().map(str::parse::<f32>).collect::<Result<Vec<_>, _>>() {
-                    Ok(v) if v.len() == 2 => format!("{:.3} {:.3}", v[0] + 3.0, v[1]),
-                    _ => l.to_string(),
-                })
-                .collect();
-            std::fs::write(other.join(path.file_name().unwrap()), shifted.join("\n") + "\n").unwrap();
+            std::fs::write(other.join(path.file_name().unwrap()), shifted_pts(&path, 3.0, 0.0)).unwrap();
         }
     }
     let args = ["bench-fit", s(&f.synth), "--model", s(&f.model), "--landmark-steps", "2000", "--image-steps", "20", "--no-write"];
@@ -270,17 +275,6 @@ fn a_landmark_calibration_removes_a_detector_offset() {
     let (exact, detected) = (dir.path().join("exact"), dir.path().join("detected"));
     std::fs::create_dir_all(&exact).unwrap();
     std::fs::create_dir_all(&detected).unwrap();
-    let shifted_pts = |path: &std::path::Path, dx: f32, dy: f32| -> String {
-        let text = std::fs::read_to_string(path).unwrap();
-        let lines: Vec<String> = text
-            .lines()
-            .map(|l| match l.split_whitespace().map(str::parse::<f32>).collect::<Result<Vec<_>, _>>() {
-                Ok(v) if v.len() == 2 => format!("{:.3} {:.3}", v[0] + dx, v[1] + dy),
-                _ => l.to_string(),
-            })
-            .collect();
-        lines.join("\n") + "\n"
-    };
     let originals: Vec<_> =
         std::fs::read_dir(&f.synth).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "pts")).collect();
     // Training pairs: the set's faces moved about the image (the same views), detected 3 px right.

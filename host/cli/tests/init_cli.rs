@@ -115,27 +115,18 @@ fn fit_without_landmarks_detects_them_first() {
         assert!(out.join(name).exists(), "{name} missing");
     }
     // The initializer's landmarks enter with their own σ, which the user can set.
-    let sigma = |dir: &std::path::Path| {
-        let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap();
-        j["settings"]["landmarks"]["sigma"].as_f64().unwrap()
+    let json = |dir: &std::path::Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap()
     };
+    let sigma = |dir: &std::path::Path| json(dir)["settings"]["landmarks"]["sigma"].as_f64().unwrap();
     assert!((sigma(&out) - f64::from(gpmm_host::init::INIT_LANDMARK_SIGMA)).abs() < 1e-6, "{}", sigma(&out));
+    // Short fits from the init file with σ 0.02 and `extra` arguments, written to `dir`.
+    let fit_init = |dir: &std::path::Path, extra: &[&str]| {
+        let args = ["fit", s(&f.model), s(&image), "--init", s(&f.init), "--init-landmark-sigma", "0.02", "-o", s(dir)];
+        ok(&gpmm(&[&args[..], &["--landmark-steps", "100", "--image-steps", "5"], extra].concat()));
+    };
     let out2 = f.dir.path().join("fit-init-sigma");
-    ok(&gpmm(&[
-        "fit",
-        s(&f.model),
-        s(&image),
-        "--init",
-        s(&f.init),
-        "--init-landmark-sigma",
-        "0.02",
-        "-o",
-        s(&out2),
-        "--landmark-steps",
-        "100",
-        "--image-steps",
-        "5",
-    ]));
+    fit_init(&out2, &[]);
     assert!((sigma(&out2) - 0.02).abs() < 1e-6, "{}", sigma(&out2));
     // A calibration of the initializer's landmarks (here: every point 0.1 IOD along the eye line)
     // corrects them before the fit, and fit.json names it.
@@ -146,29 +137,7 @@ fn fit_without_landmarks_detects_them_first() {
         "training": {"images": 0, "median_rms_px_before": 0.0, "median_rms_px_after": 0.0}});
     std::fs::write(&cal, body.to_string()).unwrap();
     let out3 = f.dir.path().join("fit-init-cal");
-    let steps = ["--landmark-steps", "100", "--image-steps", "5"];
-    ok(&gpmm(
-        &[
-            &[
-                "fit",
-                s(&f.model),
-                s(&image),
-                "--init",
-                s(&f.init),
-                "--landmark-calibration",
-                s(&cal),
-                "--init-landmark-sigma",
-                "0.02",
-                "-o",
-                s(&out3),
-            ][..],
-            &steps,
-        ]
-        .concat(),
-    ));
-    let json = |dir: &std::path::Path| -> serde_json::Value {
-        serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap()
-    };
+    fit_init(&out3, &["--landmark-calibration", s(&cal)]);
     assert_eq!(json(&out3)["landmark_calibration"], s(&cal));
     let mean_x = |j: &serde_json::Value| {
         let v = j["fitted_landmarks"].as_array().unwrap();

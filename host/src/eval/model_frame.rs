@@ -55,24 +55,14 @@ impl ModelFrame {
     pub fn truth_in_model_frame(&self, truth_deg: [f32; 3]) -> [f32; 3] {
         compose_deg(truth_deg, &self.rotation)
     }
-
-    /// The alignment rotation as yaw, pitch, roll (degrees).
-    pub fn alignment_deg(&self) -> [f32; 3] {
-        crate::photo::euler_angles(&self.rotation).map(|a| a.to_degrees() as f32)
-    }
 }
 
 /// Euler angles (degrees) of `R(angles) · r0`.
 fn compose_deg(angles_deg: [f32; 3], r0: &[[f64; 3]; 3]) -> [f32; 3] {
     let [yaw, pitch, roll] = angles_deg.map(f32::to_radians);
-    let r = gpmm_core::Pose { yaw, pitch, roll, translation: [0.0; 3] }.rotation().map(|row| row.map(f64::from));
-    let mut m = [[0.0f64; 3]; 3];
-    for (i, row) in m.iter_mut().enumerate() {
-        for (j, v) in row.iter_mut().enumerate() {
-            *v = (0..3).map(|k| r[i][k] * r0[k][j]).sum();
-        }
-    }
-    crate::photo::euler_angles(&m).map(|a| a.to_degrees() as f32)
+    let r = gpmm_core::Pose { yaw, pitch, roll, translation: [0.0; 3] }.rotation();
+    let m = gpmm_core::render::pose::mat_mul(&r, &r0.map(|row| row.map(|v| v as f32)));
+    crate::photo::euler_angles(&m.map(|row| row.map(f64::from))).map(|a| a.to_degrees() as f32)
 }
 
 #[cfg(test)]

@@ -61,11 +61,14 @@ pub enum FitRunError {
     /// The landmarks could not be corrected with the detector calibration.
     #[error("{}: {error}", path.display())]
     Calibration {
-        /// The landmark file (or the calibration file, when it could not be read).
+        /// The landmark file.
         path: std::path::PathBuf,
         /// What went wrong.
         error: CalibrationError,
     },
+    /// The detector calibration file could not be read (the error names the file).
+    #[error(transparent)]
+    CalibrationFile(CalibrationError),
     /// The settings are out of range.
     #[error("{0}")]
     Settings(String),
@@ -742,7 +745,7 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     let model = crate::gp::model_io::load(&job.model)?;
     let t0 = Instant::now();
     let calibration = match &job.landmark_calibration {
-        Some(path) => Some(LandmarkCalibration::read(path).map_err(|error| FitRunError::Calibration { path: path.clone(), error })?),
+        Some(path) => Some(LandmarkCalibration::read(path).map_err(FitRunError::CalibrationFile)?),
         None => None,
     };
     let prepared = load_photo(&model, &job.image, &job.landmarks, job.pts_one_based, job.settings.size, calibration.as_ref())?;
