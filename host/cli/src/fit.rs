@@ -240,6 +240,10 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         (None, Some(e)) => eprintln!("no figures in the model's frame: {e}"),
         (None, None) => {}
     }
+    if let Some(f) = &summary.face_frame {
+        eprintln!("the fitted face's own iBUG frame (its fitted landmarks, the rule the truth is defined by) against the truth:");
+        print_per_yaw(&f.per_yaw, f.median_signed_error_deg);
+    }
     println!("{}", serde_json::to_string_pretty(&summary)?);
     Ok(())
 }

@@ -246,6 +246,16 @@ fn bench_fit_prints_the_statistics() {
     assert!(align.iter().all(|a| a.abs() < 15.0) && align.iter().any(|a| a.abs() > 0.1), "{m}");
     let rows = m["per_yaw"].as_array().unwrap();
     assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{m}");
+    // And the fitted face's own frame against the truth: every image has it, a few degrees from
+    // the model's pose (the fitted shape's chin → nose-bridge axis), same rows.
+    let face = &j["face_frame"];
+    let rows = face["per_yaw"].as_array().unwrap();
+    assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{face}");
+    for im in per_image["images"].as_array().unwrap() {
+        let (fit, own) = (&im["fit_deg"], &im["fit_face_frame_deg"]);
+        let gap = (0..3).map(|k| (fit[k].as_f64().unwrap() - own[k].as_f64().unwrap()).abs()).fold(0.0, f64::max);
+        assert!(gap < 15.0, "the face frame is the model's turned by a few degrees: {im}");
+    }
 
     // Landmarks from another directory (here: the exact ones shifted 3 px right): the fit follows them.
     let other = f.synth.parent().unwrap().join("shifted-landmarks");

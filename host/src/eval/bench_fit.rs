@@ -40,6 +40,10 @@ pub struct BenchImage {
     /// True yaw, pitch, roll in the model's frame (degrees; see [`crate::eval::model_frame`]).
     #[serde(default)]
     pub truth_model_frame_deg: Option<[f32; 3]>,
+    /// Fitted yaw, pitch, roll of the fitted face's own iBUG frame (degrees; see
+    /// [`crate::eval::model_frame::fit_in_face_frame`]): the rule the truth is defined by.
+    #[serde(default)]
+    pub fit_face_frame_deg: Option<[f32; 3]>,
     /// Landmark error in % of the inter-ocular (outer eye corner) distance.
     pub landmark_error_iod_pct: f32,
     /// Landmark error of the landmark-only result, in % of the inter-ocular distance.
@@ -86,35 +90,52 @@ pub struct YawRow {
     pub roll_error_centred_deg: Stat,
 }
 
-/// Median signed (fitted − true) yaw, pitch and roll errors of `images` (degrees).
-pub fn median_offsets(images: &[BenchImage]) -> [f64; 3] {
-    median_offsets_against(images, &|b| b.truth_deg)
+/// Which angles an error table compares: the fitted and the true yaw, pitch, roll of an image.
+struct Angles<'a> {
+    fit: &'a dyn Fn(&BenchImage) -> [f32; 3],
+    truth: &'a dyn Fn(&BenchImage) -> [f32; 3],
 }
 
-/// Median signed (fitted − `truth`) yaw, pitch and roll errors of `images` (degrees).
-fn median_offsets_against(images: &[BenchImage], truth: &dyn Fn(&BenchImage) -> [f32; 3]) -> [f64; 3] {
-    let signed = |k: usize| images.iter().map(|b| f64::from(b.fit_deg[k] - truth(b)[k])).collect::<Vec<_>>();
+impl Angles<'_> {
+    /// The fit's pose against the truth in the identities' face frames.
+    const PLAIN: Angles<'static> = Angles { fit: &|b| b.fit_deg, truth: &|b| b.truth_deg };
+
+    /// Signed error (fitted − true) of angle `k` (0 yaw, 1 pitch, 2 roll).
+    fn signed(&self, b: &BenchImage, k: usize) -> f64 {
+        f64::from((self.fit)(b)[k] - (self.truth)(b)[k])
+    }
+}
+
+/// Median signed (fitted − true) yaw, pitch and roll errors of `images` (degrees).
+pub fn median_offsets(images: &[BenchImage]) -> [f64; 3] {
+    median_offsets_of(images, &Angles::PLAIN)
+}
+
+/// Median signed errors of `images` (degrees) between the angles `angles` compares.
+fn median_offsets_of(images: &[BenchImage], angles: &Angles<'_>) -> [f64; 3] {
+    let signed = |k: usize| images.iter().map(|b| angles.signed(b, k)).collect::<Vec<_>>();
     [stat(&signed(0)).median, stat(&signed(1)).median, stat(&signed(2)).median]
 }
 
 /// One row per true |yaw|, in increasing order.
 pub fn per_yaw(images: &[BenchImage]) -> Vec<YawRow> {
-    per_yaw_against(images, &|b| b.truth_deg)
+    per_yaw_of(images, &Angles::PLAIN)
 }
 
-/// One row per true |yaw| (of `truth_deg`: the rows stay those of the set), errors against `truth`.
-fn per_yaw_against(images: &[BenchImage], truth: &dyn Fn(&BenchImage) -> [f32; 3]) -> Vec<YawRow> {
+/// One row per true |yaw| (of `truth_deg`: the rows stay those of the set), errors between the
+/// angles `angles` compares.
+fn per_yaw_of(images: &[BenchImage], angles: &Angles<'_>) -> Vec<YawRow> {
     let mut keys: Vec<i32> = images.iter().map(|b| b.truth_deg[0].abs().round() as i32).collect();
     keys.sort_unstable();
     keys.dedup();
-    let offset = median_offsets_against(images, truth);
+    let offset = median_offsets_of(images, angles);
     keys.into_iter()
         .map(|k| {
             let row: Vec<&BenchImage> = images.iter().filter(|b| b.truth_deg[0].abs().round() as i32 == k).collect();
             let n = row.len().max(1) as f64;
-            let err = |i: usize| row.iter().map(|b| f64::from((b.fit_deg[i] - truth(b)[i]).abs())).collect::<Vec<_>>();
-            let centred = |i: usize| row.iter().map(|b| (f64::from(b.fit_deg[i] - truth(b)[i]) - offset[i]).abs()).collect::<Vec<_>>();
-            let signed = |b: &&BenchImage| f64::from(b.fit_deg[0] - truth(b)[0]);
+            let err = |i: usize| row.iter().map(|b| angles.signed(b, i).abs()).collect::<Vec<_>>();
+            let centred = |i: usize| row.iter().map(|b| (angles.signed(b, i) - offset[i]).abs()).collect::<Vec<_>>();
+            let signed = |b: &&BenchImage| angles.signed(b, 0);
             let sign = |b: &&BenchImage| if b.truth_deg[0].abs() < 0.5 { 1.0 } else { f64::from(b.truth_deg[0].signum()) };
             YawRow {
                 abs_yaw_deg: k,
@@ -168,6 +189,10 @@ pub struct BenchSummary {
     /// Why there is no `model_frame` (e.g. the set's ICT data is not where `truth.json` says).
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub model_frame_error: Option<String>,
+    /// The fitted face's own iBUG frame against the truth (`None` if an image has none): the
+    /// same rule on both sides, so identity-dependent frame tilts drop out.
+    #[serde(default)]
+    pub face_frame: Option<FrameErrors>,
     /// Where the landmarks came from: `exact` (the set's) or the landmark directory.
     pub landmarks: String,
     /// Seconds per fit (each fit on one thread).
@@ -190,6 +215,18 @@ pub struct ModelFrameSummary {
     /// Median signed yaw, pitch and roll error (degrees): the offsets removed in the `*_centred_deg` figures.
     pub median_signed_error_deg: [f64; 3],
     /// Per true |yaw| (rows of the set's truth): the errors against the truth in the model's frame.
+    pub per_yaw: Vec<YawRow>,
+}
+
+/// Pose errors of the fitted face's own iBUG frame against the truth
+/// ([`crate::eval::model_frame::fit_in_face_frame`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameErrors {
+    /// |yaw| error (degrees).
+    pub yaw_error_deg: Stat,
+    /// Median signed yaw, pitch and roll error (degrees): the offsets removed in the `*_centred_deg` figures.
+    pub median_signed_error_deg: [f64; 3],
+    /// Per true |yaw|.
     pub per_yaw: Vec<YawRow>,
 }
 
@@ -256,20 +293,25 @@ pub fn bench_one(
     let shape_only = crate::fit::project_landmarks_of(model, &o.landmark_params, size).map_err(|e| e.to_string())?;
     let lm_only: Vec<[f32; 2]> = shape_only.iter().map(|p| prepared.crop.to_original(*p, size)).collect();
     let p = &o.params.pose;
-    Ok(BenchImage {
-        image: truth.image.clone(),
-        truth_deg: [truth.yaw_deg, truth.pitch_deg, truth.roll_deg],
-        // The fit's pose is relative to the crop's centre as optical axis; the truth is the photo camera's.
-        truth_model_frame_deg: frame.map(|f| f.truth_in_model_frame([truth.yaw_deg, truth.pitch_deg, truth.roll_deg])),
-        fit_deg: crate::photo::pose_in_photo_frame(
-            [p.yaw, p.pitch, p.roll],
+    let in_photo = |angles: [f32; 3]| {
+        crate::photo::pose_in_photo_frame(
+            angles,
             o.params.focal,
             &prepared.crop,
             size,
             prepared.original_size[0],
             prepared.original_size[1],
         )
-        .map(f32::to_degrees),
+        .map(f32::to_degrees)
+    };
+    let face_frame = crate::eval::model_frame::fit_in_face_frame(model, o.params.shape_coeffs(), [p.yaw, p.pitch, p.roll]);
+    Ok(BenchImage {
+        image: truth.image.clone(),
+        truth_deg: [truth.yaw_deg, truth.pitch_deg, truth.roll_deg],
+        // The fit's pose is relative to the crop's centre as optical axis; the truth is the photo camera's.
+        truth_model_frame_deg: frame.map(|f| f.truth_in_model_frame([truth.yaw_deg, truth.pitch_deg, truth.roll_deg])),
+        fit_deg: in_photo([p.yaw, p.pitch, p.roll]),
+        fit_face_frame_deg: face_frame.ok().map(in_photo),
         landmark_error_iod_pct: iod_error(&fitted, &truth.landmarks),
         landmark_error_iod_pct_after_landmark_chain: iod_error(&lm_only, &truth.landmarks),
         pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,
@@ -284,6 +326,7 @@ fn model_frame_summary(images: &[BenchImage]) -> Option<ModelFrameSummary> {
         return None;
     }
     let truth = |b: &BenchImage| b.truth_model_frame_deg.unwrap_or(b.truth_deg);
+    let angles = Angles { fit: &|b| b.fit_deg, truth: &truth };
     let align = |k: usize| images.iter().map(|b| f64::from(truth(b)[k] - b.truth_deg[k])).collect::<Vec<_>>();
     Some(ModelFrameSummary {
         alignment: format!(
@@ -292,9 +335,22 @@ fn model_frame_summary(images: &[BenchImage]) -> Option<ModelFrameSummary> {
             ALIGNED_LANDMARKS.end - 1
         ),
         median_alignment_deg: [stat(&align(0)).median, stat(&align(1)).median, stat(&align(2)).median],
-        yaw_error_deg: stat(&images.iter().map(|b| f64::from((b.fit_deg[0] - truth(b)[0]).abs())).collect::<Vec<_>>()),
-        median_signed_error_deg: median_offsets_against(images, &truth),
-        per_yaw: per_yaw_against(images, &truth),
+        yaw_error_deg: stat(&images.iter().map(|b| angles.signed(b, 0).abs()).collect::<Vec<_>>()),
+        median_signed_error_deg: median_offsets_of(images, &angles),
+        per_yaw: per_yaw_of(images, &angles),
+    })
+}
+
+/// The errors of the fitted face's own frame against the truth, if every image has it.
+fn face_frame_summary(images: &[BenchImage]) -> Option<FrameErrors> {
+    if images.iter().any(|b| b.fit_face_frame_deg.is_none()) {
+        return None;
+    }
+    let angles = Angles { fit: &|b| b.fit_face_frame_deg.unwrap_or(b.fit_deg), truth: &|b| b.truth_deg };
+    Some(FrameErrors {
+        yaw_error_deg: stat(&images.iter().map(|b| angles.signed(b, 0).abs()).collect::<Vec<_>>()),
+        median_signed_error_deg: median_offsets_of(images, &angles),
+        per_yaw: per_yaw_of(images, &angles),
     })
 }
 
@@ -370,6 +426,7 @@ pub fn bench(
         per_yaw: per_yaw(&ok),
         model_frame: frame.as_ref().ok().and_then(|_| model_frame_summary(&ok)),
         model_frame_error: frame.err(),
+        face_frame: face_frame_summary(&ok),
         landmarks: landmarks.describe(),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
@@ -397,6 +454,7 @@ mod tests {
             truth_deg: [t, 1.0, 0.0],
             fit_deg: [f, 2.0, 0.5],
             truth_model_frame_deg: None,
+            fit_face_frame_deg: None,
             landmark_error_iod_pct: 0.0,
             landmark_error_iod_pct_after_landmark_chain: 0.0,
             pixel_rmse_after_landmark_chain: 0.0,
@@ -423,6 +481,7 @@ mod tests {
             truth_deg: [t, 0.0, 0.0],
             fit_deg: [t + 1.0, 4.0, 0.0],
             truth_model_frame_deg: Some([t + 1.0, 4.0, 0.0]),
+            fit_face_frame_deg: None,
             landmark_error_iod_pct: 0.0,
             landmark_error_iod_pct_after_landmark_chain: 0.0,
             pixel_rmse_after_landmark_chain: 0.0,
@@ -436,5 +495,13 @@ mod tests {
         assert!((m.median_alignment_deg[0] - 1.0).abs() < 1e-6 && (m.median_alignment_deg[1] - 4.0).abs() < 1e-6);
         // Against the identities' frames the same fits are 1° off in yaw.
         assert!(per_yaw(&images).iter().all(|r| (r.yaw_error_deg.median - 1.0).abs() < 1e-6));
+        assert_eq!(face_frame_summary(&images), None, "no fitted face frame, no summary");
+        // The fitted face's own frame is compared with the plain truth: here 2° of pitch off.
+        let own: Vec<BenchImage> =
+            images.iter().map(|b| BenchImage { fit_face_frame_deg: Some([b.truth_deg[0], 2.0, 0.0]), ..b.clone() }).collect();
+        let f = face_frame_summary(&own).expect("every image has its face frame");
+        assert_eq!(f.per_yaw.iter().map(|r| r.abs_yaw_deg).collect::<Vec<_>>(), [0, 45]);
+        assert!(f.per_yaw.iter().all(|r| r.yaw_error_deg.median.abs() < 1e-6 && (r.pitch_error_deg.median - 2.0).abs() < 1e-6));
+        assert!((f.median_signed_error_deg[1] - 2.0).abs() < 1e-6);
     }
 }

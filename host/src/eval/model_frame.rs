@@ -57,6 +57,31 @@ impl ModelFrame {
     }
 }
 
+/// The fit's yaw, pitch, roll (radians) turned to the fitted face's own iBUG frame
+/// ([`crate::mesh::template::ibug_frame`] of the fitted shape's 68 landmarks, the rule `gpmm
+/// synth` defines its truth by; see [`pose_of_face_frame`]).
+pub fn fit_in_face_frame(model: &GpModel, shape_coeffs: &[f32], fit_rad: [f32; 3]) -> Result<[f32; 3], String> {
+    if model.landmarks.len() != 68 {
+        return Err(format!("the model has {} landmarks, not the 68 of iBUG-68", model.landmarks.len()));
+    }
+    let shape = model.shape.instance(shape_coeffs).map_err(|e| e.to_string())?;
+    let lm: Vec<[f64; 3]> = model
+        .landmarks
+        .iter()
+        .map(|&v| shape.get(v as usize).map(|p| p.map(f64::from)).ok_or_else(|| format!("model landmark vertex {v} is past the mesh")))
+        .collect::<Result<_, _>>()?;
+    pose_of_face_frame(&lm, fit_rad)
+}
+
+/// The yaw, pitch, roll (radians) of the iBUG frame of landmarks `lm` (model coordinates) when
+/// the model is turned by `pose_rad`: `R · Aᵀ`, with `A` the frame's axes (rows) in model
+/// coordinates.
+pub fn pose_of_face_frame(lm: &[[f64; 3]], pose_rad: [f32; 3]) -> Result<[f32; 3], String> {
+    let axes = crate::mesh::template::ibug_frame(lm)?.axes;
+    let transposed = [0, 1, 2].map(|i| [axes[0][i], axes[1][i], axes[2][i]]);
+    Ok(compose_deg(pose_rad.map(f32::to_degrees), &transposed).map(f32::to_radians))
+}
+
 /// Euler angles (degrees) of `R(angles) · r0`.
 fn compose_deg(angles_deg: [f32; 3], r0: &[[f64; 3]; 3]) -> [f32; 3] {
     let [yaw, pitch, roll] = angles_deg.map(f32::to_radians);
@@ -79,5 +104,36 @@ mod tests {
         let ry = [[t.cos(), 0.0, t.sin()], [0.0, 1.0, 0.0], [-t.sin(), 0.0, t.cos()]];
         let b = compose_deg([30.0, 0.0, 0.0], &ry);
         assert!((b[0] - 31.0).abs() < 1e-4 && b[1].abs() < 1e-4 && b[2].abs() < 1e-4, "{b:?}");
+    }
+
+    /// 68 landmarks in their own iBUG frame: mirror pairs symmetric about x = 0, the other
+    /// points on the midline, chin (8) straight below the nose bridge (27).
+    fn landmarks_in_own_frame() -> Vec<[f64; 3]> {
+        let mut lm: Vec<[f64; 3]> = (0..68).map(|i| [0.0, -50.0 + 1.5 * i as f64, 5.0 + (i % 7) as f64]).collect();
+        for (k, &(l, r)) in crate::mesh::template::IBUG68_MIRROR_PAIRS.iter().enumerate() {
+            let (y, z) = (-40.0 + 3.0 * k as f64, 10.0 + (k % 5) as f64);
+            lm[l] = [-(20.0 + k as f64), y, z];
+            lm[r] = [20.0 + k as f64, y, z];
+        }
+        lm[8] = [0.0, -60.0, 10.0];
+        lm[27] = [0.0, 40.0, 10.0];
+        lm
+    }
+
+    #[test]
+    fn a_face_in_its_own_frame_keeps_the_pose_and_a_tilted_one_adds_its_tilt() {
+        let lm = landmarks_in_own_frame();
+        let pose = [30f32.to_radians(), -4f32.to_radians(), 2f32.to_radians()];
+        let same = pose_of_face_frame(&lm, pose).unwrap().map(f32::to_degrees);
+        assert!(same.iter().zip([30.0, -4.0, 2.0]).all(|(a, b)| (a - b).abs() < 1e-3), "{same:?}");
+        // The same face tilted 10° about x (forehead toward the camera, as in a nod): its frame is
+        // the model's turned by Rx(10°), so a fit turned by yaw 30° alone shows a face frame at
+        // yaw 30°, pitch 10°.
+        let t = 10f64.to_radians();
+        let tilted: Vec<[f64; 3]> = lm.iter().map(|p| [p[0], t.cos() * p[1] - t.sin() * p[2], t.sin() * p[1] + t.cos() * p[2]]).collect();
+        let a = pose_of_face_frame(&tilted, [30f32.to_radians(), 0.0, 0.0]).unwrap().map(f32::to_degrees);
+        assert!((a[0] - 30.0).abs() < 1e-3 && (a[1] - 10.0).abs() < 1e-3 && a[2].abs() < 1e-3, "{a:?}");
+        // Landmarks with no left-right direction are refused, not a panic.
+        assert!(pose_of_face_frame(&[[0.0; 3]; 68], pose).is_err());
     }
 }
