@@ -15,6 +15,10 @@ use crate::{ShLight, Vec3};
 /// "Landmark-free start").
 pub const INIT_LANDMARK_SIGMA: f32 = 0.015;
 
+/// The landmark chain's pose share where the chains fit the shape themselves (no start solve:
+/// a device; [`FitSettings::without_shape_solve`]): 40 % pose, 60 % shape.
+pub const CHAIN_SHAPE_POSE_SHARE: f32 = 0.4;
+
 /// Settings of [`super::standard_fit`] (defaults: the documented default fit), in groups: the
 /// landmark chain, the image chain, the ranks fitted, the start, the proposal mixtures and the
 /// light solves.
@@ -157,13 +161,14 @@ impl StartSettings {
 }
 
 impl FitSettings {
-    /// The default fit: 5000 landmark steps (2000 pose, 3000 shape; contour σ × 3 for the pose),
-    /// 600 image steps, 200 shape and 50 colour components, landmark σ 0.5 % of the image side,
-    /// pixel σ 0.043, background floor 0.01, start at 500 mm; the default mixtures and light.
+    /// The default fit: 5000 landmark steps on the pose (contour σ × 3), the start's shape solve
+    /// (the shape), 600 image steps without shape moves, 200 shape and 50 colour components,
+    /// landmark σ 0.5 % of the image side, pixel σ 0.043, background floor 0.01, start at 500 mm;
+    /// the default mixtures and light. Without the solve (a device) see [`Self::without_shape_solve`].
     pub const DEFAULT: Self = Self {
         landmarks: LandmarkSettings {
             steps: 5000,
-            pose_share: 0.4,
+            pose_share: 1.0,
             contour_landmarks: 17,
             contour_sigma_factor: 3.0,
             sigma: 0.005,
@@ -182,6 +187,22 @@ impl FitSettings {
         let mut s = self;
         s.landmarks.steps = landmark_steps;
         s.image.steps = image_steps;
+        s
+    }
+
+    /// These settings without the start's shape solve (`start.shape_rounds = 0`, as a device runs
+    /// them), the chains fitting the shape instead: a landmark chain that fits the pose only gets
+    /// [`CHAIN_SHAPE_POSE_SHARE`], an image chain without shape moves gets [`MixtureShares::IMAGE`]'s
+    /// shape share; shares that already fit the shape are kept.
+    pub const fn without_shape_solve(self) -> Self {
+        let mut s = self;
+        s.start.shape_rounds = 0;
+        if s.landmarks.pose_share >= 1.0 {
+            s.landmarks.pose_share = CHAIN_SHAPE_POSE_SHARE;
+        }
+        if s.proposals.image.shape <= 0.0 {
+            s.proposals.image.shape = MixtureShares::IMAGE.shape;
+        }
         s
     }
 
@@ -366,7 +387,14 @@ impl MixtureShares {
     /// A joint landmark mixture: the whole pose 70 %, shape 30 %.
     pub const LANDMARK_JOINT: Self = Self { pose: 0.7, yaw: true, distance: true, shape: 0.3, ..Self::NONE };
 
-    /// The image chain: pose 30 %, shape 25 %, colour 20 %, light 25 % (a fifth of it the least-squares light).
+    /// The image chain after the start's shape solve ([`ProposalSettings::DEFAULT`]): no shape
+    /// moves (the solve fits the shape; the chain's random shape moves added no identity and made
+    /// it depend on the seed, docs/evaluation.md "The shape from the solve alone"); the other
+    /// shares of [`Self::IMAGE`].
+    pub const IMAGE_AFTER_SOLVE: Self = Self { shape: 0.0, ..Self::IMAGE };
+
+    /// The image chain that fits the shape itself (no start solve, as on a device): pose 30 %,
+    /// shape 25 %, colour 20 %, light 25 % (a fifth of it the least-squares light).
     pub const IMAGE: Self = Self {
         pose: 0.3,
         yaw: true,
@@ -405,7 +433,7 @@ impl ProposalSettings {
     pub const DEFAULT: Self = Self {
         landmark_pose: MixtureShares::LANDMARK_POSE,
         landmark_shape: MixtureShares::LANDMARK_SHAPE,
-        image: MixtureShares::IMAGE,
+        image: MixtureShares::IMAGE_AFTER_SOLVE,
         drift: DriftSettings::DEFAULT,
     };
 
@@ -478,6 +506,24 @@ impl Default for LightSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn without_the_solve_the_chains_fit_the_shape() {
+        let d = FitSettings::DEFAULT;
+        // The host's default: the solve fits the shape, the chains do not.
+        assert!(d.start.shape_rounds > 0 && d.landmarks.pose_share >= 1.0 && d.proposals.image.shape == 0.0);
+        let device = d.without_shape_solve();
+        assert_eq!(device.start.shape_rounds, 0);
+        assert_eq!(device.landmarks.pose_share, CHAIN_SHAPE_POSE_SHARE);
+        assert_eq!(device.proposals.image, MixtureShares::IMAGE);
+        assert_eq!(device.validate(), Ok(()));
+        // Shares that already fit the shape stay as they were.
+        let mut own = d;
+        own.landmarks.pose_share = 0.7;
+        own.proposals.image.shape = 0.1;
+        let kept = own.without_shape_solve();
+        assert_eq!((kept.landmarks.pose_share, kept.proposals.image.shape), (0.7, 0.1));
+    }
 
     #[test]
     fn settings_are_checked() {

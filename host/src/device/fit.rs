@@ -11,8 +11,7 @@
 use crate::device::quantize::BlobBuf;
 use crate::fit::Prepared;
 use gpmm_core::fit::{
-    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, RankSettings, StandardFit, StartSettings,
-    TargetImage,
+    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, RankSettings, StandardFit, TargetImage,
 };
 use gpmm_core::format::{fit_input, fit_record, FormatError};
 use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
@@ -80,13 +79,14 @@ pub enum DeviceFitError {
 
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
 /// of both the device and the host's run of it, and no shape solve at the start (it needs the
-/// host's scratch: about 3 × 65 floats a sampled vertex, 1 MB with the template model).
+/// host's scratch: about 3 × 65 floats a sampled vertex, 1 MB with the template model): the
+/// chains fit the shape instead ([`FitSettings::without_shape_solve`]).
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
     let ranks = RankSettings {
         shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),
         color: settings.ranks.color.min(profile.color_capacity).min(DEVICE_KC),
     };
-    FitSettings { ranks, start: StartSettings { shape_rounds: 0, ..settings.start }, ..*settings }
+    FitSettings { ranks, ..settings.without_shape_solve() }
 }
 
 /// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and
