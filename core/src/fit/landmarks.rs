@@ -51,6 +51,14 @@ impl<'a> LandmarkTarget<'a> {
         Ok(Self { factors, ..self })
     }
 
+    /// The same target with another σ (pixels, > 0 and finite).
+    pub fn with_sigma(self, sigma: f32) -> Result<Self, FitError> {
+        if !(sigma > 0.0 && sigma.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        Ok(Self { sigma, ..self })
+    }
+
     /// The same target with a Student-t term of `nu` degrees of freedom instead of the Gaussian
     /// (`0`: Gaussian): a point `k` σ off costs `(ν + 2)/2 · ln(1 + k²/ν)` instead of `k²/2`, so a
     /// few wrong points of a detector do not pull the fit. `nu` must be 0 or finite and > 0.
@@ -208,6 +216,17 @@ pub fn evaluate_landmarks_rotated(
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn another_sigma_keeps_the_rest_and_refuses_bad_values() {
+        let (points, valid, factors) = ([[1.0f32, 2.0], [3.0, 4.0]], [true, false], [2.0f32, 1.0]);
+        let t = LandmarkTarget::new(&points, &valid, 0.5).unwrap().with_sigma_factors(&factors).unwrap().with_student_t(4.0).unwrap();
+        let wide = t.with_sigma(5.0).unwrap();
+        assert_eq!((wide.sigma(), wide.sigma_factor(0), wide.student_t(), wide.len()), (5.0, 2.0, 4.0, 2));
+        for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(t.with_sigma(bad).err(), Some(FitError::BadConfig), "{bad}");
+        }
+    }
 
     #[test]
     fn exact_projection_has_zero_error() {

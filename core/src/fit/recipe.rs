@@ -189,10 +189,18 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     color_rounds::<I, KS, KC>(model, &image, settings, settings.start.color_rounds, &mut start, instance, w, h)?;
     shape_rounds::<I, KS, KC>(model, &image, settings.start.shape_landmarks.then_some(&lm), settings, &mut start, instance, w, h)?;
 
-    // 4. The image chain.
+    // 4. The image chain, its landmark σ scaled.
     let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
-    let problem =
-        Problem { model: *model, landmarks: lm, prior: &prior, mixture: &img_mix, width: w, height: h, silhouette: silhouette.as_ref() };
+    let img_lm = lm.with_sigma(lm.sigma() * settings.image.landmark_sigma_factor)?;
+    let problem = Problem {
+        model: *model,
+        landmarks: img_lm,
+        prior: &prior,
+        mixture: &img_mix,
+        width: w,
+        height: h,
+        silhouette: silhouette.as_ref(),
+    };
     let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;

@@ -82,6 +82,10 @@ pub struct ImageSettings {
     /// Colour-and-light rounds (as [`StartSettings::color_rounds`]) on the image chain's best
     /// sample, kept if its log posterior is higher (0: none).
     pub color_polish_rounds: u32,
+    /// Factor on the landmark σ in the image chain (> 0; 1: the landmark chain's σ). Large values
+    /// leave the landmarks to the start alone (the pose chain and the shape solve), the image
+    /// chain then following the image.
+    pub landmark_sigma_factor: f32,
 }
 
 /// How many of the model's components are fitted (the leading ones; capped by the model's rank
@@ -175,7 +179,13 @@ impl FitSettings {
             student_t: 0.0,
             silhouette: false,
         },
-        image: ImageSettings { steps: 600, pixel_sigma: DEFAULT_PIXEL_SIGMA, background_floor: 0.01, color_polish_rounds: 0 },
+        image: ImageSettings {
+            steps: 600,
+            pixel_sigma: DEFAULT_PIXEL_SIGMA,
+            background_floor: 0.01,
+            color_polish_rounds: 0,
+            landmark_sigma_factor: 1.0,
+        },
         ranks: RankSettings { shape: 200, color: 50 },
         start: StartSettings::DEFAULT,
         proposals: ProposalSettings::DEFAULT,
@@ -220,6 +230,8 @@ impl FitSettings {
         let (l, i) = (&self.landmarks, &self.image);
         if positive(l.sigma)
             && positive(i.pixel_sigma)
+            && positive(i.landmark_sigma_factor)
+            && positive(l.sigma * i.landmark_sigma_factor)
             && positive(self.start.nominal_distance_mm)
             && self.start.color_stride >= 1
             && positive(self.start.color_weight)
@@ -537,6 +549,8 @@ mod tests {
             FitSettings { landmarks: LandmarkSettings { contour_sigma_factor: f32::INFINITY, ..d.landmarks }, ..d },
             FitSettings { landmarks: LandmarkSettings { sigma: -1.0, ..d.landmarks }, ..d },
             FitSettings { image: ImageSettings { background_floor: -0.5, ..d.image }, ..d },
+            FitSettings { image: ImageSettings { landmark_sigma_factor: 0.0, ..d.image }, ..d },
+            FitSettings { image: ImageSettings { landmark_sigma_factor: f32::INFINITY, ..d.image }, ..d },
             FitSettings { start: StartSettings { nominal_distance_mm: 0.0, ..d.start }, ..d },
             FitSettings { start: StartSettings { color_stride: 0, ..d.start }, ..d },
             FitSettings { start: StartSettings { color_weight: f32::NAN, ..d.start }, ..d },
