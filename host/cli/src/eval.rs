@@ -163,9 +163,11 @@ pub struct RecognitionArgs {
     /// Colour components fitted.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K")]
     pub color_rank: usize,
-    /// Seed of the fitting chains.
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
-    pub fit_seed: u64,
+    /// Seed of the fitting chains; several (`--fit-seed 0,1,2,3`) run the evaluation once per
+    /// seed into OUT/seed-N and write the pooled accuracies per seed, their mean and spread to
+    /// OUT/seeds.{md,json} (one seed's figure moves by several points with the chains' path).
+    #[arg(long, value_delimiter = ',', num_args = 1.., default_values_t = [gpmm_host::fit::FitOptions::DEFAULT.seed], value_name = "SEED")]
+    pub fit_seed: Vec<u64>,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -293,44 +295,73 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         )
         .with_ranks(a.shape_rank, a.color_rank);
     let fit = gpmm_host::fit::override_settings(&fit, &a.overrides)?;
-    let settings = gpmm_host::fit::FitOptions { size: a.size, seed: a.fit_seed, fit };
-    settings.validate()?;
-    let kde_settings = gpmm_host::fit::FitOptions {
-        fit: settings.fit.with_steps(settings.fit.landmarks.steps, a.kde_image_steps.unwrap_or(settings.fit.image.steps)),
-        ..settings
-    };
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
-    let bar = ProgressBar::new(0);
-    bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
-    let progress = |p: Progress<'_>| match p {
-        Progress::Fitting(label, done, total) => {
-            bar.set_message(label.to_string());
-            bar.set_length(total as u64);
-            bar.set_position(done as u64);
+    let mut seeds: Vec<u64> = Vec::new();
+    for s in &a.fit_seed {
+        if !seeds.contains(s) {
+            seeds.push(*s);
         }
-        Progress::RowDone(r) => {
-            let acc: Vec<String> = r.yaws.iter().map(|y| format!("{}°: {:.1} %", y.yaw_deg, 100.0 * y.accuracy)).collect();
-            note(&bar, format!("{}: {} ({:.0} s{})", r.label, acc.join(", "), r.fit_wall_seconds, if r.cached { ", cached" } else { "" }));
+    }
+    if seeds.is_empty() {
+        bail!("--fit-seed needs at least one seed");
+    }
+    let mut reports = Vec::new();
+    for &seed in &seeds {
+        let out = if seeds.len() == 1 { a.output.clone() } else { a.output.join(format!("seed-{seed}")) };
+        if seeds.len() > 1 {
+            eprintln!("fit seed {seed} -> {}", out.display());
         }
-    };
-    let results = evaluate(&rows, &set, &settings, &kde_settings, jobs, &a.output, &progress)?;
-    bar.finish_and_clear();
-    let report = RecognitionReport {
-        synth_dir: a.synth.display().to_string(),
-        synth_seed: set.seed,
-        identities: set.identities.len(),
-        gallery: set.identities.len(),
-        chance: 1.0 / set.identities.len().max(1) as f64,
-        settings,
-        kde_settings: (kde_settings != settings && sel.kde.is_some_and(|n| n > 1)).then_some(kde_settings),
-        jobs,
-        command: command_line(),
-        rows: results,
-        total_seconds: t0.elapsed().as_secs_f64(),
-    };
-    write_report(&report, &a.output)?;
-    println!("{}", gpmm_host::eval::recognition::markdown(&report));
-    eprintln!("wrote recognition.md, .csv, .json and .png to {}", a.output.display());
+        let settings = gpmm_host::fit::FitOptions { size: a.size, seed, fit };
+        settings.validate()?;
+        let kde_settings = gpmm_host::fit::FitOptions {
+            fit: settings.fit.with_steps(settings.fit.landmarks.steps, a.kde_image_steps.unwrap_or(settings.fit.image.steps)),
+            ..settings
+        };
+        let bar = ProgressBar::new(0);
+        bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
+        let progress = |p: Progress<'_>| match p {
+            Progress::Fitting(label, done, total) => {
+                bar.set_message(label.to_string());
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            }
+            Progress::RowDone(r) => {
+                let acc: Vec<String> = r.yaws.iter().map(|y| format!("{}°: {:.1} %", y.yaw_deg, 100.0 * y.accuracy)).collect();
+                note(
+                    &bar,
+                    format!("{}: {} ({:.0} s{})", r.label, acc.join(", "), r.fit_wall_seconds, if r.cached { ", cached" } else { "" }),
+                );
+            }
+        };
+        let results = evaluate(&rows, &set, &settings, &kde_settings, jobs, &out, &progress)?;
+        bar.finish_and_clear();
+        let report = RecognitionReport {
+            synth_dir: a.synth.display().to_string(),
+            synth_seed: set.seed,
+            identities: set.identities.len(),
+            gallery: set.identities.len(),
+            chance: 1.0 / set.identities.len().max(1) as f64,
+            settings,
+            kde_settings: (kde_settings != settings && sel.kde.is_some_and(|n| n > 1)).then_some(kde_settings),
+            jobs,
+            command: command_line(),
+            rows: results,
+            total_seconds: t0.elapsed().as_secs_f64(),
+        };
+        write_report(&report, &out)?;
+        if seeds.len() == 1 {
+            println!("{}", gpmm_host::eval::recognition::markdown(&report));
+        }
+        eprintln!("wrote recognition.md, .csv, .json and .png to {}", out.display());
+        reports.push(report);
+    }
+    if seeds.len() > 1 {
+        use gpmm_host::eval::recognition_seeds::{markdown, summarize, write_summary};
+        let summary = summarize(&seeds, &reports, command_line())?;
+        write_summary(&summary, &a.output)?;
+        println!("{}", markdown(&summary));
+        eprintln!("wrote seeds.md and seeds.json to {}", a.output.display());
+    }
     Ok(())
 }
 

@@ -3,7 +3,7 @@
 //! same result, registration recovers a known instance, bad input gives clear errors.
 
 mod common;
-use common::{fails, gpmm, ok};
+use common::{fails, gpmm, ok, read_json};
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -140,6 +140,22 @@ fn recognition_quick_writes_a_consistent_table_and_reuses_its_fits() {
     assert_eq!(with_dir.matches(", cached").count(), 0, "{with_dir}");
     let tiny_row = |rows: &[Vec<String>]| rows.iter().find(|r| r[0] == "tiny").map(|r| r[..8].to_vec());
     assert_eq!(tiny_row(&csv_rows(&out.join("recognition.csv"))), tiny_row(&rows));
+
+    // Several fit seeds: one full report per seed, and their pooled figures side by side. The
+    // first seed's report is the single-seed run's (same settings, same fits).
+    let seeds_out = f.dir.path().join("recognition-seeds");
+    let single = seeds_out.join("single");
+    ok(&gpmm(&[&tiny[..], &["--image-steps", "20", "--fit-seed", "3", "-o", s(&single)]].concat()));
+    let printed = ok(&gpmm(&[&tiny[..], &["--image-steps", "20", "--fit-seed", "3,4,3", "-o", s(&seeds_out)]].concat()));
+    assert!(printed.contains("seed 3") && printed.contains("seed 4") && printed.contains("mean"), "{printed}");
+    let summary = read_json(&seeds_out.join("seeds.json"));
+    assert_eq!(summary["seeds"], serde_json::json!([3, 4]), "a repeated seed runs once: {summary}");
+    let row = summary["rows"].as_array().unwrap().iter().find(|r| r["label"] == "tiny").expect("the model's row");
+    let per: Vec<f64> = row["per_seed"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    let (mean, min, max) = (row["mean"].as_f64().unwrap(), row["min"].as_f64().unwrap(), row["max"].as_f64().unwrap());
+    assert!((mean - (per[0] + per[1]) / 2.0).abs() < 1e-12 && min <= mean && mean <= max, "{row}");
+    assert!(seeds_out.join("seeds.md").is_file() && seeds_out.join("seed-4/recognition.md").is_file());
+    assert_eq!(tiny_row(&csv_rows(&seeds_out.join("seed-3/recognition.csv"))), tiny_row(&csv_rows(&single.join("recognition.csv"))));
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! output files are written, repeated runs give the same `fit.json`, bad input gives clear errors.
 
 mod common;
-use common::{fails, gpmm, ok};
+use common::{fails, gpmm, ok, read_json};
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -73,10 +73,6 @@ fn fit(f: &Fixture, image: &Path, pts: &Path, out: &Path, extra: &[&str]) -> Out
     args.extend(FAST);
     args.extend(extra);
     gpmm(&args)
-}
-
-fn read_json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
 }
 
 #[test]

@@ -15,6 +15,7 @@ pub mod npy;
 pub mod pca;
 pub mod plot;
 pub mod recognition;
+pub mod recognition_seeds;
 pub mod specgen;
 pub mod synth;
 pub mod world;

@@ -22,3 +22,9 @@ pub fn fails(out: &Output) -> String {
     assert!(!stderr.contains("panicked"), "gpmm panicked: {stderr}");
     stderr
 }
+
+/// Reads a JSON file (panics with the path if it cannot).
+pub fn read_json(p: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
