@@ -5,18 +5,23 @@
 //!    ([`initial_guess`]; run twice, the first probe measures the depth at which the focal length
 //!    puts the face at [`FitSettings::nominal_distance_mm`]), ambient light, zero coefficients;
 //!    the prior is centred on it ([`Prior::around`]).
-//! 2. The landmark chain (prior × landmarks, no rendering) in two phases, as the paper's fit
-//!    script fits the pose to the landmarks before anything else: first the pose alone
+//! 2. The landmark chain (prior × landmarks, no rendering) in two phases (by default the first
+//!    only: [`LandmarkSettings::pose_share`](super::settings::LandmarkSettings) 1, the shape coming
+//!    from step 3's solve), as the paper's fit script fits the pose to the landmarks before
+//!    anything else: first the pose alone
 //!    ([`Mixture::landmark_pose`]: no shape, no distance changes; the jaw contour's σ scaled by
 //!    [`FitSettings::contour_sigma_factor`]), then the shape with yaw and distance held
 //!    ([`Mixture::landmark_shape`]). Letting shape and yaw move together trades one for the
 //!    other: on faces from another model (ICT) such a joint chain underestimated a 30° yaw by
 //!    5–7°, because the template's landmark depths (the silhouette contour above all) differ from
 //!    the face's.
-//! 3. The shape phase's best sample gets the closed-form least-squares SH light on every visible
-//!    vertex, then (if [`FitSettings::start`] asks for rounds) the colour coefficients solved for
-//!    that light and the light again for the new albedo ([`super::color_fit`]).
-//! 4. The image chain from there (prior × landmarks × image, delayed acceptance; all parameters);
+//! 3. The landmark chain's best sample gets the closed-form least-squares SH light on every
+//!    visible vertex, then (if [`FitSettings::start`] asks for rounds) the colour coefficients
+//!    solved for that light and the light again for the new albedo ([`super::color_fit`]), then
+//!    the shape solve's rounds (Gauss–Newton on landmarks and image, [`super::shape_fit`]; the
+//!    host's default, not on a device).
+//! 4. The image chain from there (prior × landmarks × image, delayed acceptance; the parameters
+//!    its mixture moves: by default pose, colour and light, the shape staying the solve's);
 //!    optionally its best sample's colour and light solved again ([`ImageSettings::color_polish_rounds`](super::settings::ImageSettings)),
 //!    kept if that raises the log posterior.
 //!
