@@ -3,14 +3,14 @@
 //!
 //! 1. Start: a scaled-orthographic least-squares pose of the mean face's landmarks
 //!    ([`initial_guess`]; run twice, the first probe measures the depth at which the focal length
-//!    puts the face at [`FitSettings::nominal_distance_mm`]), ambient light, zero coefficients;
+//!    puts the face at [`StartSettings::nominal_distance_mm`](super::settings::StartSettings)), ambient light, zero coefficients;
 //!    the prior is centred on it ([`Prior::around`]).
 //! 2. The landmark chain (prior × landmarks, no rendering) in two phases (by default the first
 //!    only: [`LandmarkSettings::pose_share`](super::settings::LandmarkSettings) 1, the shape coming
 //!    from step 3's solve), as the paper's fit script fits the pose to the landmarks before
 //!    anything else: first the pose alone
 //!    ([`Mixture::landmark_pose`]: no shape, no distance changes; the jaw contour's σ scaled by
-//!    [`FitSettings::contour_sigma_factor`]), then the shape with yaw and distance held
+//!    [`LandmarkSettings::contour_sigma_factor`](super::settings::LandmarkSettings)), then the shape with yaw and distance held
 //!    ([`Mixture::landmark_shape`]). Letting shape and yaw move together trades one for the
 //!    other: on faces from another model (ICT) such a joint chain underestimated a 30° yaw by
 //!    5–7°, because the template's landmark depths (the silhouette contour above all) differ from

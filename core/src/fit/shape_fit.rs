@@ -12,7 +12,7 @@
 //! in the coefficients (`x + h U_k`), the normals are recomputed over the whole mesh. A damped
 //! (Levenberg–Marquardt) step is kept only if the objective on the same samples falls.
 //! Visibility: a back-facing test (as in the colour and light solves) and an occlusion test on a
-//! coarse depth grid of the instance's vertices ([`DepthGrid`]).
+//! coarse depth grid of the instance's vertices (`DepthGrid`).
 //!
 //! Memory: the caller's spare shape buffers and solve scratch ([`Instance::with_solve_scratch`]:
 //! `3 (components + 1)` values a sample) and two `MAX_SHAPE_SOLVE²` matrices on the stack; it runs
