@@ -262,6 +262,35 @@ impl<'a> Silhouette<'a> {
 
 /// The frontal outline's height at `x`: piecewise linear through the contour points, clamped at
 /// the ends (they are ordered in x, in either direction).
+/// Clears `mask[i]` for each of the first `contour` landmarks whose model vertex faces away from
+/// the camera under `pose` (cosine between its normal and the direction to the camera below
+/// `min_cos`): a detector puts such a point on the visible outline, where the fixed vertex is
+/// not, and the point then pulls the shape and the yaw toward frontal. `positions` and `normals`
+/// are the instance's (model space); landmarks past the mesh are left as they are.
+pub fn hide_turned_away_contour<I: TriIndex>(
+    model: &MorphableModel<'_, I>,
+    positions: &[Vec3],
+    normals: &[Vec3],
+    pose: &Pose,
+    contour: usize,
+    min_cos: f32,
+    mask: &mut [bool],
+) {
+    let r = pose.rotation();
+    let t = pose.translation;
+    for (seen, &v) in mask.iter_mut().zip(model.landmarks()).take(contour.min(MAX_CONTOUR)) {
+        let (Some(p), Some(n)) = (positions.get(v as usize), normals.get(v as usize)) else { continue };
+        let q = mat_vec(&r, *p);
+        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
+        let dist = libm::sqrtf(dot(pc, pc));
+        let cos = -dot(mat_vec(&r, *n), pc) / dist;
+        // NaN (a degenerate vertex) keeps the point.
+        if cos < min_cos {
+            *seen = false;
+        }
+    }
+}
+
 fn outline_height(outline: &[[f32; 2]], x: f32) -> f32 {
     let (Some(first), Some(last)) = (outline.first(), outline.last()) else {
         return f32::NEG_INFINITY;
@@ -346,6 +375,28 @@ fn normalize(a: Vec3) -> Option<Vec3> {
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
+    use crate::model::basis::{Basis, DenseBasis};
+
+    #[test]
+    fn contour_points_turned_away_from_the_camera_are_hidden() {
+        // Three vertices, each a landmark: 0 faces the camera (+z, the camera 500 mm in front),
+        // 1 faces away (−z), 2 faces sideways at 60° (cos 0.5); one degenerate triangle.
+        let positions = [[0.0f32, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0]];
+        let normals = [[0.0f32, 0.0, 1.0], [0.0, 0.0, -1.0], [0.866, 0.0, 0.5]];
+        let (empty, triangles, landmarks) = ([0.0f32; 0], [[0u32, 1, 2]], [0u32, 1, 2]);
+        let basis = || Basis::Dense(DenseBasis::new(&empty, 0, 3).unwrap());
+        let model = MorphableModel::new(&positions, &positions, basis(), basis(), &triangles, &landmarks).unwrap();
+        let pose = Pose::frontal(500.0);
+        let hide = |contour: usize, min_cos: f32| {
+            let mut mask = [true; 3];
+            hide_turned_away_contour(&model, &positions, &normals, &pose, contour, min_cos, &mut mask);
+            mask
+        };
+        assert_eq!(hide(3, 0.0), [true, false, true]);
+        assert_eq!(hide(3, 0.7), [true, false, false]);
+        assert_eq!(hide(3, -1.5), [true, true, true], "-1 or less keeps every point");
+        assert_eq!(hide(1, 0.7), [true, true, true], "only the contour's points are looked at");
+    }
 
     #[test]
     fn outline_height_interpolates_and_clamps() {

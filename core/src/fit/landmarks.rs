@@ -51,6 +51,21 @@ impl<'a> LandmarkTarget<'a> {
         Ok(Self { factors, ..self })
     }
 
+    /// The same target with another mask of usable points (one per point, at least one usable,
+    /// every usable point finite).
+    pub fn with_valid(self, valid: &'a [bool]) -> Result<Self, FitError> {
+        if valid.len() != self.points.len() {
+            return Err(FitError::LengthMismatch);
+        }
+        if self.points.iter().zip(valid).any(|(p, &v)| v && !(p[0].is_finite() && p[1].is_finite())) {
+            return Err(FitError::NonFinite);
+        }
+        if !valid.iter().any(|&v| v) {
+            return Err(FitError::NoValidLandmarks);
+        }
+        Ok(Self { valid, ..self })
+    }
+
     /// The same target with another σ (pixels, > 0 and finite).
     pub fn with_sigma(self, sigma: f32) -> Result<Self, FitError> {
         if !(sigma > 0.0 && sigma.is_finite()) {
@@ -226,6 +241,16 @@ mod tests {
         for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
             assert_eq!(t.with_sigma(bad).err(), Some(FitError::BadConfig), "{bad}");
         }
+    }
+
+    #[test]
+    fn another_mask_keeps_the_rest_and_needs_a_usable_point() {
+        let (points, valid) = ([[1.0f32, 2.0], [3.0, 4.0]], [true, true]);
+        let t = LandmarkTarget::new(&points, &valid, 0.5).unwrap().with_student_t(4.0).unwrap();
+        let one = t.with_valid(&[false, true]).unwrap();
+        assert_eq!((one.valid(), one.sigma(), one.student_t()), (&[false, true][..], 0.5, 4.0));
+        assert_eq!(t.with_valid(&[false, false]).err(), Some(FitError::NoValidLandmarks));
+        assert_eq!(t.with_valid(&[true]).err(), Some(FitError::LengthMismatch));
     }
 
     #[test]

@@ -31,7 +31,7 @@ use super::chain::{
     image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, ChainState, FitResult, ImageProblem, Problem,
 };
 use super::color_fit::{solve_color, ColorScene, ColorSolveConfig};
-use super::contour::Silhouette;
+use super::contour::{hide_turned_away_contour, Silhouette};
 use super::image::{BackgroundModel, ImageEval, TargetImage};
 use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
@@ -191,6 +191,15 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     {
         start.light = l;
     }
+    // Contour points on the side turned away are left to the pose phase.
+    let mut seen = [false; super::MAX_LANDMARKS];
+    let seen = seen.get_mut(..valid.len()).ok_or(FitError::TooManyLandmarks)?;
+    seen.copy_from_slice(valid);
+    if lm.len() == IBUG68 {
+        let (positions, normals) = (instance.positions(), instance.normals());
+        hide_turned_away_contour(model, positions, normals, &start.pose, contour, settings.landmarks.hidden_contour_min_cos, seen);
+    }
+    let lm = if seen.iter().any(|&v| v) { lm.with_valid(seen)? } else { lm };
     color_rounds::<I, KS, KC>(model, &image, settings, settings.start.color_rounds, &mut start, instance, w, h)?;
     shape_rounds::<I, KS, KC>(model, &image, settings.start.shape_landmarks.then_some(&lm), settings, &mut start, instance, w, h)?;
 

@@ -66,6 +66,12 @@ pub struct LandmarkSettings {
     /// Whether the contour landmarks follow the model's silhouette ([`super::contour`]) instead
     /// of fixed vertices.
     pub silhouette: bool,
+    /// After the pose phase, contour landmarks whose model vertex faces away from the camera
+    /// (cosine between its normal and the direction to the camera below this) are left out of
+    /// the shape solve and the image chain: a detector puts them on the visible outline. −1 or
+    /// less keeps all. 0 (the default) removed the 30–45° frontal pull with exact and detector
+    /// landmarks on the development set (docs/evaluation.md "Turned-away contour points").
+    pub hidden_contour_min_cos: f32,
 }
 
 /// The image chain and the image likelihood.
@@ -178,6 +184,7 @@ impl FitSettings {
             sigma: 0.005,
             student_t: 0.0,
             silhouette: false,
+            hidden_contour_min_cos: 0.0,
         },
         image: ImageSettings {
             steps: 600,
@@ -231,6 +238,7 @@ impl FitSettings {
         if positive(l.sigma)
             && positive(i.pixel_sigma)
             && positive(i.landmark_sigma_factor)
+            && l.hidden_contour_min_cos.is_finite()
             && positive(l.sigma * i.landmark_sigma_factor)
             && positive(self.start.nominal_distance_mm)
             && self.start.color_stride >= 1
@@ -550,6 +558,7 @@ mod tests {
             FitSettings { landmarks: LandmarkSettings { sigma: -1.0, ..d.landmarks }, ..d },
             FitSettings { image: ImageSettings { background_floor: -0.5, ..d.image }, ..d },
             FitSettings { image: ImageSettings { landmark_sigma_factor: 0.0, ..d.image }, ..d },
+            FitSettings { landmarks: LandmarkSettings { hidden_contour_min_cos: f32::NAN, ..d.landmarks }, ..d },
             FitSettings { image: ImageSettings { landmark_sigma_factor: f32::INFINITY, ..d.image }, ..d },
             FitSettings { start: StartSettings { nominal_distance_mm: 0.0, ..d.start }, ..d },
             FitSettings { start: StartSettings { color_stride: 0, ..d.start }, ..d },

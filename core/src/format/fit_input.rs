@@ -26,7 +26,7 @@ use serde::{de::DeserializeOwned, Serialize};
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFI";
 /// The layout version written and read.
-pub const VERSION: u32 = 7;
+pub const VERSION: u32 = 8;
 /// Bytes before the settings payload.
 pub const HEADER_BYTES: usize = 32;
 /// Largest settings payload.
