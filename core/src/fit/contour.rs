@@ -15,6 +15,7 @@
 //! contour point), with the outline found per pose instead of from a fixed vertex list.
 
 use super::landmarks::LandmarkTarget;
+use super::light_fit::facing;
 use super::FitError;
 use crate::model::morphable::MorphableModel;
 use crate::render::pose::mat_vec;
@@ -260,8 +261,6 @@ impl<'a> Silhouette<'a> {
     }
 }
 
-/// The frontal outline's height at `x`: piecewise linear through the contour points, clamped at
-/// the ends (they are ordered in x, in either direction).
 /// Clears `mask[i]` for each of the first `contour` landmarks whose model vertex faces away from
 /// the camera under `pose` (cosine between its normal and the direction to the camera below
 /// `min_cos`): a detector puts such a point on the visible outline, where the fixed vertex is
@@ -277,20 +276,17 @@ pub fn hide_turned_away_contour<I: TriIndex>(
     mask: &mut [bool],
 ) {
     let r = pose.rotation();
-    let t = pose.translation;
     for (seen, &v) in mask.iter_mut().zip(model.landmarks()).take(contour.min(MAX_CONTOUR)) {
         let (Some(p), Some(n)) = (positions.get(v as usize), normals.get(v as usize)) else { continue };
-        let q = mat_vec(&r, *p);
-        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
-        let dist = libm::sqrtf(dot(pc, pc));
-        let cos = -dot(mat_vec(&r, *n), pc) / dist;
         // NaN (a degenerate vertex) keeps the point.
-        if cos < min_cos {
+        if facing(&r, pose.translation, *p, *n).cos < min_cos {
             *seen = false;
         }
     }
 }
 
+/// The frontal outline's height at `x`: piecewise linear through the contour points, clamped at
+/// the ends (they are ordered in x, in either direction).
 fn outline_height(outline: &[[f32; 2]], x: f32) -> f32 {
     let (Some(first), Some(last)) = (outline.first(), outline.last()) else {
         return f32::NEG_INFINITY;

@@ -17,6 +17,17 @@ pub struct LandmarkTarget<'a> {
     nu: f32,
 }
 
+/// Every usable point finite, and one usable at all.
+fn check_mask(points: &[[f32; 2]], valid: &[bool]) -> Result<(), FitError> {
+    if points.iter().zip(valid).any(|(p, &v)| v && !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(FitError::NonFinite);
+    }
+    if !valid.iter().any(|&v| v) {
+        return Err(FitError::NoValidLandmarks);
+    }
+    Ok(())
+}
+
 impl<'a> LandmarkTarget<'a> {
     /// Checks that `points` and `valid` have the same length (at most [`MAX_LANDMARKS`]), that
     /// every valid point is finite, that one is valid at all and that `sigma > 0` (pixels).
@@ -30,12 +41,7 @@ impl<'a> LandmarkTarget<'a> {
         if !(sigma > 0.0 && sigma.is_finite()) {
             return Err(FitError::BadConfig);
         }
-        if points.iter().zip(valid).any(|(p, &v)| v && !(p[0].is_finite() && p[1].is_finite())) {
-            return Err(FitError::NonFinite);
-        }
-        if !valid.iter().any(|&v| v) {
-            return Err(FitError::NoValidLandmarks);
-        }
+        check_mask(points, valid)?;
         Ok(Self { points, valid, sigma, factors: &[], outward: &[], nu: 0.0 })
     }
 
@@ -57,12 +63,7 @@ impl<'a> LandmarkTarget<'a> {
         if valid.len() != self.points.len() {
             return Err(FitError::LengthMismatch);
         }
-        if self.points.iter().zip(valid).any(|(p, &v)| v && !(p[0].is_finite() && p[1].is_finite())) {
-            return Err(FitError::NonFinite);
-        }
-        if !valid.iter().any(|&v| v) {
-            return Err(FitError::NoValidLandmarks);
-        }
+        check_mask(self.points, valid)?;
         Ok(Self { valid, ..self })
     }
 

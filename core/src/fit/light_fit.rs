@@ -95,6 +95,29 @@ pub fn solve_light(
     Ok(light)
 }
 
+/// A model-space vertex seen from the camera: where it is, where its normal points, and how
+/// squarely it faces the camera.
+pub(super) struct Facing {
+    /// Camera-space position.
+    pub position: Vec3,
+    /// Camera-space normal.
+    pub normal: Vec3,
+    /// Cosine between the normal and the direction to the camera (1: facing it, < 0: turned away;
+    /// NaN at the camera's centre or for a degenerate normal).
+    pub cos: f32,
+}
+
+/// The vertex at `p` with normal `n` (model space) under rotation `r` and translation `t`: the one
+/// facing test of the light, colour and shape solves and of the contour landmarks.
+pub(super) fn facing(r: &[[f32; 3]; 3], t: Vec3, p: Vec3, n: Vec3) -> Facing {
+    let normal = mat_vec(r, n);
+    let q = mat_vec(r, p);
+    let position = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
+    let dist = libm::sqrtf(position[0] * position[0] + position[1] * position[1] + position[2] * position[2]);
+    let cos = -(normal[0] * position[0] + normal[1] * position[1] + normal[2] * position[2]) / dist;
+    Facing { position, normal, cos }
+}
+
 /// Calls `f(vertex, camera-space normal, target colour)` for every `stride`-th vertex from
 /// `offset` that faces the camera (cosine ≥ `min_cos`) and projects into `image`; returns their
 /// number. The sample walk of the light and colour solves (visibility is a back-facing test only).
@@ -111,14 +134,9 @@ pub(super) fn visit_facing(
     mut f: impl FnMut(usize, Vec3, Vec3),
 ) -> usize {
     let r = pose.rotation();
-    let t = pose.translation;
     let mut m = 0;
     for (v, (p, n)) in positions.iter().zip(normals).enumerate().skip(offset).step_by(stride.max(1)) {
-        let nc = mat_vec(&r, *n);
-        let q = mat_vec(&r, *p);
-        let pc = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
-        let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
-        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
+        let Facing { position: pc, normal: nc, cos } = facing(&r, pose.translation, *p, *n);
         if cos.is_nan() || cos < min_cos {
             continue;
         }

@@ -97,11 +97,7 @@ impl Frame<'_, '_> {
 
     /// Whether a vertex faces the camera by at least `min_cos`.
     fn faces(&self, p: Vec3, n: Vec3, min_cos: f32) -> bool {
-        let pc = self.to_camera(p);
-        let nc = mat_vec(&self.rotation, n);
-        let dist = libm::sqrtf(pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]);
-        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
-        cos >= min_cos
+        super::light_fit::facing(&self.rotation, self.translation, p, n).cos >= min_cos
     }
 }
 

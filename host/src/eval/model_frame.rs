@@ -64,13 +64,10 @@ pub fn fit_in_face_frame(model: &GpModel, shape_coeffs: &[f32], fit_rad: [f32; 3
     if model.landmarks.len() != 68 {
         return Err(format!("the model has {} landmarks, not the 68 of iBUG-68", model.landmarks.len()));
     }
-    let shape = model.shape.instance(shape_coeffs).map_err(|e| e.to_string())?;
-    let lm: Vec<[f64; 3]> = model
-        .landmarks
-        .iter()
-        .map(|&v| shape.get(v as usize).map(|p| p.map(f64::from)).ok_or_else(|| format!("model landmark vertex {v} is past the mesh")))
-        .collect::<Result<_, _>>()?;
-    pose_of_face_frame(&lm, fit_rad)
+    // The fitted shape's landmark vertices only, as the fitter computes them.
+    let mut lm = [[0.0f32; 3]; 68];
+    crate::fit::morphable(model).map_err(|e| e.to_string())?.landmark_positions(shape_coeffs, &mut lm).map_err(|e| e.to_string())?;
+    pose_of_face_frame(&lm.map(|p| p.map(f64::from)), fit_rad)
 }
 
 /// The yaw, pitch, roll (radians) of the iBUG frame of landmarks `lm` (model coordinates) when
