@@ -8,8 +8,8 @@ mod fit_support;
 use fit_support::*;
 use gpmm_core::fit::{
     image_chain_with, image_log_likelihood, landmark_chain_with, BackgroundLikelihood, BackgroundModel, ChainObserver, FitParams,
-    GaussianPixel, ImageProblem, LightSolveConfig, Mixture, OneOf, PixelLikelihood, Prior, Problem, Proposal, ProposalContext,
-    ProposalStep, StandardProposal, StepOutcome, TargetImage, DEFAULT_PIXEL_SIGMA,
+    GaussianPixel, ImageProblem, LightSolveConfig, Mixture, OneOf, PixelLikelihood, PosteriorMoments, Prior, Problem, Proposal,
+    ProposalContext, ProposalStep, StandardProposal, StepOutcome, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
 use gpmm_core::Vec3;
 use rand_core::{Rng, SeedableRng};
@@ -133,12 +133,22 @@ fn a_user_pixel_likelihood_and_user_proposals_run_in_the_image_chain() {
     let mut bufs = Buffers::new(synth.vertices());
     let mut inst = bufs.instance();
     let mut raster = Raster::new();
+    let prior_yaw = truth.pose.yaw;
     let mut start = truth;
     start.pose.yaw += 3f32.to_radians();
     let steps = 120;
     let mut obs = ByName::default();
+    let mut moments = PosteriorMoments::<{ fit_support::KS }, { fit_support::KC }>::new(40);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
-    let fit = image_chain_with(&problem, &ip, &start, steps, &mut inst, &mut raster, &mut rng, &mut obs).unwrap();
+    let fit = image_chain_with(&problem, &ip, &start, steps, &mut inst, &mut raster, &mut rng, (&mut obs, &mut moments)).unwrap();
+
+    // A second observer beside the first summarized the states after the burn-in.
+    assert_eq!(moments.samples(), steps - 40);
+    assert_eq!(moments.color_mean().count(), fit.best.color_coeffs().len());
+    let yaw = moments.angles_mean()[0];
+    assert!((yaw - prior_yaw).abs() < 5f32.to_radians(), "{yaw} {prior_yaw}");
+    // A yaw that stopped moving before the burn-in is the last state's, with no spread.
+    assert!(moments.angles_sd()[0] > 0.0 || yaw == fit.last.pose.yaw);
 
     // The observer was told about every component, every step and every proposal.
     assert_eq!(obs.components.len(), mix.entries().len());
@@ -192,10 +202,15 @@ fn user_proposals_run_in_the_landmark_chain() {
     let problem =
         Problem { model, landmarks: target(&points, &valid), prior: &prior, mixture: &mix, width: W, height: H, silhouette: None };
     let mut obs = ByName::default();
+    let mut moments = PosteriorMoments::<{ fit_support::KS }, { fit_support::KC }>::new(150);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-    let fit = landmark_chain_with(&problem, &truth, 200, &mut rng, &mut obs).unwrap();
+    let fit = landmark_chain_with(&problem, &truth, 200, &mut rng, (&mut obs, &mut moments)).unwrap();
     assert_eq!(fit.best, truth);
     assert_eq!(fit.last, truth);
+    // The state never moved: its mean is the state, its spread zero.
+    assert_eq!(moments.samples(), 50);
+    assert!(moments.shape_mean().eq(truth.shape_coeffs().iter().copied()));
+    assert!(moments.shape_sd().all(|s| s == 0.0) && moments.angles_sd() == [0.0; 3]);
     let (never, stay) = (obs.outcomes["never"].len(), obs.outcomes["stay"].len());
     assert_eq!(never + stay, 200);
     // Weights 1 : 3.

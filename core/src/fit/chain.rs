@@ -24,7 +24,7 @@ use super::landmarks::{evaluate_landmarks_rotated, LandmarkEval, LandmarkTarget,
 use super::light_fit::{solve_light, LightSolveConfig};
 use super::likelihood::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
 use super::normal::{uniform, uniform_open0};
-use super::observer::{Acceptance, ChainObserver, NoObserver, Progress, ProposalStep, StepOutcome};
+use super::observer::{Acceptance, ChainObserver, ChainSample, NoObserver, Progress, ProposalStep, StepOutcome};
 use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::{Mixture, Proposal, ProposalContext, StandardProposal};
@@ -440,6 +440,15 @@ where
         let report = ProposalStep { step, id, name: proposal.name(), outcome, log_posterior: cur.log_posterior() };
         acc.proposal(&report);
         observer.proposal(&report);
+        let p = &cur.params;
+        observer.sample(&ChainSample {
+            step,
+            pose: &p.pose,
+            light: &p.light,
+            shape: p.shape_coeffs(),
+            color: p.color_coeffs(),
+            log_posterior: report.log_posterior,
+        });
     }
     observer.progress(steps);
     let [a, b] = states;

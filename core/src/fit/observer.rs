@@ -3,6 +3,7 @@
 //! name, log or trace with their own observers.
 
 use super::proposal::MAX_PROPOSALS;
+use crate::{Pose, ShLight};
 
 /// What became of one proposal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,7 +47,25 @@ pub struct ProposalStep {
     pub log_posterior: f32,
 }
 
-/// Watches a chain: progress before each step and the outcome of every proposal.
+/// The chain's current state after a step (borrowed: an observer copies what it keeps).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChainSample<'a> {
+    /// The step's index in its chain (0-based).
+    pub step: u32,
+    /// The rigid pose.
+    pub pose: &'a Pose,
+    /// The light.
+    pub light: &'a ShLight,
+    /// The active shape coefficients.
+    pub shape: &'a [f32],
+    /// The active colour coefficients.
+    pub color: &'a [f32],
+    /// The log posterior (up to a constant).
+    pub log_posterior: f32,
+}
+
+/// Watches a chain: progress before each step, the outcome of every proposal and the state
+/// after it.
 pub trait ChainObserver {
     /// Called once per mixture component before the first step (index and
     /// [`super::Proposal::name`]), so that reports can list components never drawn.
@@ -57,6 +76,10 @@ pub trait ChainObserver {
 
     /// Called once per proposal, after the chain decided.
     fn proposal(&mut self, _step: &ProposalStep) {}
+
+    /// Called after each step with the chain's current state (the accepted proposal or the
+    /// state it stayed in): what a posterior summary averages.
+    fn sample(&mut self, _sample: &ChainSample<'_>) {}
 }
 
 /// Observes nothing.
@@ -87,6 +110,10 @@ impl<O: ChainObserver + ?Sized> ChainObserver for &mut O {
     fn proposal(&mut self, step: &ProposalStep) {
         (**self).proposal(step)
     }
+
+    fn sample(&mut self, sample: &ChainSample<'_>) {
+        (**self).sample(sample)
+    }
 }
 
 /// Two observers, both told everything (first `.0`, then `.1`).
@@ -104,6 +131,11 @@ impl<A: ChainObserver, B: ChainObserver> ChainObserver for (A, B) {
     fn proposal(&mut self, step: &ProposalStep) {
         self.0.proposal(step);
         self.1.proposal(step);
+    }
+
+    fn sample(&mut self, sample: &ChainSample<'_>) {
+        self.0.sample(sample);
+        self.1.sample(sample);
     }
 }
 

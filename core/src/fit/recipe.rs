@@ -37,7 +37,7 @@ use super::init::{initial_guess, landmark_pivot};
 use super::landmarks::{LandmarkEval, LandmarkTarget};
 use super::light_fit::solve_light;
 use super::likelihood::GaussianPixel;
-use super::observer::{Acceptance, ChainObserver, ProposalStep};
+use super::observer::{Acceptance, ChainObserver, ChainSample, ProposalStep};
 use super::params::FitParams;
 use super::prior::Prior;
 use super::proposal::{Mixture, StandardProposal};
@@ -76,6 +76,9 @@ pub trait FitObserver {
 
     /// One proposal of a chain of `stage` (both landmark phases report [`Stage::LandmarkChain`]).
     fn proposal(&mut self, _stage: Stage, _step: &ProposalStep) {}
+
+    /// The state of a chain of `stage` after a step (see [`ChainObserver::sample`]).
+    fn sample(&mut self, _stage: Stage, _sample: &ChainSample<'_>) {}
 }
 
 /// A [`FitObserver`] seen by one chain (or one phase of the landmark chain): progress is shifted
@@ -102,6 +105,10 @@ impl ChainObserver for PhaseObserver<'_> {
 
     fn proposal(&mut self, step: &ProposalStep) {
         self.observer.proposal(self.stage, step)
+    }
+
+    fn sample(&mut self, sample: &ChainSample<'_>) {
+        self.observer.sample(self.stage, sample)
     }
 }
 

@@ -3,6 +3,7 @@
 use crate::progress::{bar_style, note, spinner};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use gpmm_host::eval::recognition::Coefficients;
 use gpmm_host::gp::kernel::ModelKernel;
 use indicatif::ProgressBar;
 use std::path::{Path, PathBuf};
@@ -168,6 +169,12 @@ pub struct RecognitionArgs {
     /// OUT/seeds.{md,json} (one seed's figure moves by several points with the chains' path).
     #[arg(long, value_delimiter = ',', num_args = 1.., default_values_t = [gpmm_host::fit::FitOptions::DEFAULT.seed], value_name = "SEED")]
     pub fit_seed: Vec<u64>,
+    /// Which coefficients are compared: the image chain's posterior mean over its second half
+    /// (the posterior's estimate; where the image says little, as for a colour the light explains
+    /// as well, it stays near the prior instead of where the chain's walk left it), or its best
+    /// sample (the fit `gpmm fit` draws).
+    #[arg(long, value_enum, default_value_t = CoefficientsArg::PosteriorMean)]
+    pub coefficients: CoefficientsArg,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -178,6 +185,24 @@ pub struct RecognitionArgs {
     /// Output directory.
     #[arg(short, long, value_name = "OUT")]
     pub output: PathBuf,
+}
+
+/// `--coefficients` of `gpmm eval recognition` (see [`Coefficients`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CoefficientsArg {
+    /// The image chain's posterior mean over its second half.
+    PosteriorMean,
+    /// The image chain's best sample.
+    Best,
+}
+
+impl From<CoefficientsArg> for Coefficients {
+    fn from(a: CoefficientsArg) -> Self {
+        match a {
+            CoefficientsArg::PosteriorMean => Coefficients::PosteriorMean,
+            CoefficientsArg::Best => Coefficients::Best,
+        }
+    }
 }
 
 /// Arguments of `gpmm eval specgen`.
@@ -263,7 +288,7 @@ fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) 
 
 /// Runs `gpmm eval recognition`.
 pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
-    use gpmm_host::eval::recognition::{evaluate, write_report, Progress, RecognitionReport, SynthSet};
+    use gpmm_host::eval::recognition::{evaluate, write_report, FitPlan, Progress, RecognitionReport, SynthSet};
     let t0 = Instant::now();
     let q = a.models.quick;
     if !a.synth.is_dir() {
@@ -335,7 +360,8 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
                 );
             }
         };
-        let results = evaluate(&rows, &set, &settings, &kde_settings, jobs, &out, &progress)?;
+        let plan = FitPlan { settings, kde_settings, coefficients: a.coefficients.into() };
+        let results = evaluate(&rows, &set, &plan, jobs, &out, &progress)?;
         bar.finish_and_clear();
         let report = RecognitionReport {
             synth_dir: a.synth.display().to_string(),
@@ -345,6 +371,7 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
             chance: 1.0 / set.identities.len().max(1) as f64,
             settings,
             kde_settings: (kde_settings != settings && sel.kde.is_some_and(|n| n > 1)).then_some(kde_settings),
+            coefficients: a.coefficients.into(),
             jobs,
             command: command_line(),
             rows: results,

@@ -141,6 +141,16 @@ fn recognition_quick_writes_a_consistent_table_and_reuses_its_fits() {
     let tiny_row = |rows: &[Vec<String>]| rows.iter().find(|r| r[0] == "tiny").map(|r| r[..8].to_vec());
     assert_eq!(tiny_row(&csv_rows(&out.join("recognition.csv"))), tiny_row(&rows));
 
+    // The best samples instead of the posterior means: the cache knows which it kept, and the
+    // reports say which were compared.
+    assert_eq!(report["coefficients"], "posterior-mean");
+    let best_out = f.dir.path().join("recognition-best");
+    let best = ok(&gpmm(&[&tiny[..], &["--image-steps", "20", "--coefficients", "best", "-o", s(&best_out)]].concat()));
+    assert!(best.contains("compared: the image chain's best sample"), "{best}");
+    assert_eq!(read_json(&best_out.join("recognition.json"))["coefficients"], "best");
+    let again_best = ok(&gpmm(&[&tiny[..], &["--image-steps", "20", "--coefficients", "posterior-mean", "-o", s(&best_out)]].concat()));
+    assert_eq!(again_best.matches(", cached").count(), 0, "{again_best}");
+
     // Several fit seeds: one full report per seed, and their pooled figures side by side. The
     // first seed's report is the single-seed run's (same settings, same fits).
     let seeds_out = f.dir.path().join("recognition-seeds");

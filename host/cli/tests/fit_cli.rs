@@ -112,6 +112,15 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     let acc = &j["acceptance"]["image_chain"]["yaw"];
     assert!(acc["proposed"].as_u64().unwrap() >= acc["passed"].as_u64().unwrap());
     assert!(j["pixel_rmse"].as_f64().unwrap() <= j["pixel_rmse_after_landmark_chain"].as_f64().unwrap());
+    // The image chain's second half summarized: one sample per step, a mean and a spread per
+    // fitted coefficient, and a mean yaw near the fit's.
+    let post = &j["posterior"];
+    assert_eq!((post["burn_in"].as_u64(), post["samples"].as_u64()), (Some(30), Some(30)), "{post}");
+    assert_eq!(post["shape_mean"].as_array().unwrap().len(), 20);
+    assert_eq!(post["color_sd"].as_array().unwrap().len(), j["color"].as_array().unwrap().len());
+    assert!(post["color_sd"].as_array().unwrap().iter().all(|v| v.as_f64().unwrap() >= 0.0));
+    let mean_yaw = post["angles_mean_deg"][0].as_f64().unwrap();
+    assert!((mean_yaw - yaw).abs() < 2.0, "posterior mean yaw {mean_yaw}, fit {yaw}");
     let overlay = image::open(out.path().join("overlay.png")).unwrap();
     assert!(overlay.width() > 3 * 128 && overlay.height() > 128);
     let ply = std::fs::read(out.path().join("fit.ply")).unwrap();

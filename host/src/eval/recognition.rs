@@ -44,6 +44,38 @@ pub struct ImageFit {
     pub seconds: f64,
 }
 
+/// Which of a fit's coefficients are compared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Coefficients {
+    /// The image chain's posterior mean (its second half): the posterior's estimate.
+    #[default]
+    PosteriorMean,
+    /// The image chain's best sample (the fit `gpmm fit` draws).
+    Best,
+}
+
+impl Coefficients {
+    /// How reports name it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Coefficients::PosteriorMean => "the image chain's posterior mean",
+            Coefficients::Best => "the image chain's best sample",
+        }
+    }
+}
+
+/// How [`evaluate`] fits: the settings, those of KDE components, and the coefficients compared.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitPlan {
+    /// Fit settings.
+    pub settings: FitOptions,
+    /// Settings of the KDE components' fits.
+    pub kde_settings: FitOptions,
+    /// The coefficients compared.
+    pub coefficients: Coefficients,
+}
+
 /// Which coefficients identify a face.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -160,6 +192,9 @@ pub struct RecognitionReport {
     pub settings: FitOptions,
     /// Settings of the KDE components' fits, if different.
     pub kde_settings: Option<FitOptions>,
+    /// The coefficients compared (absent in older reports: the best sample).
+    #[serde(default = "best_sample")]
+    pub coefficients: Coefficients,
     /// Threads.
     pub jobs: usize,
     /// The command line that produced the report.
@@ -231,28 +266,45 @@ impl SynthSet {
     }
 }
 
-fn fit_one(model: &crate::gp::model::GpModel, set: &SynthSet, t: &ImageTruth, settings: &FitOptions) -> Result<ImageFit, String> {
+/// What reports written before the choice compared.
+fn best_sample() -> Coefficients {
+    Coefficients::Best
+}
+
+fn fit_one(
+    model: &crate::gp::model::GpModel,
+    set: &SynthSet,
+    t: &ImageTruth,
+    settings: &FitOptions,
+    coefficients: Coefficients,
+) -> Result<ImageFit, String> {
     let t0 = Instant::now();
     let pts = set.landmarks.file(&set.dir, &t.landmarks_file);
     let prepared = load_photo(model, &set.dir.join(&t.image), &pts, false, settings.size, set.landmarks.calibration())
         .map_err(|e| format!("{}: {e}", t.image))?;
     let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", t.image))?;
+    let p = match coefficients {
+        Coefficients::PosteriorMean => o.posterior.mean_params(&o.params),
+        Coefficients::Best => o.params,
+    };
     Ok(ImageFit {
         image: t.image.clone(),
         identity: t.identity,
         yaw_deg: t.yaw_deg,
-        shape: o.params.shape_coeffs().to_vec(),
-        color: o.params.color_coeffs().to_vec(),
+        shape: p.shape_coeffs().to_vec(),
+        color: p.color_coeffs().to_vec(),
         pixel_rmse: o.pixel_rmse,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }
 
-/// Fits every image of `set` with the model at `model_path` (cached in `cache`); `progress(done, total)` after each fit.
+/// Fits every image of `set` with the model at `model_path` (cached in `cache`) and keeps
+/// `coefficients`; `progress(done, total)` after each fit.
 pub fn fit_set(
     model_path: &Path,
     set: &SynthSet,
     settings: &FitOptions,
+    coefficients: Coefficients,
     jobs: usize,
     cache: &Path,
     progress: &(dyn Fn(usize, usize) + Sync),
@@ -266,6 +318,7 @@ pub fn fit_set(
         "settings": settings_text,
         "truth_sha256": set.truth_sha256,
         "images": set.images.iter().map(|t| t.image.as_str()).collect::<Vec<_>>(),
+        "coefficients": coefficients,
     });
     let mut key = key;
     if let Some(d) = &set.landmarks.dir {
@@ -303,7 +356,7 @@ pub fn fit_set(
         set.images
             .par_iter()
             .map(|t| {
-                let r = fit_one(&model, set, t, settings);
+                let r = fit_one(&model, set, t, settings, coefficients);
                 progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
                 r
             })
@@ -391,12 +444,12 @@ pub enum Progress<'a> {
     RowDone(&'a RowResult),
 }
 
-/// Evaluates every row on `set`; KDE rows (label starting with `kde`) use `kde_settings`.
+/// Evaluates every row on `set` as `plan` says (rows of several components, the KDEs, with its
+/// `kde_settings`).
 pub fn evaluate(
     rows: &[Row],
     set: &SynthSet,
-    settings: &FitOptions,
-    kde_settings: &FitOptions,
+    plan: &FitPlan,
     jobs: usize,
     out: &Path,
     progress: &(dyn Fn(Progress<'_>) + Sync),
@@ -404,12 +457,12 @@ pub fn evaluate(
     let yaws = set.probe_yaws();
     let mut results = Vec::new();
     for row in rows {
-        let s = if row.components.len() > 1 { kde_settings } else { settings };
+        let s = if row.components.len() > 1 { &plan.kde_settings } else { &plan.settings };
         let mut sets = Vec::new();
         let mut cached = true;
         for (label, path) in &row.components {
             let cache = out.join("fits").join(format!("{label}.json"));
-            let (fs, hit) = fit_set(path, set, s, jobs, &cache, &|d, t| progress(Progress::Fitting(label, d, t)))?;
+            let (fs, hit) = fit_set(path, set, s, plan.coefficients, jobs, &cache, &|d, t| progress(Progress::Fitting(label, d, t)))?;
             cached &= hit;
             sets.push(fs);
         }
@@ -455,7 +508,7 @@ pub fn markdown(report: &RecognitionReport) -> String {
     let mut s = String::new();
     s.push_str(&format!(
         "Rank-1 recognition (%), gallery yaw 0 ({} identities, chance {} %), `gpmm synth` seed {}; [Wilson 95 % interval]; \
-fit: {} landmark + {} image steps at {}x{} px, {} shape + {} colour components",
+fit: {} landmark + {} image steps at {}x{} px, {} shape + {} colour components; compared: {}",
         report.gallery,
         pct(report.chance),
         report.synth_seed,
@@ -464,7 +517,8 @@ fit: {} landmark + {} image steps at {}x{} px, {} shape + {} colour components",
         report.settings.size,
         report.settings.size,
         report.settings.fit.ranks.shape,
-        report.settings.fit.ranks.color
+        report.settings.fit.ranks.color,
+        report.coefficients.describe()
     ));
     if let Some(k) = &report.kde_settings {
         s.push_str(&format!(" (KDE components: {} image steps)", k.fit.image.steps));

@@ -26,8 +26,8 @@ use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
-    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SolveScratch, SpareBuffers, TargetImage,
-    MAX_LANDMARKS, MAX_SHAPE_SOLVE,
+    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, PosteriorMoments, RankSettings, SolveScratch,
+    SpareBuffers, TargetImage, MAX_LANDMARKS, MAX_SHAPE_SOLVE,
 };
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::shading::{ShadingBuffers, ShadingCache};
@@ -229,6 +229,8 @@ pub struct Outcome {
     pub landmark_acceptance: AcceptanceReport,
     /// Image-chain counts.
     pub image_acceptance: AcceptanceReport,
+    /// The image chain's posterior summary (its second half).
+    pub posterior: PosteriorSummary,
     /// The fit's projected model landmarks.
     pub fitted_landmarks: Vec<[f32; 2]>,
     /// The fit rendered (transparent where the model does not cover).
@@ -294,11 +296,12 @@ pub fn fit_prepared(
 
     // One run of the core's standard fit; the observer reports progress, splits the time and
     // counts the proposals by name.
-    let mut observer = observe::HostObserver::new(progress);
+    let mut observer = observe::HostObserver::new(progress, core_settings.image.steps / 2);
     let result = standard_fit(&mm, target, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut rng, &mut observer)
         .map_err(core("fit"))?;
     let landmark_seconds = observer.landmark_seconds;
     let image_seconds = observer.elapsed() - landmark_seconds;
+    let posterior = PosteriorSummary::of(&observer.posterior);
     let (landmark_acceptance, image_acceptance) = (observer.landmark, observer.image);
     let best = result.image;
     let start = result.start;
@@ -325,6 +328,7 @@ pub fn fit_prepared(
         covered_pixels: img_eval.covered,
         landmark_acceptance,
         image_acceptance,
+        posterior,
         fitted_landmarks,
         render: sink.into_image(),
         landmark_seconds,
@@ -371,6 +375,56 @@ pub struct Timing {
     pub landmark_step_us: f64,
     /// Milliseconds per image step.
     pub image_step_ms: f64,
+}
+
+/// The image chain's posterior summary: mean and standard deviation of the coefficients and
+/// the rotation over its samples from half-way on (one sample per step, the state the chain is
+/// in). The mean is the posterior's estimate; the best sample (the fit) is one draw.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PosteriorSummary {
+    /// Image-chain steps left out before the samples start.
+    pub burn_in: u32,
+    /// Samples summed.
+    pub samples: u32,
+    /// Mean shape coefficients.
+    pub shape_mean: Vec<f32>,
+    /// Their standard deviations.
+    pub shape_sd: Vec<f32>,
+    /// Mean colour coefficients.
+    pub color_mean: Vec<f32>,
+    /// Their standard deviations.
+    pub color_sd: Vec<f32>,
+    /// Mean yaw, pitch and roll (degrees).
+    pub angles_mean_deg: [f32; 3],
+    /// Their standard deviations (degrees).
+    pub angles_sd_deg: [f32; 3],
+}
+
+impl PosteriorSummary {
+    /// The summary of the core's moments.
+    pub fn of(m: &PosteriorMoments<KS, KC>) -> Self {
+        Self {
+            burn_in: m.burn_in(),
+            samples: m.samples(),
+            shape_mean: m.shape_mean().collect(),
+            shape_sd: m.shape_sd().collect(),
+            color_mean: m.color_mean().collect(),
+            color_sd: m.color_sd().collect(),
+            angles_mean_deg: m.angles_mean().map(f32::to_degrees),
+            angles_sd_deg: m.angles_sd().map(f32::to_degrees),
+        }
+    }
+
+    /// The mean coefficients in place of `params`' (its pose, focal and light kept); `params`
+    /// unchanged if nothing was summed or the lengths differ.
+    pub fn mean_params(&self, params: &Params) -> Params {
+        let mut p = params.clone();
+        if self.samples > 0 && self.shape_mean.len() == p.shape_len() && self.color_mean.len() == p.color_len() {
+            p.shape_coeffs_mut().copy_from_slice(&self.shape_mean);
+            p.color_coeffs_mut().copy_from_slice(&self.color_mean);
+        }
+        p
+    }
 }
 
 /// Log densities of the fit.
@@ -472,6 +526,9 @@ pub struct FitReport {
     pub log_densities: LogDensities,
     /// Per proposal kind: proposed, passed the prior-and-landmark stage, accepted.
     pub acceptance: AcceptanceBoth,
+    /// The image chain's posterior summary (absent in older files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub posterior: Option<PosteriorSummary>,
     /// The fit's landmarks in the original image.
     pub fitted_landmarks: Vec<[f32; 2]>,
     /// Total wall-clock seconds of crop and fit (absent with `--no-timing`; not deterministic).
@@ -560,6 +617,7 @@ pub fn report(
         log_likelihood: o.image_log_likelihood + o.landmark_log_likelihood,
         log_densities: LogDensities { posterior: o.log_posterior, image: o.image_log_likelihood, landmarks: o.landmark_log_likelihood },
         acceptance: AcceptanceBoth { landmark_chain: o.landmark_acceptance.clone(), image_chain: o.image_acceptance.clone() },
+        posterior: Some(o.posterior.clone()),
         fitted_landmarks: fitted,
         seconds,
         timing,

@@ -1,8 +1,9 @@
 //! The host's observer of the core's standard fit: progress reports in chunks, the landmark
-//! chain's wall time, and acceptance counts per proposal name as the chains report them.
+//! chain's wall time, acceptance counts per proposal name as the chains report them, and the
+//! image chain's posterior moments.
 
-use super::{AcceptanceReport, KindCounts};
-use gpmm_core::fit::{FitObserver, ProposalStep, Stage};
+use super::{AcceptanceReport, KindCounts, KC, KS};
+use gpmm_core::fit::{ChainObserver, ChainSample, FitObserver, PosteriorMoments, ProposalStep, Stage};
 use std::time::Instant;
 
 /// Landmark-chain steps between progress reports.
@@ -20,12 +21,21 @@ pub(crate) struct HostObserver<'p> {
     pub landmark: AcceptanceReport,
     /// Counts of the image chain, by proposal name.
     pub image: AcceptanceReport,
+    /// The image chain's samples from its burn-in on.
+    pub posterior: Box<PosteriorMoments<KS, KC>>,
 }
 
 impl<'p> HostObserver<'p> {
-    /// Starts the clock now.
-    pub fn new(progress: &'p mut dyn FnMut(&str, u64, u64)) -> Self {
-        Self { progress, t0: Instant::now(), landmark_seconds: 0.0, landmark: AcceptanceReport::new(), image: AcceptanceReport::new() }
+    /// Starts the clock now; the posterior summary leaves out the image chain's first `burn_in` steps.
+    pub fn new(progress: &'p mut dyn FnMut(&str, u64, u64), burn_in: u32) -> Self {
+        Self {
+            progress,
+            t0: Instant::now(),
+            landmark_seconds: 0.0,
+            landmark: AcceptanceReport::new(),
+            image: AcceptanceReport::new(),
+            posterior: Box::new(PosteriorMoments::new(burn_in)),
+        }
     }
 
     /// Seconds since [`Self::new`].
@@ -69,5 +79,11 @@ impl FitObserver for HostObserver<'_> {
         c.proposed += 1;
         c.passed += u64::from(step.outcome.passed_filter());
         c.accepted += u64::from(step.outcome.accepted());
+    }
+
+    fn sample(&mut self, stage: Stage, sample: &ChainSample<'_>) {
+        if stage == Stage::ImageChain {
+            self.posterior.sample(sample);
+        }
     }
 }
