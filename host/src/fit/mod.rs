@@ -18,6 +18,7 @@
 
 mod observe;
 mod overrides;
+mod posterior;
 pub mod register;
 
 use crate::gp::model::GpModel;
@@ -26,8 +27,8 @@ use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
 use gpmm_core::fit::{
-    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, PosteriorMoments, RankSettings, SolveScratch,
-    SpareBuffers, TargetImage, MAX_LANDMARKS, MAX_SHAPE_SOLVE,
+    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SolveScratch, SpareBuffers, TargetImage,
+    MAX_LANDMARKS, MAX_SHAPE_SOLVE,
 };
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::shading::{ShadingBuffers, ShadingCache};
@@ -41,6 +42,7 @@ use std::time::Instant;
 
 pub use gpmm_core::fit::FitSettings;
 pub use overrides::override_settings;
+pub use posterior::PosteriorSummary;
 
 /// Shape coefficient capacity of a fit (a model of higher rank is fitted in its first `KS` components).
 pub const KS: usize = 200;
@@ -375,56 +377,6 @@ pub struct Timing {
     pub landmark_step_us: f64,
     /// Milliseconds per image step.
     pub image_step_ms: f64,
-}
-
-/// The image chain's posterior summary: mean and standard deviation of the coefficients and
-/// the rotation over its samples from half-way on (one sample per step, the state the chain is
-/// in). The mean is the posterior's estimate; the best sample (the fit) is one draw.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PosteriorSummary {
-    /// Image-chain steps left out before the samples start.
-    pub burn_in: u32,
-    /// Samples summed.
-    pub samples: u32,
-    /// Mean shape coefficients.
-    pub shape_mean: Vec<f32>,
-    /// Their standard deviations.
-    pub shape_sd: Vec<f32>,
-    /// Mean colour coefficients.
-    pub color_mean: Vec<f32>,
-    /// Their standard deviations.
-    pub color_sd: Vec<f32>,
-    /// Mean yaw, pitch and roll (degrees).
-    pub angles_mean_deg: [f32; 3],
-    /// Their standard deviations (degrees).
-    pub angles_sd_deg: [f32; 3],
-}
-
-impl PosteriorSummary {
-    /// The summary of the core's moments.
-    pub fn of(m: &PosteriorMoments<KS, KC>) -> Self {
-        Self {
-            burn_in: m.burn_in(),
-            samples: m.samples(),
-            shape_mean: m.shape_mean().collect(),
-            shape_sd: m.shape_sd().collect(),
-            color_mean: m.color_mean().collect(),
-            color_sd: m.color_sd().collect(),
-            angles_mean_deg: m.angles_mean().map(f32::to_degrees),
-            angles_sd_deg: m.angles_sd().map(f32::to_degrees),
-        }
-    }
-
-    /// The mean coefficients in place of `params`' (its pose, focal and light kept); `params`
-    /// unchanged if nothing was summed or the lengths differ.
-    pub fn mean_params(&self, params: &Params) -> Params {
-        let mut p = params.clone();
-        if self.samples > 0 && self.shape_mean.len() == p.shape_len() && self.color_mean.len() == p.color_len() {
-            p.shape_coeffs_mut().copy_from_slice(&self.shape_mean);
-            p.color_coeffs_mut().copy_from_slice(&self.color_mean);
-        }
-        p
-    }
 }
 
 /// Log densities of the fit.
