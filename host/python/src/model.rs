@@ -256,7 +256,7 @@ impl Model {
     /// `image`: `H x W x 3` uint8 RGB; `landmarks`: `L x 2` pixel coordinates (0-based, pixel centres at +0.5).
     /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
     /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
-    /// `acceptance`, RMSEs, `crop`) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
+    /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
     /// `working_image` (the crop the chains saw). `landmark_calibration`: a detector calibration file
     /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
     #[pyo3(signature = (image, landmarks, *, seed = None, size = None, landmark_steps = None, image_steps = None,
@@ -327,6 +327,17 @@ impl Model {
         dict.set_item("light", vec3_to_numpy(py, &rep.light)?)?;
         dict.set_item("translation_mm", vec_to_numpy(py, rep.translation_mm.to_vec()))?;
         dict.set_item("fitted_landmarks", points_to_numpy(py, &rep.fitted_landmarks)?)?;
+        if let (Some(post), Ok(Some(d))) = (&rep.posterior, dict.get_item("posterior")) {
+            let d = d.cast::<PyDict>().map_err(|_| err_msg("posterior summary is not a dict"))?;
+            for (key, v) in [
+                ("shape_mean", &post.shape_mean),
+                ("shape_sd", &post.shape_sd),
+                ("color_mean", &post.color_mean),
+                ("color_sd", &post.color_sd),
+            ] {
+                d.set_item(key, vec_to_numpy(py, v.clone()))?;
+            }
+        }
         dict.set_item("overlay", rgba_to_numpy(py, &ov)?)?;
         dict.set_item("render", rgba_to_numpy(py, &outcome.render)?)?;
         dict.set_item("working_image", rgb_to_numpy(py, &prepared.image)?)?;

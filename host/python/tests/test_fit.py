@@ -22,6 +22,8 @@ def assert_same_fit(py_fit, cli_fit):
     for key in ("shape", "color", "light", "translation_mm", "fitted_landmarks", "photo_pose_deg"):
         np.testing.assert_array_equal(np.asarray(py_fit[key], np.float32), np.array(cli_fit[key], np.float32), err_msg=key)
     assert py_fit["acceptance"] == cli_fit["acceptance"]
+    for key in ("shape_mean", "color_mean", "color_sd"):
+        np.testing.assert_array_equal(np.asarray(py_fit["posterior"][key], np.float32), np.array(cli_fit["posterior"][key], np.float32), err_msg=key)
 
 
 def test_demo_model_default_fit_matches_the_cli(demo_model_path, astronaut, run_cli, tmp_path):
@@ -49,6 +51,9 @@ def test_fit_outputs(py_fit):
     assert py_fit["overlay"].ndim == 3 and py_fit["overlay"].shape[2] == 4
     assert py_fit["landmark_rmse_original_px"] < 15.0, "the fit follows the landmarks"
     assert py_fit["acceptance"]["image_chain"], "the image chain ran"
+    post = py_fit["posterior"]
+    assert post["samples"] > 0 and post["color_mean"].shape == py_fit["color"].shape
+    assert post["shape_sd"].dtype == np.float32 and (post["shape_sd"] >= 0).all()
 
 
 def test_fit_settings_and_errors(small_model_path, astronaut, tmp_path):
