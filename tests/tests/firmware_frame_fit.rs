@@ -78,7 +78,7 @@ fn fixture() -> &'static Fixture {
         let (frame, _) = camera_frame(&face.image, 160, 120);
         let view = blob.view().expect("blob view");
         let mut fit = CoreSettings::DEFAULT.with_steps(STEPS.0, STEPS.1).with_ranks(view.rank_shape(), view.rank_color());
-        fit.landmarks.sigma = INIT_LANDMARK_SIGMA;
+        fit.landmarks = fit.landmarks.for_initializer(INIT_LANDMARK_SIGMA);
         let options = FitOptions { size: M4F.frame_fit_side, seed: 5, fit };
         let settings = device_settings(&options.core(), &M4F);
         Fixture { blob, init, frame, settings }

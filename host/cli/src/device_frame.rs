@@ -39,7 +39,7 @@ pub fn device_fit_init(
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
     let (frame, mapping) = camera_frame(&photo, a.width, a.height);
     let mut fit = FitSettings::DEFAULT.with_steps(a.landmark_steps, a.image_steps).with_ranks(rank_shape, rank_color);
-    fit.landmarks.sigma = a.init_landmark_sigma;
+    fit.landmarks = fit.landmarks.for_initializer(a.init_landmark_sigma);
     let options = FitOptions { size: side, seed: a.seed, fit };
     options.validate()?;
     let settings = device_settings(&options.core(), profile);

@@ -135,7 +135,9 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let landmarks = match (a.landmarks, &a.init) {
         (Some(pts), _) => pts,
         (None, Some(init)) => {
-            settings.fit.landmarks.sigma = a.init_landmark_sigma;
+            settings.fit.landmarks = settings.fit.landmarks.for_initializer(a.init_landmark_sigma);
+            // An explicit --set still wins over the initializer's defaults.
+            settings.fit = gpmm_host::fit::override_settings(&settings.fit, &a.settings.overrides)?;
             crate::init::detect_to_dir(&a.image, init, &a.output)?
         }
         (None, None) => {

@@ -128,6 +128,13 @@ fn fit_without_landmarks_detects_them_first() {
     let out2 = f.dir.path().join("fit-init-sigma");
     fit_init(&out2, &[]);
     assert!((sigma(&out2) - 0.02).abs() < 1e-6, "{}", sigma(&out2));
+    // Every contour point is kept (the initializer learned the contour vertices, hidden or not),
+    // unless --set says otherwise.
+    let hidden = |dir: &std::path::Path| json(dir)["settings"]["landmarks"]["hidden_contour_min_cos"].as_f64().unwrap();
+    assert_eq!(hidden(&out2), -1.0);
+    let out3 = f.dir.path().join("fit-init-hidden");
+    fit_init(&out3, &["--set", "landmarks.hidden_contour_min_cos=0.1"]);
+    assert!((hidden(&out3) - 0.1).abs() < 1e-6 && (sigma(&out3) - 0.02).abs() < 1e-6, "{}", hidden(&out3));
     // A calibration of the initializer's landmarks (here: every point 0.1 IOD along the eye line)
     // corrects them before the fit, and fit.json names it.
     let cal = f.dir.path().join("init.cal.json");
