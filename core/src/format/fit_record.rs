@@ -130,7 +130,7 @@ impl<'a> F32s<'a> {
     }
 }
 
-/// A fit record: written by [`write`] from the caller's arrays, read by [`parse`] as a view.
+/// A fit record: written by [`write()`] from the caller's arrays, read by [`parse`] as a view.
 #[derive(Debug, Clone, Copy)]
 pub struct FitRecord<'a> {
     /// The figures.

@@ -2,11 +2,12 @@
 //!
 //! - [`blob`]: the quantized model (`GPMB`, `docs/blob-format.md`);
 //! - [`device_mesh`]: a mesh instance plus the scene to render it in (`GPDM`);
-//! - [`fit_input`]: the target image, its landmarks, the seed and the whole fit settings (`GPFI`);
+//! - `fit_input` (feature `serde`): the target image, its landmarks, the seed and the whole fit
+//!   settings (`GPFI`);
 //! - [`fit_record`]: the fit's result as the firmware reports it (`GPFR`);
 //! - [`detection`]: a camera frame to detect the face in (`GPDF`) and the detection (`GPDR`);
-//! - [`frame_fit`]: the landmark-free fit's job (`GPFF`: working side, seed, settings) and the
-//!   partition layout blob + job + init file + frame.
+//! - `frame_fit` (feature `serde`): the landmark-free fit's job (`GPFF`: working side, seed,
+//!   settings) and the partition layout blob + job + init file + frame.
 //!
 //! All are little-endian, 4-byte aligned where read in place, and end in (or carry) a CRC-32.
 //! Readers check everything before anything is used and return a [`FormatError`], never panic.
@@ -25,7 +26,8 @@ pub mod frame_fit;
 
 use core::fmt;
 
-/// Why bytes were refused by a reader or a writer of [`device_mesh`], [`fit_input`], [`fit_record`] or [`detection`].
+/// Why bytes were refused by a reader or a writer of [`device_mesh`], `fit_input`, [`fit_record`],
+/// [`detection`] or `frame_fit`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum FormatError {

@@ -7,7 +7,7 @@ use crate::render::shading::{ProjectedVertex, TriIndex};
 
 /// The vertex ids (in the rasterizer's set-up order) and perspective-correct weights with which
 /// triangle `tri` colours pixel `(x, y)` of a `width × height` frame, exactly as
-/// [`TileRasterizer::render`] computes them (edge functions evaluated directly instead of
+/// [`crate::TileRasterizer::render`] computes them (edge functions evaluated directly instead of
 /// stepped: the same integers, so the same bits). `None` if the triangle would not be drawn.
 pub fn fragment_weights<I: TriIndex>(
     vertices: &[ProjectedVertex],

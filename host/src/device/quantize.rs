@@ -273,7 +273,7 @@ impl QuantizedPart {
 /// A model reduced to a device profile and quantized, ready to be written as a blob.
 #[derive(Debug, Clone)]
 pub struct QuantizedModel {
-    /// The float model after simplification and rank truncation (the reference of [`quantization_error`]).
+    /// The float model after simplification and rank truncation (the reference of [`super::accuracy::quantization_error`]).
     pub reduced: GpModel,
     /// Vertex ids in the source model of the kept vertices, ascending.
     pub kept: Vec<u32>,

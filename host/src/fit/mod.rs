@@ -1,16 +1,20 @@
 //! Fitting a model to a photo (`gpmm fit`): crop around the landmarks, the core's landmark chain,
 //! a least-squares light, the core's image chain; `fit.json`, `overlay.png` and `fit.ply`.
 //!
-//! Steps ([`fit_prepared`]; 2 to 5 are the core's [`standard_fit`], which the firmware runs too):
+//! Steps ([`fit_prepared`]; 2 to 5 are the core's [`standard_fit`], which the firmware runs too,
+//! described step by step in `gpmm_core::fit::recipe`):
 //! 1. The photo is cropped and resampled to `size × size` ([`crate::photo`]); the landmarks follow.
 //! 2. Start ([`gpmm_core::fit::initial_guess`]): the scaled-orthographic pose of the mean face's
-//!    landmarks, at [`FitSettings::nominal_distance_mm`] (the focal length follows from that distance).
-//! 3. Landmark chain (`prior × landmarks`, no rendering), [`FitSettings::landmark_steps`] steps:
-//!    the pose first (40 %; jaw contour σ × 3, no distance changes), then the shape with yaw and
-//!    distance held.
-//! 4. The SH light of the landmark fit's best sample is solved in closed form (least squares on
-//!    all visible vertices): this "landmark-only result" is the baseline of the pixel RMSE.
-//! 5. Image chain (`prior × landmarks × image`, delayed acceptance), [`FitSettings::image_steps`] steps.
+//!    landmarks, at [`gpmm_core::fit::StartSettings::nominal_distance_mm`] (the focal length
+//!    follows from that distance).
+//! 3. Landmark chain (`prior × landmarks`, no rendering), [`gpmm_core::fit::LandmarkSettings::steps`]
+//!    steps on the pose (jaw contour σ × 3).
+//! 4. The SH light of its best sample, solved in closed form (the "landmark-only result", the
+//!    baseline of the pixel RMSE), then the start's shape solve (Gauss–Newton on the landmarks
+//!    and the image).
+//! 5. Image chain (`prior × landmarks × image`, delayed acceptance),
+//!    [`gpmm_core::fit::ImageSettings::steps`] steps on pose, colour and light; its second half is
+//!    summarized as the posterior ([`PosteriorSummary`]).
 //!
 //! Both chains run once each, reporting progress through the core's step callback. The
 //! result is a deterministic function of the inputs, the settings and the seed: `fit.json` is

@@ -10,19 +10,19 @@
 //! eigenproblem. See docs/design.md, "Low rank".
 //!
 //! Nothing here is face-specific: the kernels see only vertex positions (mm)
-//! and template colours (linear RGB in [0,1]).
+//! and template colours (linear RGB in \[0, 1\]).
 
 use crate::mesh::geometry::dist2;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// A vertex as a kernel sees it: position in mm and template colour in [0,1].
+/// A vertex as a kernel sees it: position in mm and template colour in \[0, 1\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KernelPoint {
     /// Position (mm).
     pub position: [f64; 3],
-    /// Template colour (linear RGB in [0,1]).
+    /// Template colour (linear RGB in \[0, 1\]).
     pub color: [f64; 3],
 }
 

@@ -163,14 +163,14 @@ pub fn scalar_nystrom(kernel: &ScalarKernel, points: &[KernelPoint], opts: &Nyst
 ///
 /// With `split = Some((count, directions))` only the `count` largest components of the merged
 /// kernel are wanted, kernel `k`'s pairs counting `directions[k]` times: the exact eigenvalues of
-/// each kernel over the first [`ESTIMATE_POINTS`] sampled points estimate how many pairs each
+/// each kernel over the first `ESTIMATE_POINTS` sampled points estimate how many pairs each
 /// kernel contributes to them, and a kernel's range finder, extension and Rayleigh–Ritz step are
-/// sized for that estimate with a margin (see [`split_bounds`]) instead of `max_ranks[k]`.
+/// sized for that estimate with a margin (see `split_bounds`) instead of `max_ranks[k]`.
 ///
 /// With [`NystromOptions::refine`] (the default): `K_NZ` in single precision, a basis of the
 /// leading subspace of `K_ZZ` from a randomized range finder (single precision too), its Nyström
 /// extensions `Y = K_NZ U`, and a Rayleigh–Ritz step in double precision against the exact
-/// kernel matrix ([`rayleigh_ritz_bank`]). The single-precision steps only choose the subspace:
+/// kernel matrix (`rayleigh_ritz_bank`). The single-precision steps only choose the subspace:
 /// the eigenpairs are exact Ritz pairs of `K` within it.
 pub fn bank_nystrom(
     kernels: &[ScalarKernel],

@@ -136,7 +136,7 @@ impl GpModel {
         fraction(&self.color.eigenvalues, self.metadata.color_trace)
     }
 
-    /// The mesh for given coefficients (missing coefficients are zero; colours clamped to [0,1]).
+    /// The mesh for given coefficients (missing coefficients are zero; colours clamped to \[0, 1\]).
     pub fn instance(&self, shape: &[f32], color: &[f32]) -> Result<Mesh, ModelError> {
         let p = self.shape.instance(shape)?;
         let c = self.color.instance(color)?;

@@ -8,7 +8,7 @@ pub mod io;
 pub mod simplify;
 pub mod template;
 
-/// A coloured triangle mesh in f64 (positions in the mesh's units, colours linear RGB in [0,1]).
+/// A coloured triangle mesh in f64 (positions in the mesh's units, colours linear RGB in \[0, 1\]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Mesh {
     /// Vertex positions.

@@ -50,7 +50,7 @@ pub fn light_from_rows(rows: &[Vec<f32>]) -> Result<ShLight, String> {
     Ok(light)
 }
 
-/// Parses `R,G,B` with each channel in [0,1].
+/// Parses `R,G,B` with each channel in \[0, 1\].
 pub fn parse_rgb(s: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = s.split(',').map(|p| p.trim().parse::<f64>().map_err(|e| format!("'{p}': {e}"))).collect::<Result<_, _>>()?;
     match v.as_slice() {
@@ -59,7 +59,7 @@ pub fn parse_rgb(s: &str) -> Result<[f64; 3], String> {
     }
 }
 
-/// Parses a background: `R,G,B` in [0,1] or `transparent`.
+/// Parses a background: `R,G,B` in \[0, 1\] or `transparent`.
 pub fn parse_background(s: &str) -> Result<Background, String> {
     if s.trim().eq_ignore_ascii_case("transparent") {
         return Ok(Background::Transparent);

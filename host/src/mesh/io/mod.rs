@@ -4,7 +4,7 @@
 //!   - **PLY** (ASCII, binary little- or big-endian): vertex `x y z` (float or
 //!     double); colours from `red green blue` (also `r g b` or
 //!     `diffuse_red diffuse_green diffuse_blue`; integer values are 0-255,
-//!     `ushort` 0-65535, float values already in [0,1]); faces from a
+//!     `ushort` 0-65535, float values already in \[0, 1\]); faces from a
 //!     `vertex_indices` (or `vertex_index`) integer list; polygons with more
 //!     than three corners are fan-triangulated.
 //!   - **glTF** (`.glb`, or `.gltf` with its buffers next to it): every
@@ -192,7 +192,7 @@ pub fn read_mesh_with_info(
 /// Checks a mesh read from `path` (errors name `path`) and drops degenerate triangles.
 ///
 /// Errors: no vertices or triangles, colour count differing from vertex count,
-/// a non-finite coordinate or colour, a colour outside [0,1], a triangle index
+/// a non-finite coordinate or colour, a colour outside \[0, 1\], a triangle index
 /// out of range, an undirected edge shared by more than two triangles.
 pub fn validate_mesh(path: &Path, mesh: &mut Mesh) -> Result<(), MeshIoError> {
     let n = mesh.positions.len();
@@ -278,7 +278,7 @@ fn scalar_f64(p: &Property) -> Option<f64> {
     })
 }
 
-/// A colour component in [0,1]: integers are 0-255 (`ushort`: 0-65535), floats already in [0,1].
+/// A colour component in \[0, 1\]: integers are 0-255 (`ushort`: 0-65535), floats already in \[0, 1\].
 fn color_f64(p: &Property) -> Option<f64> {
     match *p {
         Property::UShort(v) => Some(f64::from(v) / 65535.0),
