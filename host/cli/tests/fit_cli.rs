@@ -242,6 +242,9 @@ fn bench_fit_prints_the_statistics() {
     let per_image = read_json(&f.synth.join("bench.json"));
     assert_eq!(per_image["images"].as_array().unwrap().len(), 2);
     assert_eq!(j["landmarks"], "exact");
+    // The chain's own spread of the angles, beside the errors: finite and not negative.
+    let sd: Vec<f64> = j["median_posterior_angles_sd_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!(sd.len() == 3 && sd.iter().all(|v| v.is_finite() && *v >= 0.0), "{j}");
     let rows = j["per_yaw"].as_array().unwrap();
     assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{j}");
     // The same errors against the truth in the model's frame: one rotation between the two mean

@@ -54,6 +54,10 @@ pub struct BenchImage {
     pub pixel_rmse: f32,
     /// Seconds of this fit.
     pub seconds: f64,
+    /// Standard deviations of yaw, pitch and roll over the image chain's second half (degrees;
+    /// fit.json's `posterior`).
+    #[serde(default)]
+    pub posterior_angles_sd_deg: [f32; 3],
 }
 
 /// Median and 90th percentile.
@@ -195,6 +199,10 @@ pub struct BenchSummary {
     pub face_frame: Option<FrameErrors>,
     /// Where the landmarks came from: `exact` (the set's) or the landmark directory.
     pub landmarks: String,
+    /// Median over the images of the image chain's standard deviation of yaw, pitch and roll
+    /// (degrees): the spread the chain reports, to set beside the errors above.
+    #[serde(default)]
+    pub median_posterior_angles_sd_deg: [f64; 3],
     /// Seconds per fit (each fit on one thread).
     pub seconds_per_fit: Stat,
     /// Wall-clock seconds of the whole benchmark.
@@ -317,6 +325,7 @@ pub fn bench_one(
         pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,
         pixel_rmse: o.pixel_rmse,
         seconds,
+        posterior_angles_sd_deg: o.posterior.angles_sd_deg,
     })
 }
 
@@ -428,6 +437,7 @@ pub fn bench(
         model_frame_error: frame.err(),
         face_frame: face_frame_summary(&ok),
         landmarks: landmarks.describe(),
+        median_posterior_angles_sd_deg: [0, 1, 2].map(|k| stat(&col(&|b| f64::from(b.posterior_angles_sd_deg[k]))).median),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
         jobs,
@@ -460,6 +470,7 @@ mod tests {
             pixel_rmse_after_landmark_chain: 0.0,
             pixel_rmse: 0.0,
             seconds: 0.0,
+            posterior_angles_sd_deg: [0.0; 3],
         };
         // ±45 fitted as ±41: 4° toward frontal on both sides, no plain signed mean.
         let rows = per_yaw(&[img(45.0, 41.0), img(-45.0, -41.0), img(0.0, 0.5), img(15.0, 16.0)]);
@@ -487,6 +498,7 @@ mod tests {
             pixel_rmse_after_landmark_chain: 0.0,
             pixel_rmse: 0.0,
             seconds: 0.0,
+            posterior_angles_sd_deg: [0.0; 3],
         };
         let images = [img(45.0), img(-45.0), img(0.0)];
         let m = model_frame_summary(&images).expect("every image has the model-frame truth");
