@@ -57,10 +57,12 @@ pub enum Command {
     ///
     /// The photo is cropped to a square around the landmarks (side 1.8x the landmarks' larger
     /// extent, lifted by 0.1x so the forehead fits; border pixels repeated past the image edge) and
-    /// resampled to --size. Then a landmark-only chain (default 5000 steps, about 0.1 s: the first
-    /// 40 % fit the pose with the jaw contour down-weighted, the rest the shape with yaw held), a
-    /// closed-form SH light, and an image chain (default 600 steps, each renders the model: about
-    /// 0.55 s at 128x128). Writes OUTDIR/fit.json, overlay.png (input | fit | blend; green dots: target
+    /// resampled to --size. Then a landmark-only chain on the pose (default 5000 steps, the jaw
+    /// contour down-weighted; about 0.01 s), a closed-form SH light, a Gauss-Newton solve of the
+    /// leading shape components against the landmarks and the image, and an image chain on pose,
+    /// colour and light (default 600 steps, each renders the model; about 0.15 s at 128x128).
+    /// Writes OUTDIR/fit.json (every field: docs/fit-json.md; the chain's best sample, and the mean
+    /// and spread of its second half), overlay.png (input | fit | blend; green dots: target
     /// landmarks, red crosses: fitted) and fit.ply (the fitted shape and albedo, model space, mm).
     /// The same inputs and seed give the same fit.json except `seconds` and `timing`.
     Fit(fit::FitArgs),
