@@ -256,7 +256,8 @@ impl Model {
     /// `image`: `H x W x 3` uint8 RGB; `landmarks`: `L x 2` pixel coordinates (0-based, pixel centres at +0.5).
     /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
     /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
-    /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
+    /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient;
+    /// docs/fit-json.md) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
     /// `working_image` (the crop the chains saw). `landmark_calibration`: a detector calibration file
     /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
     #[pyo3(signature = (image, landmarks, *, seed = None, size = None, landmark_steps = None, image_steps = None,
