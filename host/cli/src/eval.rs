@@ -173,8 +173,8 @@ pub struct RecognitionArgs {
     /// (the posterior's estimate; where the image says little, as for a colour the light explains
     /// as well, it stays near the prior instead of where the chain's walk left it), or its best
     /// sample (the fit `gpmm fit` draws).
-    #[arg(long, value_enum, default_value_t = CoefficientsArg::PosteriorMean)]
-    pub coefficients: CoefficientsArg,
+    #[arg(long, value_name = "posterior-mean|best", default_value = "posterior-mean", value_parser = Coefficients::parse)]
+    pub coefficients: Coefficients,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -185,24 +185,6 @@ pub struct RecognitionArgs {
     /// Output directory.
     #[arg(short, long, value_name = "OUT")]
     pub output: PathBuf,
-}
-
-/// `--coefficients` of `gpmm eval recognition` (see [`Coefficients`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum CoefficientsArg {
-    /// The image chain's posterior mean over its second half.
-    PosteriorMean,
-    /// The image chain's best sample.
-    Best,
-}
-
-impl From<CoefficientsArg> for Coefficients {
-    fn from(a: CoefficientsArg) -> Self {
-        match a {
-            CoefficientsArg::PosteriorMean => Coefficients::PosteriorMean,
-            CoefficientsArg::Best => Coefficients::Best,
-        }
-    }
 }
 
 /// Arguments of `gpmm eval specgen`.
@@ -360,7 +342,7 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
                 );
             }
         };
-        let plan = FitPlan { settings, kde_settings, coefficients: a.coefficients.into() };
+        let plan = FitPlan { settings, kde_settings, coefficients: a.coefficients };
         let results = evaluate(&rows, &set, &plan, jobs, &out, &progress)?;
         bar.finish_and_clear();
         let report = RecognitionReport {
@@ -371,7 +353,7 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
             chance: 1.0 / set.identities.len().max(1) as f64,
             settings,
             kde_settings: (kde_settings != settings && sel.kde.is_some_and(|n| n > 1)).then_some(kde_settings),
-            coefficients: a.coefficients.into(),
+            coefficients: a.coefficients,
             jobs,
             command: command_line(),
             rows: results,

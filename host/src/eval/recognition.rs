@@ -56,6 +56,22 @@ pub enum Coefficients {
 }
 
 impl Coefficients {
+    /// Both choices.
+    pub const ALL: [Self; 2] = [Self::PosteriorMean, Self::Best];
+
+    /// The name on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Coefficients::PosteriorMean => "posterior-mean",
+            Coefficients::Best => "best",
+        }
+    }
+
+    /// Parses `--coefficients`: `posterior-mean` or `best`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        Self::ALL.into_iter().find(|c| c.name() == s.trim()).ok_or_else(|| format!("'{s}': the coefficients are posterior-mean or best"))
+    }
+
     /// How reports name it.
     pub fn describe(self) -> &'static str {
         match self {
@@ -627,4 +643,18 @@ pub fn write_report(report: &RecognitionReport, out: &Path) -> Result<(), EvalEr
     let png = out.join("recognition.png");
     super::save_png(&line_chart(&chart, 760, 480), &png)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Coefficients;
+
+    #[test]
+    fn coefficient_names_parse_back_and_match_the_json() {
+        for c in Coefficients::ALL {
+            assert_eq!(Coefficients::parse(c.name()), Ok(c));
+            assert_eq!(serde_json::to_value(c).unwrap(), serde_json::Value::String(c.name().into()));
+        }
+        assert!(Coefficients::parse("mean").unwrap_err().contains("posterior-mean or best"));
+    }
 }
