@@ -441,14 +441,7 @@ where
         acc.proposal(&report);
         observer.proposal(&report);
         let p = &cur.params;
-        observer.sample(&ChainSample {
-            step,
-            pose: &p.pose,
-            light: &p.light,
-            shape: p.shape_coeffs(),
-            color: p.color_coeffs(),
-            log_posterior: report.log_posterior,
-        });
+        observer.sample(&ChainSample { step, pose: &p.pose, light: &p.light, shape: p.shape_coeffs(), color: p.color_coeffs() });
     }
     observer.progress(steps);
     let [a, b] = states;

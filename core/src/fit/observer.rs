@@ -47,7 +47,8 @@ pub struct ProposalStep {
     pub log_posterior: f32,
 }
 
-/// The chain's current state after a step (borrowed: an observer copies what it keeps).
+/// The chain's current state after a step (borrowed: an observer copies what it keeps; its log
+/// posterior is the step's [`ProposalStep::log_posterior`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChainSample<'a> {
     /// The step's index in its chain (0-based).
@@ -60,8 +61,6 @@ pub struct ChainSample<'a> {
     pub shape: &'a [f32],
     /// The active colour coefficients.
     pub color: &'a [f32],
-    /// The log posterior (up to a constant).
-    pub log_posterior: f32,
 }
 
 /// Watches a chain: progress before each step, the outcome of every proposal and the state

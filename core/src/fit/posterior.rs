@@ -130,7 +130,7 @@ mod tests {
     use crate::{Pose, ShLight};
 
     fn sample<'a>(step: u32, pose: &'a Pose, light: &'a ShLight, shape: &'a [f32], color: &'a [f32]) -> ChainSample<'a> {
-        ChainSample { step, pose, light, shape, color, log_posterior: 0.0 }
+        ChainSample { step, pose, light, shape, color }
     }
 
     #[test]
