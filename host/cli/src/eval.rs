@@ -73,8 +73,9 @@ pub struct DetectEvalArgs {
     /// Do not write DIR/detect.json.
     #[arg(long)]
     pub no_write: bool,
-    /// Write each detection's 68 landmarks to PTS_DIR/NAME.pts (0-based), e.g. for
-    /// `gpmm bench-fit --landmarks-dir PTS_DIR` or `gpmm eval recognition --landmarks-dir PTS_DIR`.
+    /// Write each detection's 68 landmarks to PTS_DIR/NAME.pts (0-based; points past the image's
+    /// edge moved onto it, as `gpmm fit --init` does), e.g. for `gpmm bench-fit --landmarks-dir
+    /// PTS_DIR` or `gpmm eval recognition --landmarks-dir PTS_DIR`.
     #[arg(long, value_name = "PTS_DIR")]
     pub pts_dir: Option<PathBuf>,
 }
@@ -477,7 +478,11 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     if let Some(dir) = &a.pts_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in rows.iter().filter(|r| !r.landmarks.is_empty()) {
-            crate::init::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &r.landmarks)?;
+            // Kept inside the image, as `gpmm fit --init` keeps them, so that the fits can read them.
+            let image = a.dir.join(&r.image);
+            let (w, h) = image::image_dimensions(&image).with_context(|| format!("cannot read {}", image.display()))?;
+            let (points, _) = gpmm_host::photo::pts::clamp_to_image(&r.landmarks, w, h);
+            crate::init::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &points)?;
         }
         eprintln!("wrote {} .pts files to {}", rows.iter().filter(|r| !r.landmarks.is_empty()).count(), dir.display());
     }

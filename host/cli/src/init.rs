@@ -163,7 +163,12 @@ pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path) -> Res
     };
     std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let pts = out_dir.join("detected.pts");
-    write_pts(&pts, &det.landmarks)?;
+    // A face cut by the frame can have points past its edge; the fit refuses those in a file.
+    let (points, moved) = gpmm_host::photo::pts::clamp_to_image(&det.landmarks, image.width(), image.height());
+    write_pts(&pts, &points)?;
+    if moved > 0 {
+        eprintln!("{moved} of the initializer's landmarks lay outside the image and were moved onto its edge");
+    }
     let png = out_dir.join("detected.png");
     draw_detection(&image, &det).save(&png).with_context(|| format!("cannot write {}", png.display()))?;
     eprintln!(

@@ -170,6 +170,17 @@ impl Pts {
     }
 }
 
+/// The points moved onto the `width × height` image (border included) where they lie outside it,
+/// and how many were moved: a detector's reading of a face cut by the frame (a chin past the
+/// bottom edge) made fit for [`Pts::check`]. Non-finite points are left as they are.
+pub fn clamp_to_image(points: &[[f32; 2]], width: u32, height: u32) -> (Vec<[f32; 2]>, usize) {
+    let (w, h) = (width as f32, height as f32);
+    let finite = |p: &[f32; 2]| p.iter().all(|v| v.is_finite());
+    let out: Vec<[f32; 2]> = points.iter().map(|p| if finite(p) { [p[0].clamp(0.0, w), p[1].clamp(0.0, h)] } else { *p }).collect();
+    let moved = out.iter().zip(points).filter(|(q, p)| finite(p) && q != p).count();
+    (out, moved)
+}
+
 /// Landmarks in the iBUG `.pts` format (`version: 1`, `n_points:  N`, `{`, `x y` lines, `}`), 3 decimals.
 pub fn pts_string(points: &[[f32; 2]]) -> String {
     let mut s = format!("version: 1\nn_points:  {}\n{{\n", points.len());
@@ -219,5 +230,20 @@ mod tests {
         assert!(matches!(e, PtsError::Outside { index: 1, line: 5, .. }), "{e}");
         assert!(e.to_string().contains("landmark 1"), "{e}");
         assert!(ok.check(p, 2, "ibug68", 30, 4, false).is_ok());
+    }
+
+    #[test]
+    fn points_past_the_edge_are_moved_onto_it() {
+        let points = [[5.0, 128.017], [-1.5, 40.0], [64.0, 64.0], [128.0, 0.0], [f32::NAN, 3.0]];
+        let (inside, moved) = clamp_to_image(&points, 128, 128);
+        assert_eq!(moved, 2);
+        assert_eq!(inside[..4], [[5.0, 128.0], [0.0, 40.0], [64.0, 64.0], [128.0, 0.0]]);
+        assert!(inside[4][0].is_nan());
+        // What was refused before passes the check now.
+        let p = Path::new("detected.pts");
+        let before = Pts { points: points[..4].to_vec(), lines: vec![4, 5, 6, 7] };
+        assert!(matches!(before.check(p, 4, "ibug68", 128, 128, false), Err(PtsError::Outside { index: 0, .. })));
+        let after = Pts { points: inside[..4].to_vec(), lines: vec![4, 5, 6, 7] };
+        assert!(after.check(p, 4, "ibug68", 128, 128, false).is_ok());
     }
 }
