@@ -478,11 +478,9 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     if let Some(dir) = &a.pts_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in rows.iter().filter(|r| !r.landmarks.is_empty()) {
-            // Kept inside the image, as `gpmm fit --init` keeps them, so that the fits can read them.
             let image = a.dir.join(&r.image);
             let (w, h) = image::image_dimensions(&image).with_context(|| format!("cannot read {}", image.display()))?;
-            let (points, _) = gpmm_host::photo::pts::clamp_to_image(&r.landmarks, w, h);
-            crate::init::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &points)?;
+            crate::init::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &r.landmarks, w, h)?;
         }
         eprintln!("wrote {} .pts files to {}", rows.iter().filter(|r| !r.landmarks.is_empty()).count(), dir.display());
     }

@@ -50,7 +50,8 @@ pub struct DetectArgs {
     /// Init file from `gpmm train-init`.
     #[arg(long, value_name = "INIT")]
     pub init: PathBuf,
-    /// Write the 68 landmarks as an iBUG .pts file (0-based, pixel centres at +0.5, as `gpmm fit` reads).
+    /// Write the 68 landmarks as an iBUG .pts file (0-based, pixel centres at +0.5, as `gpmm fit` reads;
+    /// points past the image's edge moved onto it).
     #[arg(short, long, value_name = "PTS")]
     pub output: Option<PathBuf>,
     /// Write the image with the box and landmarks drawn.
@@ -133,7 +134,7 @@ pub fn detect(a: DetectArgs) -> Result<()> {
         bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
     };
     if let Some(path) = &a.output {
-        write_pts(path, &det.landmarks)?;
+        write_pts(path, &det.landmarks, image.width(), image.height())?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(path) = &a.draw {
@@ -163,12 +164,7 @@ pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path) -> Res
     };
     std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let pts = out_dir.join("detected.pts");
-    // A face cut by the frame can have points past its edge; the fit refuses those in a file.
-    let (points, moved) = gpmm_host::photo::pts::clamp_to_image(&det.landmarks, image.width(), image.height());
-    write_pts(&pts, &points)?;
-    if moved > 0 {
-        eprintln!("{moved} of the initializer's landmarks lay outside the image and were moved onto its edge");
-    }
+    write_pts(&pts, &det.landmarks, image.width(), image.height())?;
     let png = out_dir.join("detected.png");
     draw_detection(&image, &det).save(&png).with_context(|| format!("cannot write {}", png.display()))?;
     eprintln!(
@@ -188,9 +184,16 @@ pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path) -> Res
 /// Smallest finder score `gpmm fit --init` accepts as a face.
 pub const DEFAULT_MIN_SCORE: f32 = 0.05;
 
-/// Writes landmarks as an iBUG .pts file.
-pub fn write_pts(path: &Path, points: &[[f32; 2]]) -> Result<()> {
-    std::fs::write(path, gpmm_host::photo::pts::pts_string(points)).with_context(|| format!("cannot write {}", path.display()))
+/// Writes the initializer's landmarks as an iBUG .pts file for a `width × height` image. Points
+/// past the image's edge (a face cut by the frame) are moved onto it, since a fit refuses them in
+/// a landmark file; the move is reported.
+pub fn write_pts(path: &Path, points: &[[f32; 2]], width: u32, height: u32) -> Result<()> {
+    let (inside, moved) = gpmm_host::photo::pts::clamp_to_image(points, width, height);
+    std::fs::write(path, gpmm_host::photo::pts::pts_string(&inside)).with_context(|| format!("cannot write {}", path.display()))?;
+    if moved > 0 {
+        eprintln!("{}: {moved} landmarks lay outside the {width}x{height} image and were moved onto its edge", path.display());
+    }
+    Ok(())
 }
 
 /// The image with the finder's box (blue) and the landmarks (green) drawn.
