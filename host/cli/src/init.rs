@@ -40,6 +40,10 @@ pub struct TrainInitArgs {
     /// Render the model's faces alone on the backgrounds, with no head around them.
     #[arg(long, conflicts_with = "head")]
     pub no_head: bool,
+    /// Leave the scan's shut eyes shut in every scene (by default most scenes get open eyes
+    /// painted on, with the lid landmarks on the painted lids); for comparisons.
+    #[arg(long)]
+    pub shut_eyes: bool,
 }
 
 /// Arguments of `gpmm detect`.
@@ -75,6 +79,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         }
         opts.chunks = c;
     }
+    opts.ranges.open_eyes = !a.shut_eyes;
     let head = if a.no_head {
         None
     } else {

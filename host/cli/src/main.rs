@@ -148,9 +148,10 @@ pub enum Command {
     /// Train the face finder and initializer of a landmark-free fit on renders of a model.
     ///
     /// Renders random faces of the model (shape, colour, yaw ±70°, pitch and roll ±30°, SH light,
-    /// cameras of 20-70° field of view, partial framing) over procedural backgrounds with camera
-    /// effects (blur, noise, gamma, white balance, JPEG); the labels are the model's own landmark
-    /// vertices, pose and light. Trains two small networks with candle on the CPU, quantizes them
+    /// cameras of 20-70° field of view, partial framing) on the template's head, most with open
+    /// eyes painted over the scan's shut ones, over procedural backgrounds with camera effects
+    /// (blur, noise, gamma, white balance, JPEG); the labels are the model's own landmark vertices
+    /// (the lid points on the painted lids), pose and light. Trains two small networks with candle on the CPU, quantizes them
     /// to int8 (per-channel weight scales) and writes an init file (docs/init-format.md). Prints
     /// the quantized networks' accuracy on held-out renders as JSON. Deterministic for a seed.
     TrainInit(init::TrainInitArgs),

@@ -4,6 +4,7 @@
 
 pub mod encode;
 pub mod eval;
+pub mod eyes;
 pub mod head;
 pub mod scene;
 

@@ -4,6 +4,7 @@
 //! labelled by hand. One scene is a pure function of `(seed, index)`.
 
 use crate::gp::model::GpModel;
+use crate::init::eyes::OpenEyes;
 use crate::init::head::HeadContext;
 use crate::render::{Background, Instance, RenderSettings, Renderer, View};
 use gpmm_core::light::SH_COEFFS;
@@ -31,11 +32,22 @@ pub struct SceneRanges {
     pub face_fraction: (f32, f32),
     /// Shape and colour components drawn (standard normal; the rest zero).
     pub components: usize,
+    /// Paint open eyes over the scan's shut ones in most scenes (`crate::init::eyes`).
+    pub open_eyes: bool,
 }
 
 impl Default for SceneRanges {
     fn default() -> Self {
-        Self { yaw: 70.0, pitch: 30.0, roll: 30.0, fov: (20.0, 70.0), frame_side: (128, 256), face_fraction: (0.15, 0.8), components: 60 }
+        Self {
+            yaw: 70.0,
+            pitch: 30.0,
+            roll: 30.0,
+            fov: (20.0, 70.0),
+            frame_side: (128, 256),
+            face_fraction: (0.15, 0.8),
+            components: 60,
+            open_eyes: true,
+        }
     }
 }
 
@@ -173,7 +185,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let k = ranges.components;
     let shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
     let color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
-    let instance = Instance::of_model(model, &shape, &color).ok()?;
+    let mut instance = Instance::of_model(model, &shape, &color).ok()?;
     let view = View {
         yaw: rng.random_range(-ranges.yaw..=ranges.yaw),
         pitch: rng.random_range(-ranges.pitch..=ranges.pitch),
@@ -211,13 +223,27 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let (px, py) = (rng.random_range(0.15f32..0.85) * w as f32, rng.random_range(0.15f32..0.85) * h as f32);
     let (ox, oy) = ((px - camera.principal[0]) / camera.focal * depth, -(py - camera.principal[1]) / camera.focal * depth);
     pose.translation = [ox - rc[0], oy - rc[1], -depth - rc[2]];
-    let headed = head.map(|h| h.around(model, &instance, &mut rng));
+    let mut headed = head.map(|h| h.around(model, &instance, &mut rng));
+    // Open eyes (the scan's are shut), from a stream of their own so the rest of the scene is
+    // the same with or without them.
+    let mut eye_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ 0xE7E5);
+    let eyes = if ranges.open_eyes { OpenEyes::of_model(model) } else { None };
+    let opening = eyes.as_ref().and_then(|e| {
+        let albedos = match &mut headed {
+            Some(h) => &mut h.instance.albedos[..instance.positions.len()],
+            None => &mut instance.albedos[..],
+        };
+        e.paint(albedos, &mut eye_rng)
+    });
     let (render, _) = match &headed {
         Some(h) => renderer.render(&h.instance, &h.triangles, &pose, &settings).ok()?,
         None => renderer.render(&instance, &model.triangles, &pose, &settings).ok()?,
     };
-    let landmarks: Vec<[f32; 2]> =
-        model.landmarks.iter().filter_map(|&i| renderer.projected().get(i as usize)).map(|p| [p.x, p.y]).collect();
+    let projected = |v: u32| renderer.projected().get(v as usize).map(|p| [p.x, p.y]);
+    let mut landmarks: Vec<[f32; 2]> = model.landmarks.iter().filter_map(|&i| projected(i)).collect();
+    if let (Some(eyes), Some(opening)) = (&eyes, opening) {
+        eyes.relabel_lids(opening, projected, &mut landmarks);
+    }
     if landmarks.len() != model.landmarks.len() || landmarks.iter().flatten().any(|v| !v.is_finite()) {
         return None;
     }

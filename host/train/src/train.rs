@@ -247,6 +247,7 @@ pub fn train(
         "scenes": opts.chunks * opts.chunk_scenes,
         "yaw_range_deg": opts.ranges.yaw,
         "head_vertices": head.map_or(0, HeadContext::vertices),
+        "open_eyes": opts.ranges.open_eyes,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
