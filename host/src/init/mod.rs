@@ -2,10 +2,12 @@
 //! trained networks quantized into an init file ([`encode`]), and the core's finder and
 //! initializer run on an image ([`InitModel`]). Training itself (candle) lives in `gpmm-train`.
 
+pub mod almond;
 pub mod encode;
 pub mod eval;
 pub mod eyes;
 pub mod head;
+pub mod mouth;
 pub mod scene;
 
 use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile};

@@ -6,6 +6,7 @@
 use crate::gp::model::GpModel;
 use crate::init::eyes::OpenEyes;
 use crate::init::head::HeadContext;
+use crate::init::mouth::OpenMouth;
 use crate::render::{Background, Instance, RenderSettings, Renderer, View};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::net::face::landmark_box;
@@ -34,6 +35,9 @@ pub struct SceneRanges {
     pub components: usize,
     /// Paint open eyes over the scan's shut ones in most scenes (`crate::init::eyes`).
     pub open_eyes: bool,
+    /// Draw an open mouth (teeth, dark gap) over the scan's closed one in some scenes
+    /// (`crate::init::mouth`); off by default (docs/evaluation.md, stop 32).
+    pub open_mouth: bool,
 }
 
 impl Default for SceneRanges {
@@ -47,6 +51,7 @@ impl Default for SceneRanges {
             face_fraction: (0.15, 0.8),
             components: 60,
             open_eyes: true,
+            open_mouth: false,
         }
     }
 }
@@ -224,10 +229,13 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let (ox, oy) = ((px - camera.principal[0]) / camera.focal * depth, -(py - camera.principal[1]) / camera.focal * depth);
     pose.translation = [ox - rc[0], oy - rc[1], -depth - rc[2]];
     let mut headed = head.map(|h| h.around(model, &instance, &mut rng));
-    // Open eyes (the scan's are shut), from a stream of their own so the rest of the scene is
-    // the same with or without them.
+    // Open eyes and mouths (the scan's are shut), each from a stream of its own so the rest of
+    // the scene is the same with or without them.
     let mut eye_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ 0xE7E5);
+    let mut mouth_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7) ^ 0x3047);
     let eyes = if ranges.open_eyes { OpenEyes::of_model(model) } else { None };
+    let mouth = if ranges.open_mouth { OpenMouth::of_model(model) } else { None };
+    let mouth_look = mouth.as_ref().and_then(|m| m.draw(&mut mouth_rng).map(|look| (m, look)));
     let opening = eyes.as_ref().and_then(|e| {
         let albedos = match &mut headed {
             Some(h) => &mut h.instance.albedos[..instance.positions.len()],
@@ -235,7 +243,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
         };
         e.paint(albedos, &mut eye_rng)
     });
-    let (render, _) = match &headed {
+    let (mut render, _) = match &headed {
         Some(h) => renderer.render(&h.instance, &h.triangles, &pose, &settings).ok()?,
         None => renderer.render(&instance, &model.triangles, &pose, &settings).ok()?,
     };
@@ -243,6 +251,11 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let mut landmarks: Vec<[f32; 2]> = model.landmarks.iter().filter_map(|&i| projected(i)).collect();
     if let (Some(eyes), Some(opening)) = (&eyes, opening) {
         eyes.relabel_lids(opening, projected, &mut landmarks);
+    }
+    if let Some((mouth, look)) = &mouth_look {
+        let albedos = headed.as_ref().map_or(&instance.albedos, |h| &h.instance.albedos);
+        let light = mouth.irradiance(|v| Some((renderer.projected().get(v as usize)?.color, *albedos.get(v as usize)?)));
+        mouth.paint(look, light, projected, &mut render, &mut landmarks);
     }
     if landmarks.len() != model.landmarks.len() || landmarks.iter().flatten().any(|v| !v.is_finite()) {
         return None;

@@ -248,6 +248,7 @@ pub fn train(
         "yaw_range_deg": opts.ranges.yaw,
         "head_vertices": head.map_or(0, HeadContext::vertices),
         "open_eyes": opts.ranges.open_eyes,
+        "open_mouth": opts.ranges.open_mouth,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
