@@ -36,8 +36,20 @@ pub struct Almond {
     lower: Vec<(usize, f32)>,
     /// `t` of the shut line at `s = 0`.
     shut_t: f32,
-    /// The frame: origin (mm), `s` and `t` directions, half width (mm).
-    axes: (Vec3, Vec3, Vec3, f32),
+    /// The opening's frame on the mean shape.
+    frame: Frame,
+}
+
+/// An opening's frame: origin (mm), the `s`, `t` and out-of-plane directions, half width (mm).
+/// In `f32`, as the measured trainings were made (`crate::mesh::geometry`'s `f64` helpers would
+/// move borderline vertices and change the trained networks).
+#[derive(Debug, Clone, Copy)]
+struct Frame {
+    origin: Vec3,
+    u: Vec3,
+    w: Vec3,
+    n: Vec3,
+    half: f32,
 }
 
 fn sub(a: Vec3, b: Vec3) -> Vec3 {
@@ -52,18 +64,9 @@ fn scaled(a: Vec3, k: f32) -> Vec3 {
     a.map(|v| v * k)
 }
 
-/// A rim's shape: 1 in the middle, 0 at the corners.
-pub fn rim(s: f32) -> f32 {
-    (1.0 - s * s).max(0.0)
-}
-
-impl Almond {
-    /// The opening between landmarks `corners` of `model` (iBUG indices) with the given rim
-    /// landmarks; `None` if the model lacks them or they are degenerate.
-    pub fn of_model(model: &GpModel, corners: [usize; 2], upper: &[usize], lower: &[usize]) -> Option<Self> {
-        let mean = &model.shape.mean;
-        let at = |k: usize| model.landmarks.get(k).and_then(|&i| mean.get(i as usize)).copied();
-        let (a, b) = (at(corners[0])?, at(corners[1])?);
+impl Frame {
+    /// The frame between corners `a` and `b` (`t` along the model's +y); `None` if degenerate.
+    fn between(a: Vec3, b: Vec3) -> Option<Self> {
         let origin = scaled([a[0] + b[0], a[1] + b[1], a[2] + b[2]], 0.5);
         let across = sub(b, a);
         let half = dot(across, across).sqrt() * 0.5;
@@ -80,15 +83,33 @@ impl Almond {
         }
         let w = scaled(w0, 1.0 / wn);
         let n = [u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]];
-        let frame = |p: Vec3| {
-            let d = sub(p, origin);
-            ([dot(d, u) / half, dot(d, w) / half], dot(d, n))
-        };
+        Some(Self { origin, u, w, n, half })
+    }
+
+    /// `(s, t)` of a point (mm), and its height in front of the plane (mm).
+    fn of(&self, p: Vec3) -> ([f32; 2], f32) {
+        let d = sub(p, self.origin);
+        ([dot(d, self.u) / self.half, dot(d, self.w) / self.half], dot(d, self.n))
+    }
+}
+
+/// A rim's shape: 1 in the middle, 0 at the corners.
+pub fn rim(s: f32) -> f32 {
+    (1.0 - s * s).max(0.0)
+}
+
+impl Almond {
+    /// The opening between landmarks `corners` of `model` (iBUG indices) with the given rim
+    /// landmarks; `None` if the model lacks them or they are degenerate.
+    pub fn of_model(model: &GpModel, corners: [usize; 2], upper: &[usize], lower: &[usize]) -> Option<Self> {
+        let mean = &model.shape.mean;
+        let at = |k: usize| model.landmarks.get(k).and_then(|&i| mean.get(i as usize)).copied();
+        let frame = Frame::between(at(corners[0])?, at(corners[1])?)?;
         let mut index = vec![usize::MAX; mean.len()];
         let mut vertices = Vec::new();
         let mut depths = Vec::new();
         for (i, p) in mean.iter().enumerate() {
-            let (st, depth) = frame(*p);
+            let (st, depth) = frame.of(*p);
             if st[0].abs() <= 1.4 && st[1].abs() <= 1.2 && depth.abs() <= PLANE_MM {
                 index[i] = vertices.len();
                 vertices.push((i as u32, st));
@@ -103,7 +124,7 @@ impl Almond {
                 v.iter().all(|&i| i != usize::MAX).then_some(v)
             })
             .collect();
-        let on_rim = |ks: &[usize]| -> Option<Vec<(usize, [f32; 2])>> { ks.iter().map(|&k| Some((k, frame(at(k)?).0))).collect() };
+        let on_rim = |ks: &[usize]| -> Option<Vec<(usize, [f32; 2])>> { ks.iter().map(|&k| Some((k, frame.of(at(k)?).0))).collect() };
         let (up, low) = (on_rim(upper)?, on_rim(lower)?);
         let rims: Vec<[f32; 2]> = up.iter().chain(&low).map(|r| r.1).collect();
         if rims.is_empty() {
@@ -111,14 +132,12 @@ impl Almond {
         }
         let shut_t = rims.iter().map(|st| st[1] / rim(st[0]).max(0.2)).sum::<f32>() / rims.len() as f32;
         let s_of = |v: Vec<(usize, [f32; 2])>| v.into_iter().map(|(k, st)| (k, st[0])).collect();
-        Some(Self { vertices, triangles, depth: depths, upper: s_of(up), lower: s_of(low), shut_t, axes: (origin, u, w, half) })
+        Some(Self { vertices, triangles, depth: depths, upper: s_of(up), lower: s_of(low), shut_t, frame })
     }
 
     /// A point of the model's frame (mm) as `(s, t)`.
     pub fn local(&self, p: Vec3) -> [f32; 2] {
-        let (origin, u, w, half) = self.axes;
-        let d = sub(p, origin);
-        [dot(d, u) / half, dot(d, w) / half]
+        self.frame.of(p).0
     }
 
     /// The shut line's `t` at `s`.

@@ -49,16 +49,8 @@ pub struct MouthLook {
 
 /// Whether `p` lies inside the polygon `poly` (even-odd rule).
 fn inside(poly: &[[f32; 2]], p: [f32; 2]) -> bool {
-    let mut odd = false;
-    let mut j = poly.len().wrapping_sub(1);
-    for i in 0..poly.len() {
-        let (a, b) = (poly[i], poly[j % poly.len()]);
-        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0] {
-            odd = !odd;
-        }
-        j = i;
-    }
-    odd
+    let edges = poly.iter().zip(poly.iter().cycle().skip(1));
+    edges.filter(|(a, b)| (a[1] > p[1]) != (b[1] > p[1]) && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]).count() % 2 == 1
 }
 
 /// Distance from `p` to the segment `a`–`b`.
