@@ -8,7 +8,12 @@ albedo (a skin tone per identity, darker lips and brows, smooth variation; none 
 transferred colours), anti-aliasing and the background (a textured, blurred image instead of a
 flat colour). Colours are written linear, as gpmm reads them (no gamma).
 
-    python make_set.py SYNTH_DIR OUT_DIR [--spp 64] [--scale 2] [--seed 0] [--ict DIR]
+    python make_set.py SYNTH_DIR OUT_DIR [--spp 64] [--scale 2] [--seed 0] [--ict DIR] [--wide K1,K2]
+
+--wide puts each face small in a wider frame, as a camera with a larger sensor (the same focal
+length, the principal point moved) would see it: the frame is K (drawn from K1..K2) times the
+scene's size across its shorter side, 4:3 or 3:4, the face anywhere in it, the background drawn
+for the whole frame. truth.json (sizes, principal points, landmarks) and the .pts follow.
 """
 import argparse, json, math, os, shutil, sys
 import numpy as np
@@ -102,6 +107,32 @@ def background(w, h, rng):
     return np.clip(img, 0, 1)
 
 
+def widen(im, rgb, alpha, wide, rng):
+    """The render placed in a wider frame over a background drawn for that frame; `im` (the
+    truth.json entry) is updated to the new frame."""
+    h, w = rgb.shape[:2]
+    k = rng.uniform(*wide)
+    long_side = rng.random() < 0.5
+    big_w, big_h = (round(k * w * 4 / 3), round(k * h)) if long_side else (round(k * w), round(k * h * 4 / 3))
+    ox, oy = int(rng.integers(0, big_w - w + 1)), int(rng.integers(0, big_h - h + 1))
+    out = background(big_w, big_h, rng)
+    region = out[oy:oy + h, ox:ox + w]
+    out[oy:oy + h, ox:ox + w] = rgb + (1 - alpha) * region
+    im["width"], im["height"] = big_w, big_h
+    im["face_fraction"] = im.get("face_fraction", 0.0) * (w * h) / (big_w * big_h)
+    im["principal_px"] = [im["principal_px"][0] + ox, im["principal_px"][1] + oy]
+    im["landmarks"] = [[x + ox, y + oy] for x, y in im["landmarks"]]
+    return out
+
+
+def write_pts(path, pts):
+    with open(path, "w") as f:
+        f.write(f"version: 1\nn_points:  {len(pts)}\n{{\n")
+        for x, y in pts:
+            f.write(f"{x:.4f} {y:.4f}\n")
+        f.write("}\n")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("synth_dir")
@@ -110,7 +141,11 @@ def main():
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--scale", type=int, default=2, help="render at this multiple of the size, then box-downsample")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--wide", help="K1,K2: a frame K1..K2 times the scene's size, the face placed anywhere in it")
     a = ap.parse_args()
+    wide = [float(v) for v in a.wide.split(",")] if a.wide else None
+    if wide is not None and not (len(wide) == 2 and 1.0 <= wide[0] <= wide[1]):
+        sys.exit(f"--wide takes K1,K2 with 1 <= K1 <= K2 (got {a.wide})")
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     truth = json.load(open(os.path.join(a.synth_dir, "truth.json")))
@@ -175,10 +210,16 @@ def main():
         img = np.array(mi.render(scene))
         img = img.reshape(h, a.scale, w, a.scale, 4).mean(axis=(1, 3))
         rgb, alpha = img[..., :3], img[..., 3:4]
-        out = rgb + (1 - alpha) * background(w, h, view_rng)
+        if wide is None:
+            out = rgb + (1 - alpha) * background(w, h, view_rng)
+            shutil.copy(os.path.join(a.synth_dir, im["landmarks_file"]), a.out_dir)
+        else:
+            out = widen(im, rgb, alpha, wide, np.random.default_rng([a.seed, im["identity"], im["yaw_index"], 11]))
+            write_pts(os.path.join(a.out_dir, im["landmarks_file"]), im["landmarks"])
         Image.fromarray((np.clip(out, 0, 1) * 255 + 0.5).astype(np.uint8)).save(os.path.join(a.out_dir, im["image"]))
-        shutil.copy(os.path.join(a.synth_dir, im["landmarks_file"]), a.out_dir)
         print(f"\r{k + 1}/{len(truth['images'])} {im['image']}", end="", file=sys.stderr)
+    if wide is not None:
+        json.dump(truth, open(os.path.join(a.out_dir, "truth.json"), "w"))
     print(f"\nlargest difference between our projection of the landmark vertices and the set's .pts: {worst:.4f} px", file=sys.stderr)
 
 

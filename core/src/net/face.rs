@@ -169,7 +169,20 @@ fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + libm::expf(-x))
 }
 
+/// A second look's window side, in the first look's face sizes.
+pub const SECOND_LOOK_ZOOM: f32 = 3.0;
+/// The second look is taken when its window is smaller than this share of the frame's longer
+/// side (else it would see about what the first saw).
+pub const SECOND_LOOK_BELOW: f32 = 0.9;
+
 /// Runs the finder on an RGB frame (`w × h`); the best cell's box, whatever its score.
+///
+/// The finder first sees the whole frame letterboxed. A face small in that view (a few cells) has
+/// its size read poorly (up to 1.7× too large at 12 px of 96; docs/evaluation.md, stop 33), so
+/// when the face is small the finder looks again at a square [`SECOND_LOOK_ZOOM`] face sizes wide
+/// around it, where the face fills a third of its view. That look's box is the result when its
+/// centre lies within the first box (half its size from the first centre); a second look that
+/// settles on something else keeps the first box.
 pub fn find_face<const A: usize>(
     init: &InitFile<'_>,
     rgb: &[u8],
@@ -177,9 +190,40 @@ pub fn find_face<const A: usize>(
     h: usize,
     scratch: &mut NetScratch<A>,
 ) -> Result<FaceBox, NetError> {
+    let side = init.finder.input().w;
+    let first = look(init, rgb, w, h, Window::letterbox(w, h, side), scratch)?;
+    let Some(window) = second_look(&first, w, h, side) else { return Ok(first) };
+    let second = look(init, rgb, w, h, window, scratch)?;
+    Ok(if same_face(&first, &second) { second } else { first })
+}
+
+/// Where the finder looks a second time after finding `first` in a `w × h` frame (a `side`-pixel
+/// input): a square [`SECOND_LOOK_ZOOM`] face sizes wide around it, if that is less than
+/// [`SECOND_LOOK_BELOW`] of the frame's longer side (and the box is a number).
+pub fn second_look(first: &FaceBox, w: usize, h: usize, side: usize) -> Option<Window> {
+    let window = SECOND_LOOK_ZOOM * first.size;
+    let frame = w.max(h) as f32;
+    let usable = window.is_finite() && first.cx.is_finite() && first.cy.is_finite() && window >= 1.0;
+    (usable && window < SECOND_LOOK_BELOW * frame).then(|| Window::square(first.cx, first.cy, window, side))
+}
+
+/// Whether a second look's box is the first look's face: its centre within half the first box's
+/// size of the first centre.
+pub fn same_face(first: &FaceBox, second: &FaceBox) -> bool {
+    libm::hypotf(second.cx - first.cx, second.cy - first.cy) < 0.5 * first.size
+}
+
+/// One run of the finder on `window` of the frame: the best cell's box in frame pixels.
+fn look<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    window: Window,
+    scratch: &mut NetScratch<A>,
+) -> Result<FaceBox, NetError> {
     let net = &init.finder;
     let side = net.input().w;
-    let window = Window::letterbox(w, h, side);
     sample_rgb(rgb, w, h, window, side, scratch.input_mut(net.input().len())?)?;
     let mut out = [0f32; MAX_NET_OUTPUT];
     let grid = net.output();
@@ -284,6 +328,9 @@ pub fn read_landmarks<const A: usize>(
     Ok(det)
 }
 
+/// Refinement passes the commands use unless told otherwise (one: development set, stop 30).
+pub const DEFAULT_REFINE: usize = 1;
+
 /// Finds the face and reads it: [`find_face`], then [`read_landmarks`] if [`is_face`] at
 /// `min_score` (else `None`).
 pub fn detect<const A: usize>(
@@ -316,5 +363,36 @@ pub fn record_parts<'a>(face: &FaceBox, det: Option<&'a Detection>) -> (Detectio
     match det {
         Some(d) => (figures, &d.landmarks, &d.light),
         None => (figures, &[], &[]),
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn face(cx: f32, cy: f32, size: f32) -> FaceBox {
+        FaceBox { cx, cy, size, score: 0.9 }
+    }
+
+    #[test]
+    fn a_small_face_gets_a_second_look_around_it_and_a_large_one_does_not() {
+        // 40 px in a 640 × 480 frame: a 120 px square centred on it, sampled into 96 px.
+        let w = second_look(&face(300.0, 200.0, 40.0), 640, 480, 96).unwrap();
+        assert_eq!((w.x0, w.y0, w.step), (240.0, 140.0, 120.0 / 96.0));
+        // 200 px: the window (600 px) would be most of the frame.
+        assert!(second_look(&face(300.0, 200.0, 200.0), 640, 480, 96).is_none());
+        // Boxes that are not numbers, or smaller than a pixel's third, get none.
+        for f in [face(f32::NAN, 1.0, 10.0), face(1.0, f32::INFINITY, 10.0), face(1.0, 1.0, f32::NAN), face(1.0, 1.0, 0.1)] {
+            assert!(second_look(&f, 640, 480, 96).is_none(), "{f:?}");
+        }
+    }
+
+    #[test]
+    fn a_second_look_counts_only_when_it_stays_on_the_first_face() {
+        let first = face(100.0, 100.0, 40.0);
+        assert!(same_face(&first, &face(110.0, 95.0, 30.0)));
+        assert!(!same_face(&first, &face(100.0, 125.0, 30.0)));
+        assert!(!same_face(&first, &face(f32::NAN, 100.0, 30.0)));
     }
 }

@@ -40,7 +40,7 @@ pub struct DeviceFitArgs {
     #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT, requires = "init")]
     pub height: u32,
     /// With --init: re-centre the initializer's crop on its landmarks this many times (0..=8).
-    #[arg(long, default_value_t = 1, requires = "init")]
+    #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE as u32, requires = "init")]
     pub refine: u32,
     /// With --init: smallest finder score (0..1) counted as a face (below it: "no face found").
     #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE, requires = "init")]
@@ -93,7 +93,7 @@ pub struct DeviceDetectArgs {
     #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT)]
     pub height: u32,
     /// Re-centre the crop on the read landmarks this many times (0..=8).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE as u32)]
     pub refine: u32,
     /// Smallest finder score (0..1) counted as a face.
     #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE)]

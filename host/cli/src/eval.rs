@@ -78,6 +78,9 @@ pub struct DetectEvalArgs {
     /// PTS_DIR` or `gpmm eval recognition --landmarks-dir PTS_DIR`.
     #[arg(long, value_name = "PTS_DIR")]
     pub pts_dir: Option<PathBuf>,
+    /// Re-centre the initializer's crop on its landmarks this many times.
+    #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE)]
+    pub refine: usize,
 }
 
 /// Model selection and building options shared by the evaluations.
@@ -474,7 +477,7 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     if images.is_empty() {
         bail!("{}: no image with a reference .pts found", a.dir.display());
     }
-    let (summary, rows) = gpmm_host::init::eval::evaluate(&mut init, &images, a.pts_one_based)?;
+    let (summary, rows) = gpmm_host::init::eval::evaluate(&mut init, &images, a.pts_one_based, a.refine)?;
     if let Some(dir) = &a.pts_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in rows.iter().filter(|r| !r.landmarks.is_empty()) {

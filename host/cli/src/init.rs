@@ -67,7 +67,7 @@ pub struct DetectArgs {
     #[arg(long, value_name = "PNG")]
     pub draw: Option<PathBuf>,
     /// Re-centre the crop on the read landmarks this many times.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE)]
     pub refine: usize,
     /// Smallest finder score (0..1) counted as a face.
     #[arg(long, default_value_t = DEFAULT_MIN_SCORE)]
@@ -170,7 +170,7 @@ pub fn detect(a: DetectArgs) -> Result<()> {
 pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path) -> Result<PathBuf> {
     let mut init = InitModel::load(init_path)?;
     let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
-    let Some(det) = init.detect(&image, DEFAULT_MIN_SCORE, 1)? else {
+    let Some(det) = init.detect(&image, DEFAULT_MIN_SCORE, gpmm_core::net::face::DEFAULT_REFINE)? else {
         bail!("{}: no face found by {}", image_path.display(), init_path.display());
     };
     std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;

@@ -157,7 +157,8 @@ pub enum Command {
     TrainInit(init::TrainInitArgs),
     /// Find the face in an image and read its 68 landmarks, pose and light with an init file.
     ///
-    /// The finder sees the whole image letterboxed to 96x96; the initializer a 64x64 crop around
+    /// The finder sees the whole image letterboxed to 96x96 (and, if the face is small in it, a
+    /// second time a square three face sizes wide around it); the initializer a 64x64 crop around
     /// the found face, then again around its own landmarks (--refine). Prints JSON (box, score,
     /// angles, landmarks); -o writes a .pts that `gpmm fit --landmarks` reads.
     Detect(init::DetectArgs),

@@ -17,6 +17,8 @@ pub struct DetectImage {
     pub found: bool,
     /// Finder score.
     pub score: f32,
+    /// The finder's box size over the reference landmarks' box size (larger sides).
+    pub box_size_ratio: Option<f64>,
     /// Mean landmark distance over the reference's outer-eye-corner distance (points 36, 45).
     pub landmark_error: Option<f64>,
     /// The truth's yaw (degrees), if known.
@@ -57,6 +59,9 @@ pub struct DetectSummary {
     pub p90_landmark_error: f64,
     /// Median |yaw error| (degrees) where the yaw is known.
     pub median_abs_yaw_error_deg: f64,
+    /// The finder's box size over the reference's: 10th, 50th and 90th percentile over all
+    /// images (1 is right; the initializer is trained for crops within about ±16 %).
+    pub box_size_ratio: [f64; 3],
     /// Per |yaw| (sets with a truth.json).
     pub per_yaw: Vec<DetectYawRow>,
 }
@@ -126,6 +131,7 @@ pub fn evaluate(
     init: &mut InitModel,
     images: &[(PathBuf, PathBuf, Option<f64>)],
     one_based: bool,
+    refine: usize,
 ) -> Result<(DetectSummary, Vec<DetectImage>), InitError> {
     let mut rows = Vec::new();
     for (image, pts, yaw) in images {
@@ -133,13 +139,14 @@ pub fn evaluate(
         let reference =
             read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), source: std::io::Error::other(e.to_string()) })?;
         let refs: Vec<[f32; 2]> = reference.points.iter().map(|p| [p[0], p[1]]).collect();
-        let det = init.detect(&img, 0.0, 1)?;
+        let det = init.detect(&img, 0.0, refine)?;
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let Some(det) = det else {
             rows.push(DetectImage {
                 image: name,
                 found: false,
                 score: 0.0,
+                box_size_ratio: None,
                 landmark_error: None,
                 yaw_deg: *yaw,
                 yaw_error_deg: None,
@@ -150,7 +157,17 @@ pub fn evaluate(
         let (found, landmark_error) = score_detection(&det, &refs);
         let yaw_error_deg = yaw.map(|y| f64::from(det.angles[0].to_degrees()) - y);
         let landmarks = det.landmarks.to_vec();
-        rows.push(DetectImage { image: name, found, score: det.face.score, landmark_error, yaw_deg: *yaw, yaw_error_deg, landmarks });
+        let box_size_ratio = Some(f64::from(det.face.size / landmark_box(&refs).2.max(1e-3)));
+        rows.push(DetectImage {
+            image: name,
+            found,
+            score: det.face.score,
+            box_size_ratio,
+            landmark_error,
+            yaw_deg: *yaw,
+            yaw_error_deg,
+            landmarks,
+        });
     }
     let found: Vec<&DetectImage> = rows.iter().filter(|r| r.found).collect();
     let errs: Vec<f64> = found.iter().filter_map(|r| r.landmark_error).collect();
@@ -184,6 +201,10 @@ pub fn evaluate(
         median_landmark_error: quantile(errs.clone(), 0.5),
         p90_landmark_error: quantile(errs, 0.9),
         median_abs_yaw_error_deg: quantile(found.iter().filter_map(|r| r.yaw_error_deg.map(f64::abs)).collect(), 0.5),
+        box_size_ratio: {
+            let r: Vec<f64> = rows.iter().filter_map(|r| r.box_size_ratio).collect();
+            [0.1, 0.5, 0.9].map(|q| quantile(r.clone(), q))
+        },
         per_yaw,
     };
     Ok((summary, rows))
