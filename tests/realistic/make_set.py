@@ -10,10 +10,10 @@ flat colour). Colours are written linear, as gpmm reads them (no gamma).
 
     python make_set.py SYNTH_DIR OUT_DIR [--spp 64] [--scale 2] [--seed 0] [--ict DIR] [--wide K1,K2]
 
---wide puts each face small in a wider frame, as a camera with a larger sensor (the same focal
-length, the principal point moved) would see it: the frame is K (drawn from K1..K2) times the
+--wide puts each face small in a wider frame: the frame is K (drawn from K1..K2) times the
 scene's size across its shorter side, 4:3 or 3:4, the face anywhere in it, the background drawn
-for the whole frame. truth.json (sizes, principal points, landmarks) and the .pts follow.
+for the whole frame. The camera is the scene's with its principal point moved with the face (a
+crop of a larger frame); truth.json (sizes, principal points, landmarks) and the .pts follow.
 """
 import argparse, json, math, os, shutil, sys
 import numpy as np

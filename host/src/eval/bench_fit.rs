@@ -307,8 +307,9 @@ pub fn bench_one(
             o.params.focal,
             &prepared.crop,
             size,
-            prepared.original_size[0],
-            prepared.original_size[1],
+            // The set's camera: its principal point is the frame's centre unless the frame was
+            // widened around the face (tests/realistic/make_set.py --wide).
+            truth.principal_px,
         )
         .map(f32::to_degrees)
     };

@@ -555,8 +555,7 @@ pub fn report(
             p.focal,
             &prepared.crop,
             size,
-            prepared.original_size[0],
-            prepared.original_size[1],
+            prepared.original_size.map(|s| s as f32 * 0.5),
         )
         .map(f32::to_degrees),
         translation_mm: p.pose.translation,

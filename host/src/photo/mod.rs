@@ -168,14 +168,14 @@ mod tests {
 
 /// Yaw, pitch and roll (radians) of a fitted rotation `(yaw, pitch, roll)`, found on the crop
 /// `crop` resampled to `size × size` with the principal point at the crop's centre and focal
-/// length `focal` (working pixels), expressed in the photo's camera frame (principal point at
-/// the photo's centre, `width × height`). The fit takes the crop's centre as the optical axis: a
+/// length `focal` (working pixels), expressed in the photo's camera frame (principal point
+/// `principal`, photo pixels: a photo's centre unless the camera says otherwise). The fit takes the crop's centre as the optical axis: a
 /// face off the photo's axis by an angle `α` is fitted as turned by `α` (2.6° for a face 26 mm
 /// below the axis at 570 mm). Rotating the fit's camera onto the photo's axis removes that.
-pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u32, width: u32, height: u32) -> [f32; 3] {
+pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u32, principal: [f32; 2]) -> [f32; 3] {
     let c = crop.to_original([size as f32 * 0.5, size as f32 * 0.5], size);
     let f = f64::from(focal * crop.scale(size));
-    let d = [f64::from(c[0] - width as f32 * 0.5) / f, -f64::from(c[1] - height as f32 * 0.5) / f, -1.0];
+    let d = [f64::from(c[0] - principal[0]) / f, -f64::from(c[1] - principal[1]) / f, -1.0];
     let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let d = [d[0] / n, d[1] / n, d[2] / n];
     // Q: the smallest rotation taking the fit's axis (0, 0, −1) onto d (Rodrigues).
@@ -223,12 +223,12 @@ mod frame_tests {
         let a = [0.3f32, -0.1, 0.05];
         // Crop centred on the photo's centre: nothing changes.
         let crop = CropBox { x: 0, y: 0, side: 128 };
-        let b = pose_in_photo_frame(a, 200.0, &crop, 128, 128, 128);
+        let b = pose_in_photo_frame(a, 200.0, &crop, 128, [64.0, 64.0]);
         assert!(a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-5), "{b:?}");
         // The crop's centre 20 px right of the axis at f = 200: the ray is turned by atan(0.1)
         // about the vertical axis, which adds to the yaw (a frontal face there is seen from the side).
         let crop = CropBox { x: 20, y: 0, side: 128 };
-        let b = pose_in_photo_frame([0.0; 3], 200.0, &crop, 128, 128, 128);
+        let b = pose_in_photo_frame([0.0; 3], 200.0, &crop, 128, [64.0, 64.0]);
         assert!((b[0] - (-(0.1f32).atan())).abs() < 1e-4 && b[1].abs() < 1e-5 && b[2].abs() < 1e-5, "{b:?}");
     }
 }
