@@ -18,6 +18,7 @@ crop of a larger frame); truth.json (sizes, principal points, landmarks) and the
 import argparse, json, math, os, shutil, sys
 import numpy as np
 from PIL import Image
+from detect_landmarks import write_pts  # the same directory; mediapipe is imported only to detect
 
 MIRROR = [(0, 16), (1, 15), (2, 14), (3, 13), (4, 12), (5, 11), (6, 10), (7, 9), (17, 26), (18, 25), (19, 24), (20, 23),
           (21, 22), (31, 35), (32, 34), (36, 45), (37, 44), (38, 43), (39, 42), (40, 47), (41, 46), (48, 54), (49, 53),
@@ -123,14 +124,6 @@ def widen(im, rgb, alpha, wide, rng):
     im["principal_px"] = [im["principal_px"][0] + ox, im["principal_px"][1] + oy]
     im["landmarks"] = [[x + ox, y + oy] for x, y in im["landmarks"]]
     return out
-
-
-def write_pts(path, pts):
-    with open(path, "w") as f:
-        f.write(f"version: 1\nn_points:  {len(pts)}\n{{\n")
-        for x, y in pts:
-            f.write(f"{x:.4f} {y:.4f}\n")
-        f.write("}\n")
 
 
 def main():
