@@ -51,8 +51,9 @@ pub enum EvalCommand {
     /// DIR is a `gpmm synth` set (its truth.json lists the images and their yaw) or any folder of
     /// images with a .pts of the same name (photos). Prints JSON: the fraction of faces found (box
     /// centre within half a face size of the reference's), the median and 90th percentile of the
-    /// mean landmark error over the outer-eye-corner distance, and the median |yaw error| per
-    /// |yaw|. Writes DIR/detect.json with every image unless --no-write.
+    /// mean landmark error over the outer-eye-corner distance, the median |yaw error| per |yaw|,
+    /// and the finder's box size over the reference's (10th, 50th, 90th percentile). Writes
+    /// DIR/detect.json with every image unless --no-write.
     Detect(DetectEvalArgs),
 }
 
