@@ -91,9 +91,20 @@ pub fn score_detection(det: &Detection, refs: &[[f32; 2]]) -> (bool, Option<f64>
     (found, error)
 }
 
-/// The (image, reference .pts, truth yaw) triples of a directory: from its truth.json (a `gpmm
-/// synth` set), else every image with a .pts of the same stem (`NAME.pts` or `NAME_0.pts`).
-pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<(PathBuf, PathBuf, Option<f64>)>, InitError> {
+/// An image to measure the detector on and its reference landmarks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalImage {
+    /// The image file.
+    pub image: PathBuf,
+    /// Reference .pts files, one per face (several for a photo of several people).
+    pub references: Vec<PathBuf>,
+    /// The truth's yaw (degrees), if known.
+    pub yaw_deg: Option<f64>,
+}
+
+/// The images of a directory: from its truth.json (a `gpmm synth` set), else every image with a
+/// .pts of the same stem (`NAME.pts`, or one per face: `NAME_0.pts`, `NAME_1.pts`, …).
+pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<EvalImage>, InitError> {
     let io = |source| InitError::Io { path: dir.to_owned(), source };
     let refdir = reference_dir.unwrap_or(dir);
     let truth = dir.join("truth.json");
@@ -105,7 +116,7 @@ pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<(Path
             .filter_map(|im| {
                 let name = im["image"].as_str()?;
                 let pts = refdir.join(Path::new(name).with_extension("pts"));
-                Some((dir.join(name), pts, im["yaw_deg"].as_f64()))
+                Some(EvalImage { image: dir.join(name), references: vec![pts], yaw_deg: im["yaw_deg"].as_f64() })
             })
             .collect());
     }
@@ -118,28 +129,38 @@ pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<(Path
             continue;
         }
         let stem = p.file_stem().and_then(|s| s.to_str()).unwrap_or("");
-        let pts = [refdir.join(format!("{stem}.pts")), refdir.join(format!("{stem}_0.pts"))].into_iter().find(|q| q.exists());
-        if let Some(pts) = pts {
-            out.push((p, pts, None));
+        let single = refdir.join(format!("{stem}.pts"));
+        let references: Vec<PathBuf> = if single.exists() {
+            vec![single]
+        } else {
+            (0..).map(|k| refdir.join(format!("{stem}_{k}.pts"))).take_while(|q| q.exists()).collect()
+        };
+        if !references.is_empty() {
+            out.push(EvalImage { image: p, references, yaw_deg: None });
         }
     }
     Ok(out)
 }
 
-/// Detects every listed image and compares with its reference.
+/// Detects every listed image and compares with its reference (with several, the face whose
+/// landmarks' box centre is nearest the finder's box: a photo of two people counts the one found).
 pub fn evaluate(
     init: &mut InitModel,
-    images: &[(PathBuf, PathBuf, Option<f64>)],
+    images: &[EvalImage],
     one_based: bool,
     refine: usize,
 ) -> Result<(DetectSummary, Vec<DetectImage>), InitError> {
     let mut rows = Vec::new();
-    for (image, pts, yaw) in images {
+    for EvalImage { image, references, yaw_deg: yaw } in images {
         let img = image::open(image).map_err(|e| InitError::Io { path: image.clone(), source: std::io::Error::other(e) })?.to_rgb8();
-        let reference =
-            read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), source: std::io::Error::other(e.to_string()) })?;
-        let refs: Vec<[f32; 2]> = reference.points.iter().map(|p| [p[0], p[1]]).collect();
+        let mut faces = Vec::new();
+        for pts in references {
+            let reference =
+                read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), source: std::io::Error::other(e.to_string()) })?;
+            faces.push(reference.points.iter().map(|p| [p[0], p[1]]).collect::<Vec<[f32; 2]>>());
+        }
         let det = init.detect(&img, 0.0, refine)?;
+        let refs = nearest_face(&faces, det.as_ref().map(|d| (d.face.cx, d.face.cy)));
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let Some(det) = det else {
             rows.push(DetectImage {
@@ -208,4 +229,40 @@ pub fn evaluate(
         per_yaw,
     };
     Ok((summary, rows))
+}
+
+/// The reference face whose landmarks' box centre is nearest `at` (the first without a point, or
+/// none given).
+fn nearest_face(faces: &[Vec<[f32; 2]>], at: Option<(f32, f32)>) -> Vec<[f32; 2]> {
+    let distance = |f: &Vec<[f32; 2]>| {
+        let (cx, cy, _) = landmark_box(f);
+        at.map_or(0.0, |(x, y)| (cx - x).hypot(cy - y))
+    };
+    faces.iter().min_by(|a, b| distance(a).total_cmp(&distance(b))).cloned().unwrap_or_default()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_photo_of_several_people_lists_every_face_and_is_scored_on_the_nearest() {
+        let dir = std::env::temp_dir().join(format!("gpmm-eval-list-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in ["two.jpg", "two_0.pts", "two_1.pts", "one.png", "one.pts", "none.png"] {
+            std::fs::write(dir.join(f), b"").unwrap();
+        }
+        let list = list_images(&dir, None).unwrap();
+        let names: Vec<(String, usize)> =
+            list.iter().map(|e| (e.image.file_name().unwrap().to_string_lossy().into_owned(), e.references.len())).collect();
+        assert_eq!(names, [("one.png".to_string(), 1), ("two.jpg".to_string(), 2)]);
+        std::fs::remove_dir_all(&dir).unwrap();
+        let left = vec![[10.0f32, 10.0], [30.0, 30.0]];
+        let right = vec![[110.0f32, 10.0], [130.0, 30.0]];
+        let faces = [left.clone(), right.clone()];
+        assert_eq!(nearest_face(&faces, Some((118.0, 22.0))), right);
+        assert_eq!(nearest_face(&faces, Some((25.0, 15.0))), left);
+        assert_eq!(nearest_face(&faces, None), left);
+    }
 }
