@@ -150,6 +150,8 @@ pub struct FaceBox {
     pub size: f32,
     /// The finder's confidence, 0..1.
     pub score: f32,
+    /// Finder runs spent on it: 1, or 2 after a second look (taken or not).
+    pub looks: u8,
 }
 
 /// What the initializer read from a face.
@@ -194,7 +196,7 @@ pub fn find_face<const A: usize>(
     let first = look(init, rgb, w, h, Window::letterbox(w, h, side), scratch)?;
     let Some(window) = second_look(&first, w, h, side) else { return Ok(first) };
     let second = look(init, rgb, w, h, window, scratch)?;
-    Ok(if same_face(&first, &second) { second } else { first })
+    Ok(FaceBox { looks: 2, ..if same_face(&first, &second) { second } else { first } })
 }
 
 /// Where the finder looks a second time after finding `first` in a `w × h` frame (a `side`-pixel
@@ -246,7 +248,7 @@ fn look<const A: usize>(
     let (u, vv) = (((i % grid.w) as f32 + dx) * cell, ((i / grid.w) as f32 + dy) * cell);
     let (cx, cy) = window.to_source(u, vv);
     let size = libm::expf(log_size) * side as f32 * window.step;
-    Ok(FaceBox { cx, cy, size, score: sigmoid(logit) })
+    Ok(FaceBox { cx, cy, size, score: sigmoid(logit), looks: 1 })
 }
 
 /// Runs the initializer on the crop around `(cx, cy, size)`; fills `det` (landmarks in frame px).
@@ -300,6 +302,13 @@ pub fn landmark_box(points: &[[f32; 2]]) -> (f32, f32, f32) {
 /// Whether the finder's box counts as a face for `min_score` (a NaN score never does).
 pub fn is_face(face: &FaceBox, min_score: f32) -> bool {
     !(face.score.is_nan() || face.score < min_score)
+}
+
+/// The refinement passes that keep a detection within `refine + 2` network runs after `face`: a
+/// second look of the finder takes one pass's place. The device runs this many (its instruction
+/// bound, docs/init-format.md); the host's `gpmm detect` runs all `refine`.
+pub fn bounded_refinement(face: &FaceBox, refine: usize) -> usize {
+    refine.saturating_sub(usize::from(face.looks.saturating_sub(1)))
 }
 
 /// The initializer's part of [`detect`]: reads the face in `face`'s box, then `refine` more times,
@@ -372,7 +381,15 @@ mod tests {
     use super::*;
 
     fn face(cx: f32, cy: f32, size: f32) -> FaceBox {
-        FaceBox { cx, cy, size, score: 0.9 }
+        FaceBox { cx, cy, size, score: 0.9, looks: 1 }
+    }
+
+    #[test]
+    fn a_second_look_takes_the_place_of_a_refinement_pass_when_bounded() {
+        let once = face(1.0, 1.0, 10.0);
+        let twice = FaceBox { looks: 2, ..once };
+        assert_eq!([0, 1, 2].map(|r| bounded_refinement(&once, r)), [0, 1, 2]);
+        assert_eq!([0, 1, 2].map(|r| bounded_refinement(&twice, r)), [0, 0, 1]);
     }
 
     #[test]

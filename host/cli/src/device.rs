@@ -39,7 +39,9 @@ pub struct DeviceFitArgs {
     /// With --init: the camera frame's height (px).
     #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT, requires = "init")]
     pub height: u32,
-    /// With --init: re-centre the initializer's crop on its landmarks this many times (0..=8).
+    /// With --init: re-centre the initializer's crop on its landmarks this many times (0..=8), less
+    /// one when the finder looked twice at a small face (on the device a second look takes a
+    /// pass's place: the instruction bound).
     #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE as u32, requires = "init")]
     pub refine: u32,
     /// With --init: smallest finder score (0..1) counted as a face (below it: "no face found").
@@ -92,7 +94,9 @@ pub struct DeviceDetectArgs {
     /// Frame height (px).
     #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT)]
     pub height: u32,
-    /// Re-centre the crop on the read landmarks this many times (0..=8).
+    /// Re-centre the crop on the read landmarks this many times (0..=8), less one when the finder
+    /// looked twice at a small face (on the device a second look takes a pass's place: the
+    /// instruction bound).
     #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE as u32)]
     pub refine: u32,
     /// Smallest finder score (0..1) counted as a face.

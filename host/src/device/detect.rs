@@ -8,7 +8,7 @@ use crate::device::fit::{figure, run_firmware, tagged_hex, DeviceFitError};
 use crate::init::{InitError, InitModel};
 use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::FormatError;
-use gpmm_core::net::face::{find_face, record_parts, Detection, FaceBox};
+use gpmm_core::net::face::{bounded_refinement, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox};
 use gpmm_core::net::NetScratch;
 use gpmm_core::profile::DeviceProfile;
 use image::RgbImage;
@@ -99,7 +99,8 @@ pub fn partition_bytes(init: &[u8], frame: &[u8], profile: &DeviceProfile) -> Re
 }
 
 /// The host's run of the device's detection: the finder's box, and the detection if its score
-/// reaches `min_score` (the core's `detect`, as `gpmm detect` runs it).
+/// reaches `min_score` (the core's `find_face` and `read_landmarks` with the device's
+/// [`bounded_refinement`], as the firmware runs them).
 pub fn host_detect(
     init: &mut InitModel,
     frame: &RgbImage,
@@ -107,11 +108,15 @@ pub fn host_detect(
     refine: u32,
 ) -> Result<(FaceBox, Option<Detection>), DeviceDetectError> {
     let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let det = init.detect(frame, min_score, refine as usize)?;
     let file = init.file().map_err(InitError::Run)?;
     let mut scratch: Box<NetScratch<{ crate::init::HOST_NET_SCRATCH }>> = Box::default();
     let face = find_face(&file, frame.as_raw(), w, h, &mut scratch).map_err(InitError::Run)?;
-    Ok((face, det))
+    if !is_face(&face, min_score) {
+        return Ok((face, None));
+    }
+    let refine = bounded_refinement(&face, refine as usize);
+    let det = read_landmarks(&file, frame.as_raw(), w, h, face, refine, &mut scratch).map_err(InitError::Run)?;
+    Ok((face, Some(det)))
 }
 
 /// Record bytes for a detection with `counts` (the host's run gets the device's counts, so two
@@ -227,7 +232,7 @@ mod tests {
 
     #[test]
     fn the_record_is_read_back_from_hex_lines() {
-        let face = FaceBox { cx: 80.0, cy: 60.0, size: 30.0, score: 0.25 };
+        let face = FaceBox { cx: 80.0, cy: 60.0, size: 30.0, score: 0.25, looks: 1 };
         let counts = DetectCounts { instructions_finder: 5, instructions_total: 9, stack_peak_bytes: 100, ..DetectCounts::default() };
         let rec = record_bytes(&face, None, &counts).unwrap();
         let hex: String = rec.iter().map(|b| format!("{b:02x}")).collect();
