@@ -304,8 +304,9 @@ pub fn is_face(face: &FaceBox, min_score: f32) -> bool {
     !(face.score.is_nan() || face.score < min_score)
 }
 
-/// The refinement passes that keep a detection within `refine + 2` network runs after `face`: a
-/// second look of the finder takes one pass's place. The device runs this many (its instruction
+/// The refinement passes that keep a detection within `refine + 2` network runs after `face` (3
+/// when `refine` is 0 and the finder looked twice): a second look of the finder takes one pass's
+/// place. The device runs this many (its instruction
 /// bound, docs/init-format.md); the host's `gpmm detect` runs all `refine`.
 pub fn bounded_refinement(face: &FaceBox, refine: usize) -> usize {
     refine.saturating_sub(usize::from(face.looks.saturating_sub(1)))
