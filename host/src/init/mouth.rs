@@ -12,6 +12,7 @@
 
 use crate::gp::model::GpModel;
 use crate::init::almond::{rim, Almond, Opening};
+use crate::mesh::geometry::point_in_polygon;
 use gpmm_core::Vec3;
 use image::RgbaImage;
 use rand::{Rng, RngExt};
@@ -45,12 +46,6 @@ pub struct MouthLook {
     upper_teeth: f32,
     /// Share of the opening the lower teeth fill from the bottom rim.
     lower_teeth: f32,
-}
-
-/// Whether `p` lies inside the polygon `poly` (even-odd rule).
-fn inside(poly: &[[f32; 2]], p: [f32; 2]) -> bool {
-    let edges = poly.iter().zip(poly.iter().cycle().skip(1));
-    edges.filter(|(a, b)| (a[1] > p[1]) != (b[1] > p[1]) && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]).count() % 2 == 1
 }
 
 /// Distance from `p` to the segment `a`–`b`.
@@ -139,6 +134,7 @@ impl OpenMouth {
             }
         }
         let polygon: Vec<[f32; 2]> = top.iter().chain(bottom.iter().rev()).copied().collect();
+        let outline: Vec<[f64; 2]> = polygon.iter().map(|p| p.map(f64::from)).collect();
         let (w, h) = frame.dimensions();
         let lo = polygon.iter().fold([f32::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]);
         let hi = polygon.iter().fold([f32::NEG_INFINITY; 2], |m, p| [m[0].max(p[0]), m[1].max(p[1])]);
@@ -151,7 +147,7 @@ impl OpenMouth {
             for x in x0..x1 {
                 let p = [x as f32 + 0.5, y as f32 + 0.5];
                 let pixel = frame.get_pixel_mut(x, y);
-                if pixel[3] == 0 || !inside(&polygon, p) {
+                if pixel[3] == 0 || !point_in_polygon(&outline, p.map(f64::from)) {
                     continue;
                 }
                 // Nearest rim segments: how far down the opening the pixel lies, and where along it.

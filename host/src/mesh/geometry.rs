@@ -1,4 +1,5 @@
-//! Small f64 3-vector helpers shared by template normalization, synthetic faces and kernels.
+//! Small f64 3-vector helpers shared by template normalization, synthetic faces and kernels, and
+//! the even-odd point-in-polygon test of the template's outline and the training mouths.
 
 /// `a - b`.
 pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -40,4 +41,21 @@ pub fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
 pub fn centroid(points: impl IntoIterator<Item = [f64; 3]>) -> [f64; 3] {
     let (s, n) = points.into_iter().fold(([0.0; 3], 0usize), |(s, n), p| (add(s, p), n + 1));
     mul(s, 1.0 / n.max(1) as f64)
+}
+
+/// Even-odd point-in-polygon test.
+pub fn point_in_polygon(poly: &[[f64; 2]], q: [f64; 2]) -> bool {
+    let mut inside = false;
+    let n = poly.len();
+    for i in 0..n {
+        let a = poly[i];
+        let b = poly[(i + n - 1) % n];
+        if (a[1] > q[1]) != (b[1] > q[1]) {
+            let x = a[0] + (q[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+            if q[0] < x {
+                inside = !inside;
+            }
+        }
+    }
+    inside
 }

@@ -53,7 +53,7 @@
 //!    attribution (from a `LICENSE.txt` next to the mesh, see
 //!    [`attribution_from_license`]), scale, whether cropped, source vertex count.
 
-use crate::mesh::geometry::{add, centroid, cross, dot, mul, norm, sub};
+use crate::mesh::geometry::{add, centroid, cross, dot, mul, norm, point_in_polygon, sub};
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
@@ -416,23 +416,6 @@ impl FaceRegion {
         let side = usize::from(q[0] > 0.0);
         q[2] >= self.z_min(side, q[1]) && point_in_polygon(&self.outline, [q[0], q[1]])
     }
-}
-
-/// Even-odd point-in-polygon test.
-fn point_in_polygon(poly: &[[f64; 2]], q: [f64; 2]) -> bool {
-    let mut inside = false;
-    let n = poly.len();
-    for i in 0..n {
-        let a = poly[i];
-        let b = poly[(i + n - 1) % n];
-        if (a[1] > q[1]) != (b[1] > q[1]) {
-            let x = a[0] + (q[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
-            if q[0] < x {
-                inside = !inside;
-            }
-        }
-    }
-    inside
 }
 
 /// The vertices (ascending original indices) that the default face crop of step 3 keeps of a mesh
