@@ -6,7 +6,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_host::gp::model_io;
 use gpmm_host::init::head::HeadContext;
-use gpmm_host::init::scene::SceneSource;
+use gpmm_host::init::scene::{Openings, SceneSource};
 use gpmm_host::init::InitModel;
 use image::{Rgb, RgbImage};
 use indicatif::ProgressBar;
@@ -97,7 +97,8 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         eprintln!("head: {} vertices from {}", head.vertices(), mesh.display());
         Some(head)
     };
-    let source = SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges };
+    let openings = Openings::of_model(&model, &opts.ranges);
+    let source = SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges, openings: &openings };
     if let Some(path) = &a.preview {
         let grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)

@@ -171,6 +171,23 @@ fn camera_effects(render: &RgbaImage, back: &RgbImage, rng: &mut impl Rng) -> Rg
     out
 }
 
+/// The eyes and mouth a model's scenes may open, found once on its mean shape.
+#[derive(Debug, Clone, Default)]
+pub struct Openings {
+    eyes: Option<OpenEyes>,
+    mouth: Option<OpenMouth>,
+}
+
+impl Openings {
+    /// Those of `model` that `ranges` opens (`open_eyes`, `open_mouth`).
+    pub fn of_model(model: &GpModel, ranges: &SceneRanges) -> Self {
+        Self {
+            eyes: if ranges.open_eyes { OpenEyes::of_model(model) } else { None },
+            mouth: if ranges.open_mouth { OpenMouth::of_model(model) } else { None },
+        }
+    }
+}
+
 /// What scenes are drawn from: the model, the head put around its faces (if any), the ranges.
 #[derive(Debug, Clone, Copy)]
 pub struct SceneSource<'a> {
@@ -180,11 +197,13 @@ pub struct SceneSource<'a> {
     pub head: Option<&'a HeadContext>,
     /// The ranges of pose, camera and framing.
     pub ranges: &'a SceneRanges,
+    /// The model's openings for these ranges ([`Openings::of_model`]).
+    pub openings: &'a Openings,
 }
 
 /// Renders scene `index` of the set drawn with `seed`.
 pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &mut Renderer) -> Option<Scene> {
-    let SceneSource { model, head, ranges } = source;
+    let SceneSource { model, head, ranges, openings } = source;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
@@ -233,10 +252,9 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     // the scene is the same with or without them.
     let mut eye_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ 0xE7E5);
     let mut mouth_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7) ^ 0x3047);
-    let eyes = if ranges.open_eyes { OpenEyes::of_model(model) } else { None };
-    let mouth = if ranges.open_mouth { OpenMouth::of_model(model) } else { None };
-    let mouth_look = mouth.as_ref().and_then(|m| m.draw(&mut mouth_rng).map(|look| (m, look)));
-    let opening = eyes.as_ref().and_then(|e| {
+    let (eyes, mouth) = (openings.eyes.as_ref(), openings.mouth.as_ref());
+    let mouth_look = mouth.and_then(|m| m.draw(&mut mouth_rng).map(|look| (m, look)));
+    let opening = eyes.and_then(|e| {
         let albedos = match &mut headed {
             Some(h) => &mut h.instance.albedos[..instance.positions.len()],
             None => &mut instance.albedos[..],
@@ -249,7 +267,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     };
     let projected = |v: u32| renderer.projected().get(v as usize).map(|p| [p.x, p.y]);
     let mut landmarks: Vec<[f32; 2]> = model.landmarks.iter().filter_map(|&i| projected(i)).collect();
-    if let (Some(eyes), Some(opening)) = (&eyes, opening) {
+    if let (Some(eyes), Some(opening)) = (eyes, opening) {
         eyes.relabel_lids(opening, projected, &mut landmarks);
     }
     if let Some((mouth, look)) = &mouth_look {

@@ -9,7 +9,7 @@ use gpmm_core::net::Shape;
 use gpmm_host::gp::model::GpModel;
 use gpmm_host::init::eval::{quantile, score_detection};
 use gpmm_host::init::head::HeadContext;
-use gpmm_host::init::scene::{render_scene, SceneRanges, SceneSource, LIGHT_LABELS};
+use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
 use gpmm_host::init::{init_file_bytes, InitModel};
 use gpmm_host::render::Renderer;
 use serde::Serialize;
@@ -167,7 +167,8 @@ pub fn train(
     opts: &TrainOptions,
     mut progress: impl FnMut(Progress),
 ) -> Result<(Vec<u8>, TrainReport), String> {
-    let source = SceneSource { model, head, ranges: &opts.ranges };
+    let openings = Openings::of_model(model, &opts.ranges);
+    let source = SceneSource { model, head, ranges: &opts.ranges, openings: &openings };
     let landmarks = model.landmarks.len();
     if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
         return Err(format!("the model has {landmarks} landmarks; the initializer reads 1 to 68"));
