@@ -93,6 +93,11 @@ impl Frame {
     }
 }
 
+/// Landmark `k` (iBUG index) of `model`'s mean shape (mm), if it has it.
+pub fn mean_landmark(model: &GpModel, k: usize) -> Option<Vec3> {
+    model.landmarks.get(k).and_then(|&i| model.shape.mean.get(i as usize)).copied()
+}
+
 /// A rim's shape: 1 in the middle, 0 at the corners.
 pub fn rim(s: f32) -> f32 {
     (1.0 - s * s).max(0.0)
@@ -103,7 +108,7 @@ impl Almond {
     /// landmarks; `None` if the model lacks them or they are degenerate.
     pub fn of_model(model: &GpModel, corners: [usize; 2], upper: &[usize], lower: &[usize]) -> Option<Self> {
         let mean = &model.shape.mean;
-        let at = |k: usize| model.landmarks.get(k).and_then(|&i| mean.get(i as usize)).copied();
+        let at = |k: usize| mean_landmark(model, k);
         let frame = Frame::between(at(corners[0])?, at(corners[1])?)?;
         let mut index = vec![usize::MAX; mean.len()];
         let mut vertices = Vec::new();

@@ -11,7 +11,7 @@
 //! frame pixels, its rims projected from the face's surface.
 
 use crate::gp::model::GpModel;
-use crate::init::almond::{rim, Almond, Opening};
+use crate::init::almond::{mean_landmark, rim, Almond, Opening};
 use crate::mesh::geometry::point_in_polygon;
 use gpmm_core::Vec3;
 use image::RgbaImage;
@@ -64,8 +64,7 @@ impl OpenMouth {
         }
         let (corners, upper, lower) = INNER_LIPS;
         let mouth = Almond::of_model(model, corners, &upper, &lower)?;
-        let at = |k: usize| model.landmarks.get(k).and_then(|&i| model.shape.mean.get(i as usize)).copied();
-        let (top, bottom) = (mouth.local(at(51)?), mouth.local(at(57)?));
+        let (top, bottom) = (mouth.local(mean_landmark(model, 51)?), mouth.local(mean_landmark(model, 57)?));
         let room = [top[1] - mouth.shut(top[0]), mouth.shut(bottom[0]) - bottom[1]];
         if !(room.iter().all(|r| r.is_finite() && *r > 0.0)) {
             return None;
