@@ -29,6 +29,13 @@ pub struct TrainInitArgs {
     /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 30 minutes on 2 cores).
     #[arg(long, value_name = "N")]
     pub chunks: Option<usize>,
+    /// The finder's passes over each chunk (each pass shows every scene of the chunk once more,
+    /// in a new order; default 3).
+    #[arg(long, value_name = "N")]
+    pub passes: Option<usize>,
+    /// The initializer's passes over each chunk (default: as many as the finder's).
+    #[arg(long, value_name = "N")]
+    pub init_passes: Option<usize>,
     /// Write a picture grid of training scenes (what the networks see) to this PNG.
     #[arg(long, value_name = "PNG")]
     pub preview: Option<PathBuf>,
@@ -83,6 +90,19 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
             bail!("--chunks must be at least 1");
         }
         opts.chunks = c;
+    }
+    if let Some(p) = a.passes {
+        if p == 0 {
+            bail!("--passes must be at least 1");
+        }
+        opts.passes = p;
+        opts.init_passes = p;
+    }
+    if let Some(p) = a.init_passes {
+        if p == 0 {
+            bail!("--init-passes must be at least 1");
+        }
+        opts.init_passes = p;
     }
     opts.ranges.open_eyes = !a.shut_eyes;
     opts.ranges.open_mouth = a.open_mouth;

@@ -25,6 +25,8 @@ pub struct TrainOptions {
     pub chunk_scenes: usize,
     /// Passes over each chunk.
     pub passes: usize,
+    /// Passes of the initializer over each chunk (its steps cost a third of the finder's).
+    pub init_passes: usize,
     /// Samples per optimizer step.
     pub batch: usize,
     /// Peak learning rate.
@@ -39,17 +41,42 @@ impl TrainOptions {
     /// The default training (3,840 steps on 81,920 scenes, each seen three times; about 30
     /// minutes on two idle cores; 65 at load 4-8).
     pub fn full(seed: u64) -> Self {
-        Self { seed, chunks: 40, chunk_scenes: 2048, passes: 3, batch: 64, lr: 2e-3, validation: 300, ranges: SceneRanges::default() }
+        Self {
+            seed,
+            chunks: 40,
+            chunk_scenes: 2048,
+            passes: 3,
+            init_passes: 3,
+            batch: 64,
+            lr: 2e-3,
+            validation: 300,
+            ranges: SceneRanges::default(),
+        }
     }
 
     /// A few seconds: for tests (the networks learn little).
     pub fn quick(seed: u64) -> Self {
-        Self { seed, chunks: 2, chunk_scenes: 48, passes: 1, batch: 16, lr: 2e-3, validation: 12, ranges: SceneRanges::default() }
+        Self {
+            seed,
+            chunks: 2,
+            chunk_scenes: 48,
+            passes: 1,
+            init_passes: 1,
+            batch: 16,
+            lr: 2e-3,
+            validation: 12,
+            ranges: SceneRanges::default(),
+        }
     }
 
-    /// Optimizer steps in all.
+    /// Batches in all (a batch is a step of the finder, the initializer or both).
     pub fn steps(&self) -> usize {
-        self.chunks * self.passes * self.chunk_scenes.div_ceil(self.batch)
+        self.chunks * self.passes.max(self.init_passes) * self.chunk_scenes.div_ceil(self.batch)
+    }
+
+    /// The finder's and the initializer's optimizer steps.
+    pub fn net_steps(&self) -> [usize; 2] {
+        [self.passes, self.init_passes].map(|p| self.chunks * p * self.chunk_scenes.div_ceil(self.batch))
     }
 }
 
@@ -139,7 +166,21 @@ fn finder_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) ->
     cls + (reg * 4.0)?
 }
 
-fn initializer_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
+/// The order in which pass `pass` over chunk `chunk` shows its `n` samples: fixed for a seed.
+pub fn pass_order(seed: u64, chunk: usize, pass: usize, n: usize) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..n).collect();
+    let mut state = seed ^ ((chunk * 31 + pass) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    for i in (1..order.len()).rev() {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        order.swap(i, (state % (i as u64 + 1)) as usize);
+    }
+    order
+}
+
+/// The initializer's loss on a batch: L1 over landmarks (weight 1), angles (2) and light (0.3).
+pub fn initializer_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
     let x = batch_tensor(batch.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
     let (out, _) = net.forward(&x)?;
     let d = geo.init_outputs();
@@ -182,10 +223,15 @@ pub fn train(
     let mut opt_f = AdamW::new(finder.vars(), params(opts.lr)).map_err(err)?;
     let mut opt_i = AdamW::new(init.vars(), params(opts.lr)).map_err(err)?;
     let total = opts.steps();
-    let mut done = 0;
+    let net_total = opts.net_steps();
+    let (mut done, mut net_done) = (0, [0usize; 2]);
     let (mut last_f, mut last_i) = (0.0f32, 0.0f32);
     let mut calib: Vec<Sample> = Vec::new();
     let (mut render_seconds, mut train_seconds) = (0.0, 0.0);
+    // Each network's learning rate follows a cosine over its own steps.
+    let lr_at = |done: usize, total: usize| {
+        opts.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total.max(1) as f64).cos()))
+    };
     for chunk in 0..opts.chunks {
         progress(Progress::Rendering { chunk });
         let start = (chunk * opts.chunk_scenes) as u64;
@@ -196,41 +242,42 @@ pub fn train(
         if data.is_empty() {
             return Err("no training scene could be rendered (is the model's landmark list valid?)".into());
         }
-        let (mut sum_f, mut sum_i, mut n) = (0.0f32, 0.0f32, 0usize);
-        for pass in 0..opts.passes {
-            // A fixed, seed-dependent order per pass.
-            let mut order: Vec<usize> = (0..data.len()).collect();
-            let mut state = opts.seed ^ ((chunk * 31 + pass) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            for i in (1..order.len()).rev() {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                order.swap(i, (state % (i as u64 + 1)) as usize);
-            }
+        let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
+        let (mut f, mut i) = (last_f, last_i);
+        for pass in 0..opts.passes.max(opts.init_passes) {
+            let order = pass_order(opts.seed, chunk, pass, data.len());
+            let (train_f, train_i) = (pass < opts.passes, pass < opts.init_passes);
             for idx in order.chunks(opts.batch) {
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
-                let lr = opts.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total.max(1) as f64).cos()));
-                opt_f.set_learning_rate(lr);
-                opt_i.set_learning_rate(lr);
-                let lf = finder_loss(&finder, &batch, &geo, &device).map_err(err)?;
-                opt_f.backward_step(&lf).map_err(err)?;
-                let li = initializer_loss(&init, &batch, &geo, &device).map_err(err)?;
-                opt_i.backward_step(&li).map_err(err)?;
-                let (f, i) = (lf.to_scalar::<f32>().map_err(err)?, li.to_scalar::<f32>().map_err(err)?);
+                if train_f {
+                    opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
+                    let lf = finder_loss(&finder, &batch, &geo, &device).map_err(err)?;
+                    opt_f.backward_step(&lf).map_err(err)?;
+                    f = lf.to_scalar::<f32>().map_err(err)?;
+                    net_done[0] += 1;
+                }
+                if train_i {
+                    opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
+                    let li = initializer_loss(&init, &batch, &geo, &device).map_err(err)?;
+                    opt_i.backward_step(&li).map_err(err)?;
+                    i = li.to_scalar::<f32>().map_err(err)?;
+                    net_done[1] += 1;
+                }
                 if !(f.is_finite() && i.is_finite()) {
                     return Err(format!("training diverged at step {done} (loss {f} / {i}); try a smaller learning rate"));
                 }
-                if pass + 1 == opts.passes {
-                    sum_f += f;
-                    sum_i += i;
-                    n += 1;
+                for (k, (last_pass, value)) in [(opts.passes, f), (opts.init_passes, i)].into_iter().enumerate() {
+                    if pass + 1 == last_pass {
+                        sum[k] += value;
+                        n[k] += 1;
+                    }
                 }
                 done += 1;
                 progress(Progress::Step { done, total, finder: f, initializer: i });
             }
         }
         train_seconds += t0.elapsed().as_secs_f64();
-        (last_f, last_i) = (sum_f / n.max(1) as f32, sum_i / n.max(1) as f32);
+        (last_f, last_i) = (sum[0] / n[0].max(1) as f32, sum[1] / n[1].max(1) as f32);
         if chunk + 1 == opts.chunks {
             calib = data.into_iter().take(256).collect();
         }
@@ -245,6 +292,8 @@ pub fn train(
         "trained_on": model.metadata.kernel,
         "seed": opts.seed,
         "steps": total,
+        "finder_steps": net_total[0],
+        "initializer_steps": net_total[1],
         "scenes": opts.chunks * opts.chunk_scenes,
         "yaw_range_deg": opts.ranges.yaw,
         "head_vertices": head.map_or(0, HeadContext::vertices),

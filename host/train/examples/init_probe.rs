@@ -1,0 +1,163 @@
+//! Trains only the initializer, in float, with one of a few architectures and a budget of fresh
+//! scenes and passes, and reports its median landmark error / IOD and |yaw error| on 600 held-out
+//! crops (cut around the true box with the training's jitter; no finder, no quantization): a
+//! quick way to see what limits the initializer (docs/evaluation.md, stop 34).
+//! `cargo run --release -p gpmm-train --example init_probe -- MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES`
+//! (VARIANT: base, wide, deep, fc256 or lean).
+use candle_core::Device;
+use candle_nn::{AdamW, Optimizer, ParamsAdamW};
+use gpmm_core::net::{LayerKind, Shape};
+use gpmm_host::init::head::HeadContext;
+use gpmm_host::init::scene::{Openings, SceneRanges, SceneSource};
+use gpmm_train::data::{samples, Sample};
+use gpmm_train::nets::{batch_tensor, initializer_specs, Net, Spec};
+use gpmm_train::train::{geometry, initializer_loss, pass_order};
+
+const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
+    Spec { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
+}
+const fn dense(cin: usize, cout: usize, relu: bool) -> Spec {
+    Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu, cin, cout }
+}
+
+fn specs(variant: &str, d: usize) -> Vec<Spec> {
+    match variant {
+        "base" => initializer_specs(d),
+        "wide" => vec![
+            conv(3, 24, 2),
+            conv(24, 48, 2),
+            conv(48, 48, 1),
+            conv(48, 96, 2),
+            conv(96, 96, 2),
+            dense(1536, 128, true),
+            dense(128, d, false),
+        ],
+        "deep" => vec![
+            conv(3, 16, 2),
+            conv(16, 32, 2),
+            conv(32, 32, 1),
+            conv(32, 64, 2),
+            conv(64, 64, 1),
+            conv(64, 64, 2),
+            dense(1024, 128, true),
+            dense(128, d, false),
+        ],
+        "fc256" => vec![
+            conv(3, 16, 2),
+            conv(16, 32, 2),
+            conv(32, 32, 1),
+            conv(32, 64, 2),
+            conv(64, 64, 2),
+            dense(1024, 256, true),
+            dense(256, d, false),
+        ],
+        "lean" => vec![
+            conv(3, 16, 2),
+            conv(16, 32, 2),
+            conv(32, 64, 2),
+            conv(64, 64, 1),
+            conv(64, 64, 2),
+            dense(1024, 128, true),
+            dense(128, d, false),
+        ],
+        _ => Vec::new(),
+    }
+}
+
+type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+fn heldout_error(net: &Net, data: &[Sample], l: usize, device: &Device) -> Res<(f64, f64)> {
+    let mut errs = Vec::new();
+    let mut yaws = Vec::new();
+    for chunk in data.chunks(128) {
+        let x = batch_tensor(chunk.iter().map(|s| s.crop.as_slice()), 64, device)?;
+        let out: Vec<Vec<f32>> = net.forward(&x)?.0.to_vec2()?;
+        for (s, o) in chunk.iter().zip(&out) {
+            let t = &s.target;
+            let iod = ((t[72] - t[90]).powi(2) + (t[73] - t[91]).powi(2)).sqrt();
+            let e: f32 =
+                (0..l).map(|k| ((o[2 * k] - t[2 * k]).powi(2) + (o[2 * k + 1] - t[2 * k + 1]).powi(2)).sqrt()).sum::<f32>() / l as f32;
+            errs.push(f64::from(e / iod));
+            yaws.push(f64::from((o[2 * l] - t[2 * l]).abs().to_degrees()));
+        }
+    }
+    errs.sort_by(f64::total_cmp);
+    yaws.sort_by(f64::total_cmp);
+    Ok((errs[errs.len() / 2], yaws[yaws.len() / 2]))
+}
+
+fn main() -> Res<()> {
+    let a: Vec<String> = std::env::args().collect();
+    let [_, model_path, template, variant, chunks, passes] = a.as_slice() else {
+        return Err("usage: init_probe MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES".into());
+    };
+    let (template, variant) = (std::path::Path::new(template), variant.as_str());
+    let (chunks, passes): (usize, usize) = (chunks.parse()?, passes.parse()?);
+    let model = gpmm_host::gp::model_io::load(std::path::Path::new(model_path))?;
+    let head = HeadContext::load(&model, &template.join("lee-perry-smith.ply"), &template.join("landmarks_ibug68.json"))?;
+    let ranges = SceneRanges::default();
+    let openings = Openings::of_model(&model, &ranges);
+    let source = SceneSource { model: &model, head: Some(&head), ranges: &ranges, openings: &openings };
+    let l = model.landmarks.len();
+    let geo = geometry(l);
+    let d = geo.init_outputs();
+    let device = Device::Cpu;
+    let layers = specs(variant, d);
+    if layers.is_empty() || l != 68 {
+        return Err(format!("unknown variant {variant} or a model without the 68 iBUG landmarks").into());
+    }
+    let net = Net::new(Shape { h: 64, w: 64, c: 3 }, layers, 2, &device)?;
+    let macs: usize = {
+        let mut side = 64usize;
+        net.specs
+            .iter()
+            .map(|s| match s.kind {
+                LayerKind::Conv => {
+                    side = (side + 2 * (s.kernel / 2) - s.kernel) / s.stride + 1;
+                    side * side * s.cout * s.kernel * s.kernel * s.cin
+                }
+                LayerKind::Dense => s.cin * s.cout,
+            })
+            .sum()
+    };
+    let held = samples(source, &geo, 777, 0, 600);
+    let mut opt = AdamW::new(net.vars(), ParamsAdamW { lr: 2e-3, weight_decay: 1e-4, ..Default::default() })?;
+    let (chunk_scenes, batch, lr0) = (2048usize, 64usize, 2e-3f64);
+    let total = chunks * passes * chunk_scenes.div_ceil(batch);
+    let mut done = 0;
+    let t0 = std::time::Instant::now();
+    let mut last = 0.0;
+    for chunk in 0..chunks {
+        let data = samples(source, &geo, 1, (chunk * chunk_scenes) as u64, chunk_scenes as u64);
+        for pass in 0..passes {
+            let order = pass_order(1, chunk, pass, data.len());
+            let mut sum = 0.0;
+            let mut n = 0;
+            for idx in order.chunks(batch) {
+                let b: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
+                let lr = lr0 * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total as f64).cos()));
+                opt.set_learning_rate(lr);
+                let li = initializer_loss(&net, &b, &geo, &device)?;
+                opt.backward_step(&li)?;
+                sum += li.to_scalar::<f32>()?;
+                n += 1;
+                done += 1;
+            }
+            last = sum / n as f32;
+        }
+        if chunk % 4 == 3 || chunk + 1 == chunks {
+            let (e, y) = heldout_error(&net, &held, l, &device)?;
+            eprintln!(
+                "{variant} chunk {} step {done}/{total} loss {last:.4} held-out {e:.4} yaw {y:.2} ({:.0} s)",
+                chunk + 1,
+                t0.elapsed().as_secs_f64()
+            );
+        }
+    }
+    let (e, y) = heldout_error(&net, &held, l, &device)?;
+    println!(
+        "{variant} chunks {chunks} passes {passes} macs {macs} steps {total} loss {last:.4} held-out IOD {e:.4} yaw {y:.2} time {:.0} s",
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
