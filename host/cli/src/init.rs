@@ -36,6 +36,9 @@ pub struct TrainInitArgs {
     /// The initializer's passes over each chunk (default: as many as the finder's).
     #[arg(long, value_name = "N")]
     pub init_passes: Option<usize>,
+    /// Show the initializer every other pass in a mirror (crops flipped, labels mirrored).
+    #[arg(long)]
+    pub mirror: bool,
     /// Write a picture grid of training scenes (what the networks see) to this PNG.
     #[arg(long, value_name = "PNG")]
     pub preview: Option<PathBuf>,
@@ -104,6 +107,10 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         }
         opts.init_passes = p;
     }
+    if a.mirror && model.landmarks.len() != 68 {
+        bail!("--mirror needs a model with the 68 iBUG landmarks ({} has {})", a.model.display(), model.landmarks.len());
+    }
+    opts.mirror = a.mirror;
     opts.ranges.open_eyes = !a.shut_eyes;
     opts.ranges.open_mouth = a.open_mouth;
     let head = if a.no_head {

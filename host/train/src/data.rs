@@ -4,6 +4,7 @@
 use gpmm_core::net::face::landmark_box;
 use gpmm_core::net::resample::{sample_rgb, Window};
 use gpmm_host::init::scene::{render_scene, Scene, SceneSource};
+use gpmm_host::mesh::template::IBUG68_MIRROR_PAIRS;
 use gpmm_host::render::Renderer;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -94,4 +95,91 @@ pub fn samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, c
         })
         .filter_map(|s| s)
         .collect()
+}
+
+impl Sample {
+    /// The initializer's half of the sample seen in a mirror: the crop flipped left-right, the
+    /// landmarks' x negated and their iBUG-68 pairs swapped, yaw and roll negated, and the light's
+    /// x coefficient (SH band 1, `Y11`) negated. `None` unless the landmarks are the 68 iBUG
+    /// points (the pairs say which point is whose mirror image). The finder's half is kept.
+    pub fn mirrored(&self, geo: &Geometry) -> Option<Sample> {
+        let (side, l) = (geo.crop_side, geo.landmarks);
+        if l != 68 || self.crop.len() != side * side * 3 || self.target.len() != geo.init_outputs() {
+            return None;
+        }
+        let mut crop = self.crop.clone();
+        for (row_out, row_in) in crop.chunks_exact_mut(side * 3).zip(self.crop.chunks_exact(side * 3)) {
+            for (px_out, px_in) in row_out.chunks_exact_mut(3).zip(row_in.chunks_exact(3).rev()) {
+                px_out.copy_from_slice(px_in);
+            }
+        }
+        let mut partner: Vec<usize> = (0..l).collect();
+        for &(a, b) in &IBUG68_MIRROR_PAIRS {
+            partner[a] = b;
+            partner[b] = a;
+        }
+        let mut target = self.target.clone();
+        for (k, &p) in partner.iter().enumerate() {
+            target[2 * k] = -self.target[2 * p];
+            target[2 * k + 1] = self.target[2 * p + 1];
+        }
+        target[2 * l] = -target[2 * l];
+        target[2 * l + 2] = -target[2 * l + 2];
+        // Light: 4 coefficients × RGB, coefficient-major; coefficient 3 is band 1's x.
+        for v in target.iter_mut().skip(2 * l + 3 + 9).take(3.min(geo.light.saturating_sub(9))) {
+            *v = -*v;
+        }
+        Some(Sample { frame: self.frame.clone(), cell: self.cell, place: self.place, crop, target })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn sample(geo: &Geometry) -> Sample {
+        let n = geo.crop_side * geo.crop_side * 3;
+        Sample {
+            frame: Vec::new(),
+            cell: 0,
+            place: [0.0; 3],
+            crop: (0..n).map(|i| (i % 251) as i8).collect(),
+            target: (0..geo.init_outputs()).map(|i| (i as f32 * 0.37).sin()).collect(),
+        }
+    }
+
+    #[test]
+    fn a_mirror_image_of_a_mirror_image_is_the_sample() {
+        let geo = crate::train::geometry(68);
+        let s = sample(&geo);
+        let m = s.mirrored(&geo).unwrap();
+        assert_ne!(m.crop, s.crop);
+        assert_ne!(m.target, s.target);
+        let back = m.mirrored(&geo).unwrap();
+        assert_eq!(back.crop, s.crop);
+        assert_eq!(back.target, s.target);
+    }
+
+    #[test]
+    fn a_mirror_swaps_the_eye_corners_and_flips_the_pixels() {
+        let geo = crate::train::geometry(68);
+        let s = sample(&geo);
+        let m = s.mirrored(&geo).unwrap();
+        // Outer eye corners 36 and 45 trade places, x negated.
+        assert_eq!(m.target[72], -s.target[90]);
+        assert_eq!(m.target[91], s.target[73]);
+        // The nose tip (30) is its own mirror image.
+        assert_eq!(m.target[60], -s.target[60]);
+        // Yaw and roll change sign, pitch does not; the light's x coefficient changes sign.
+        assert_eq!(m.target[136], -s.target[136]);
+        assert_eq!(m.target[137], s.target[137]);
+        assert_eq!(m.target[138], -s.target[138]);
+        assert_eq!(m.target[139 + 9..139 + 12], s.target[139 + 9..139 + 12].iter().map(|v| -v).collect::<Vec<_>>()[..]);
+        assert_eq!(m.target[139..139 + 9], s.target[139..139 + 9]);
+        // Pixel (row 5, column 0) is the source's (row 5, last column).
+        let side = geo.crop_side;
+        assert_eq!(m.crop[5 * side * 3..5 * side * 3 + 3], s.crop[(5 * side + side - 1) * 3..(5 * side + side) * 3]);
+        assert!(s.mirrored(&crate::train::geometry(5)).is_none());
+    }
 }

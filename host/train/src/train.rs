@@ -27,6 +27,8 @@ pub struct TrainOptions {
     pub passes: usize,
     /// Passes of the initializer over each chunk (its steps cost a third of the finder's).
     pub init_passes: usize,
+    /// The initializer's odd passes see every crop in a mirror ([`Sample::mirrored`]).
+    pub mirror: bool,
     /// Samples per optimizer step.
     pub batch: usize,
     /// Peak learning rate.
@@ -47,6 +49,7 @@ impl TrainOptions {
             chunk_scenes: 2048,
             passes: 3,
             init_passes: 3,
+            mirror: false,
             batch: 64,
             lr: 2e-3,
             validation: 300,
@@ -62,6 +65,7 @@ impl TrainOptions {
             chunk_scenes: 48,
             passes: 1,
             init_passes: 1,
+            mirror: false,
             batch: 16,
             lr: 2e-3,
             validation: 12,
@@ -258,7 +262,12 @@ pub fn train(
                 }
                 if train_i {
                     opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
-                    let li = initializer_loss(&init, &batch, &geo, &device).map_err(err)?;
+                    let li = if opts.mirror && pass % 2 == 1 {
+                        let seen: Vec<Sample> = batch.iter().filter_map(|s| s.mirrored(&geo)).collect();
+                        initializer_loss(&init, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(err)?
+                    } else {
+                        initializer_loss(&init, &batch, &geo, &device).map_err(err)?
+                    };
                     opt_i.backward_step(&li).map_err(err)?;
                     i = li.to_scalar::<f32>().map_err(err)?;
                     net_done[1] += 1;
@@ -294,6 +303,7 @@ pub fn train(
         "steps": total,
         "finder_steps": net_total[0],
         "initializer_steps": net_total[1],
+        "mirror": opts.mirror,
         "scenes": opts.chunks * opts.chunk_scenes,
         "yaw_range_deg": opts.ranges.yaw,
         "head_vertices": head.map_or(0, HeadContext::vertices),
