@@ -3,7 +3,7 @@
 //! crops (cut around the true box with the training's jitter; no finder, no quantization): a
 //! quick way to see what limits the initializer (docs/evaluation.md, stop 34).
 //! `cargo run --release -p gpmm-train --example init_probe -- MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES`
-//! (VARIANT: base, wide, deep, fc256 or lean).
+//! (VARIANT: base, the default initializer, or wide, 1.5× its channels).
 use candle_core::Device;
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use gpmm_core::net::{LayerKind, Shape};
@@ -30,34 +30,6 @@ fn specs(variant: &str, d: usize) -> Vec<Spec> {
             conv(48, 96, 2),
             conv(96, 96, 2),
             dense(1536, 128, true),
-            dense(128, d, false),
-        ],
-        "deep" => vec![
-            conv(3, 16, 2),
-            conv(16, 32, 2),
-            conv(32, 32, 1),
-            conv(32, 64, 2),
-            conv(64, 64, 1),
-            conv(64, 64, 2),
-            dense(1024, 128, true),
-            dense(128, d, false),
-        ],
-        "fc256" => vec![
-            conv(3, 16, 2),
-            conv(16, 32, 2),
-            conv(32, 32, 1),
-            conv(32, 64, 2),
-            conv(64, 64, 2),
-            dense(1024, 256, true),
-            dense(256, d, false),
-        ],
-        "lean" => vec![
-            conv(3, 16, 2),
-            conv(16, 32, 2),
-            conv(32, 64, 2),
-            conv(64, 64, 1),
-            conv(64, 64, 2),
-            dense(1024, 128, true),
             dense(128, d, false),
         ],
         _ => Vec::new(),
