@@ -218,6 +218,9 @@ pub fn train(
     if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
         return Err(format!("the model has {landmarks} landmarks; the initializer reads 1 to 68"));
     }
+    if opts.mirror && landmarks != 68 {
+        return Err(format!("mirrored crops need the 68 iBUG landmarks; the model has {landmarks}"));
+    }
     let device = Device::Cpu;
     let geo = geometry(landmarks);
     let finder = Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device).map_err(err)?;
