@@ -107,9 +107,6 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         }
         opts.init_passes = p;
     }
-    if a.mirror && model.landmarks.len() != 68 {
-        bail!("--mirror needs a model with the 68 iBUG landmarks ({} has {})", a.model.display(), model.landmarks.len());
-    }
     opts.mirror = a.mirror;
     opts.ranges.open_eyes = !a.shut_eyes;
     opts.ranges.open_mouth = a.open_mouth;
@@ -142,7 +139,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         }
         gpmm_train::train::Progress::Validating => bar.set_message("quantizing and validating".to_string()),
     })
-    .map_err(anyhow::Error::msg)?;
+    .map_err(|e| anyhow::anyhow!("cannot train on {}: {e}", a.model.display()))?;
     bar.finish_and_clear();
     std::fs::write(&a.output, &bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));

@@ -9,9 +9,9 @@ use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use gpmm_core::net::{LayerKind, Shape};
 use gpmm_host::init::head::HeadContext;
 use gpmm_host::init::scene::{Openings, SceneRanges, SceneSource};
-use gpmm_train::data::{samples, Sample};
+use gpmm_train::data::{samples, Geometry, Sample};
 use gpmm_train::nets::{batch_tensor, initializer_specs, Net, Spec};
-use gpmm_train::train::{geometry, initializer_loss, pass_order};
+use gpmm_train::train::{cosine_lr, geometry, initializer_loss, pass_order};
 
 const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
     Spec { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
@@ -38,11 +38,10 @@ fn specs(variant: &str, d: usize) -> Vec<Spec> {
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
-fn heldout_error(net: &Net, data: &[Sample], l: usize, device: &Device) -> Res<(f64, f64)> {
-    let mut errs = Vec::new();
-    let mut yaws = Vec::new();
+fn heldout_error(net: &Net, data: &[Sample], geo: &Geometry, device: &Device) -> Res<(f64, f64)> {
+    let (mut errs, mut yaws, l) = (Vec::new(), Vec::new(), geo.landmarks);
     for chunk in data.chunks(128) {
-        let x = batch_tensor(chunk.iter().map(|s| s.crop.as_slice()), 64, device)?;
+        let x = batch_tensor(chunk.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
         let out: Vec<Vec<f32>> = net.forward(&x)?.0.to_vec2()?;
         for (s, o) in chunk.iter().zip(&out) {
             let t = &s.target;
@@ -78,20 +77,8 @@ fn main() -> Res<()> {
     if layers.is_empty() || l != 68 {
         return Err(format!("unknown variant {variant} or a model without the 68 iBUG landmarks").into());
     }
-    let net = Net::new(Shape { h: 64, w: 64, c: 3 }, layers, 2, &device)?;
-    let macs: usize = {
-        let mut side = 64usize;
-        net.specs
-            .iter()
-            .map(|s| match s.kind {
-                LayerKind::Conv => {
-                    side = (side + 2 * (s.kernel / 2) - s.kernel) / s.stride + 1;
-                    side * side * s.cout * s.kernel * s.kernel * s.cin
-                }
-                LayerKind::Dense => s.cin * s.cout,
-            })
-            .sum()
-    };
+    let net = Net::new(Shape { h: geo.crop_side, w: geo.crop_side, c: 3 }, layers, 2, &device)?;
+    let macs = net.macs();
     let held = samples(source, &geo, 777, 0, 600);
     let mut opt = AdamW::new(net.vars(), ParamsAdamW { lr: 2e-3, weight_decay: 1e-4, ..Default::default() })?;
     let (chunk_scenes, batch, lr0) = (2048usize, 64usize, 2e-3f64);
@@ -107,7 +94,7 @@ fn main() -> Res<()> {
             let mut n = 0;
             for idx in order.chunks(batch) {
                 let b: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
-                let lr = lr0 * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total as f64).cos()));
+                let lr = cosine_lr(lr0, done, total);
                 opt.set_learning_rate(lr);
                 let li = initializer_loss(&net, &b, &geo, &device)?;
                 opt.backward_step(&li)?;
@@ -118,7 +105,7 @@ fn main() -> Res<()> {
             last = sum / n as f32;
         }
         if chunk % 4 == 3 || chunk + 1 == chunks {
-            let (e, y) = heldout_error(&net, &held, l, &device)?;
+            let (e, y) = heldout_error(&net, &held, &geo, &device)?;
             eprintln!(
                 "{variant} chunk {} step {done}/{total} loss {last:.4} held-out {e:.4} yaw {y:.2} ({:.0} s)",
                 chunk + 1,
@@ -126,7 +113,7 @@ fn main() -> Res<()> {
             );
         }
     }
-    let (e, y) = heldout_error(&net, &held, l, &device)?;
+    let (e, y) = heldout_error(&net, &held, &geo, &device)?;
     println!(
         "{variant} chunks {chunks} passes {passes} macs {macs} steps {total} loss {last:.4} held-out IOD {e:.4} yaw {y:.2} time {:.0} s",
         t0.elapsed().as_secs_f64()

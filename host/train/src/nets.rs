@@ -88,6 +88,21 @@ impl Net {
         Ok(Self { input, specs, weights, biases })
     }
 
+    /// Multiply-accumulates of one forward pass of one sample.
+    pub fn macs(&self) -> usize {
+        let (mut h, mut w) = (self.input.h, self.input.w);
+        self.specs
+            .iter()
+            .map(|s| match s.kind {
+                LayerKind::Conv => {
+                    (h, w) = Patches { b: 1, h, w, c: s.cin, k: s.kernel, stride: s.stride }.out_hw();
+                    h * w * s.cout * s.kernel * s.kernel * s.cin
+                }
+                LayerKind::Dense => s.cin * s.cout,
+            })
+            .sum()
+    }
+
     /// Every trainable variable.
     pub fn vars(&self) -> Vec<Var> {
         self.weights.iter().chain(&self.biases).cloned().collect()
@@ -158,4 +173,20 @@ pub fn batch_tensor<'a>(inputs: impl Iterator<Item = &'a [i8]>, side: usize, dev
         n += 1;
     }
     Tensor::from_vec(data, (n, side, side, 3), device)
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn the_multiply_accumulates_are_those_the_core_counts() {
+        // The core's count of the default networks (`Network::macs`, as the training report gives it).
+        let device = Device::Cpu;
+        let finder = Net::new(Shape { h: 96, w: 96, c: 3 }, finder_specs(), 1, &device).unwrap();
+        let init = Net::new(Shape { h: 64, w: 64, c: 3 }, initializer_specs(151), 2, &device).unwrap();
+        assert_eq!(finder.macs(), 5_151_744);
+        assert_eq!(init.macs(), 5_901_184);
+    }
 }

@@ -170,6 +170,11 @@ fn finder_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) ->
     cls + (reg * 4.0)?
 }
 
+/// The learning rate after `done` of `total` steps: a cosine from `peak` down to 5 % of it.
+pub fn cosine_lr(peak: f64, done: usize, total: usize) -> f64 {
+    peak * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total.max(1) as f64).cos()))
+}
+
 /// The order in which pass `pass` over chunk `chunk` shows its `n` samples: fixed for a seed.
 pub fn pass_order(seed: u64, chunk: usize, pass: usize, n: usize) -> Vec<usize> {
     let mut order: Vec<usize> = (0..n).collect();
@@ -235,10 +240,8 @@ pub fn train(
     let (mut last_f, mut last_i) = (0.0f32, 0.0f32);
     let mut calib: Vec<Sample> = Vec::new();
     let (mut render_seconds, mut train_seconds) = (0.0, 0.0);
-    // Each network's learning rate follows a cosine over its own steps.
-    let lr_at = |done: usize, total: usize| {
-        opts.lr * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total.max(1) as f64).cos()))
-    };
+    // Each network's learning rate follows the cosine over its own steps.
+    let lr_at = |done: usize, total: usize| cosine_lr(opts.lr, done, total);
     for chunk in 0..opts.chunks {
         progress(Progress::Rendering { chunk });
         let start = (chunk * opts.chunk_scenes) as u64;
