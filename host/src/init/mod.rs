@@ -9,6 +9,7 @@ pub mod eyes;
 pub mod head;
 pub mod mouth;
 pub mod scene;
+pub mod skin;
 
 use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile};
 use gpmm_core::net::{NetError, NetScratch};

@@ -7,6 +7,7 @@ use crate::gp::model::GpModel;
 use crate::init::eyes::OpenEyes;
 use crate::init::head::HeadContext;
 use crate::init::mouth::OpenMouth;
+use crate::init::skin::PlainSkin;
 use crate::render::{Background, Instance, RenderSettings, Renderer, View};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::net::face::landmark_box;
@@ -38,6 +39,8 @@ pub struct SceneRanges {
     /// Draw an open mouth (teeth, dark gap) over the scan's closed one in some scenes
     /// (`crate::init::mouth`); off by default (docs/evaluation.md, stop 32).
     pub open_mouth: bool,
+    /// Make the skin plainer in some scenes (`crate::init::skin`); off by default.
+    pub plain_skin: PlainSkin,
 }
 
 impl Default for SceneRanges {
@@ -52,6 +55,7 @@ impl Default for SceneRanges {
             components: 60,
             open_eyes: true,
             open_mouth: false,
+            plain_skin: PlainSkin::default(),
         }
     }
 }
@@ -248,10 +252,15 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let (ox, oy) = ((px - camera.principal[0]) / camera.focal * depth, -(py - camera.principal[1]) / camera.focal * depth);
     pose.translation = [ox - rc[0], oy - rc[1], -depth - rc[2]];
     let mut headed = head.map(|h| h.around(model, &instance, &mut rng));
-    // Open eyes and mouths (the scan's are shut), each from a stream of its own so the rest of
-    // the scene is the same with or without them.
+    // Plainer skin, open eyes and mouths (the scan's are shut), each from a stream of its own so
+    // the rest of the scene is the same with or without them.
     let mut eye_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ 0xE7E5);
     let mut mouth_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7) ^ 0x3047);
+    let mut skin_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xA076_1D64_78BD_642F) ^ 0x5C1);
+    match &mut headed {
+        Some(h) => ranges.plain_skin.apply(&mut h.instance.albedos, &h.triangles, &mut skin_rng),
+        None => ranges.plain_skin.apply(&mut instance.albedos, &model.triangles, &mut skin_rng),
+    };
     let (eyes, mouth) = (openings.eyes.as_ref(), openings.mouth.as_ref());
     let mouth_look = mouth.and_then(|m| m.draw(&mut mouth_rng).map(|look| (m, look)));
     let opening = eyes.and_then(|e| {

@@ -315,6 +315,7 @@ pub fn train(
         "head_vertices": head.map_or(0, HeadContext::vertices),
         "open_eyes": opts.ranges.open_eyes,
         "open_mouth": opts.ranges.open_mouth,
+        "plain_skin": opts.ranges.plain_skin.fraction,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
