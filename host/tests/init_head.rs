@@ -82,3 +82,36 @@ fn a_model_of_another_scan_is_refused_with_the_file_named() {
     let e = HeadContext::load(&model, &mesh, &lm).unwrap_err().to_string();
     assert!(e.contains("lee-perry-smith.ply") && e.contains("not built from this template"), "{e}");
 }
+
+#[test]
+fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
+    use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource};
+    use gpmm_host::render::Renderer;
+    let Some((mesh, lm)) = files() else { return };
+    let model = small_model(&mesh, &lm);
+    let head = HeadContext::load(&model, &mesh, &lm).unwrap();
+    let base = SceneRanges::default();
+    let openings = Openings::of_model(&model, &base);
+    let mut plain = base.clone();
+    plain.plain_skin.fraction = 1.0;
+    let mut wide = base.clone();
+    wide.shape_sigma = (1.6, 1.6);
+    let mut renderer = Renderer::new();
+    let mut scene = |ranges: &SceneRanges, i: u64| {
+        let source = SceneSource { model: &model, head: Some(&head), ranges, openings: &openings };
+        render_scene(source, 5, i, &mut renderer)
+    };
+    let mut compared = 0;
+    for i in 0..4 {
+        let (Some(a), Some(p), Some(w)) = (scene(&base, i), scene(&plain, i), scene(&wide, i)) else { continue };
+        compared += 1;
+        // Plainer skin: same labels and pose, other pixels.
+        assert_eq!(p.landmarks, a.landmarks);
+        assert_eq!((p.angles, &p.light), (a.angles, &a.light));
+        assert_ne!(p.frame, a.frame, "scene {i}: the skin did not change");
+        // Wider shapes: same pose and light, the face itself moved.
+        assert_eq!((w.angles, &w.light), (a.angles, &a.light));
+        assert_ne!(w.landmarks, a.landmarks, "scene {i}: the shape did not change");
+    }
+    assert!(compared >= 3, "only {compared} of 4 scenes rendered");
+}

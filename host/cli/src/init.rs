@@ -64,6 +64,10 @@ pub struct TrainInitArgs {
     /// colour carries less detail than the scan's (off by default).
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
     pub plain_skin: f32,
+    /// Draw each scene's shape coefficients with a standard deviation from LOW..HIGH instead of 1
+    /// (e.g. 0.6,1.6: faces further from the scan than the model's prior draws; off by default).
+    #[arg(long, value_name = "LOW,HIGH", value_delimiter = ',')]
+    pub shape_sigma: Option<Vec<f32>>,
 }
 
 /// Arguments of `gpmm detect`.
@@ -119,6 +123,12 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         bail!("--plain-skin must be a fraction between 0 and 1, not {}", a.plain_skin);
     }
     opts.ranges.plain_skin.fraction = a.plain_skin;
+    if let Some(r) = &a.shape_sigma {
+        match r[..] {
+            [lo, hi] if lo > 0.0 && lo <= hi && hi.is_finite() => opts.ranges.shape_sigma = (lo, hi),
+            _ => bail!("--shape-sigma takes LOW,HIGH with 0 < LOW <= HIGH, not {r:?}"),
+        }
+    }
     let head = if a.no_head {
         None
     } else {

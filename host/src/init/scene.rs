@@ -34,6 +34,9 @@ pub struct SceneRanges {
     pub face_fraction: (f32, f32),
     /// Shape and colour components drawn (standard normal; the rest zero).
     pub components: usize,
+    /// Range of the standard deviation each scene's shape coefficients are drawn with (a range
+    /// wider than 1 shows faces further from the scan; `(1, 1)`: standard normal, the default).
+    pub shape_sigma: (f32, f32),
     /// Paint open eyes over the scan's shut ones in most scenes (`crate::init::eyes`).
     pub open_eyes: bool,
     /// Draw an open mouth (teeth, dark gap) over the scan's closed one in some scenes
@@ -53,6 +56,7 @@ impl Default for SceneRanges {
             frame_side: (128, 256),
             face_fraction: (0.15, 0.8),
             components: 60,
+            shape_sigma: (1.0, 1.0),
             open_eyes: true,
             open_mouth: false,
             plain_skin: PlainSkin::default(),
@@ -211,7 +215,16 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
-    let shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
+    let mut shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
+    // The spread from a stream of its own: the rest of the scene is the same as with standard
+    // draws (and multiplying by 1 changes no coefficient).
+    let (lo, hi) = ranges.shape_sigma;
+    let spread = if hi > lo {
+        Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xE703_7ED1_A0B4_28DB) ^ 0x54A).random_range(lo..=hi)
+    } else {
+        lo
+    };
+    shape.iter_mut().for_each(|c| *c *= spread);
     let color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
     let mut instance = Instance::of_model(model, &shape, &color).ok()?;
     let view = View {

@@ -316,6 +316,7 @@ pub fn train(
         "open_eyes": opts.ranges.open_eyes,
         "open_mouth": opts.ranges.open_mouth,
         "plain_skin": opts.ranges.plain_skin.fraction,
+        "shape_sigma": [opts.ranges.shape_sigma.0, opts.ranges.shape_sigma.1],
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
