@@ -36,9 +36,11 @@ pub struct TrainInitArgs {
     /// The initializer's passes over each chunk (default: as many as the finder's).
     #[arg(long, value_name = "N")]
     pub init_passes: Option<usize>,
-    /// Show the initializer every other pass in a mirror (crops flipped, labels mirrored).
+    /// Never show the initializer a mirrored crop (by default its second pass over each chunk sees
+    /// the crops flipped left-right with mirrored labels, when the model has the 68 iBUG
+    /// landmarks whose pairs say what a mirror swaps); for comparisons.
     #[arg(long)]
-    pub mirror: bool,
+    pub no_mirror: bool,
     /// Write a picture grid of training scenes (what the networks see) to this PNG.
     #[arg(long, value_name = "PNG")]
     pub preview: Option<PathBuf>,
@@ -116,7 +118,12 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         }
         opts.init_passes = p;
     }
-    opts.mirror = a.mirror;
+    if a.no_mirror {
+        opts.mirror = false;
+    } else if opts.mirror && model.landmarks.len() != 68 {
+        eprintln!("{}: {} landmarks, not the 68 iBUG ones: no mirrored crops", a.model.display(), model.landmarks.len());
+        opts.mirror = false;
+    }
     opts.ranges.open_eyes = !a.shut_eyes;
     opts.ranges.open_mouth = a.open_mouth;
     if !(0.0..=1.0).contains(&a.plain_skin) {

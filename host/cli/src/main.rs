@@ -151,8 +151,9 @@ pub enum Command {
     /// cameras of 20-70° field of view, partial framing) on the template's head, most with open
     /// eyes painted over the scan's shut ones, over procedural backgrounds with camera effects
     /// (blur, noise, gamma, white balance, JPEG); the labels are the model's own landmark vertices
-    /// (the lid points on the painted lids), pose and light. Trains two small networks with candle on the CPU, quantizes them
-    /// to int8 (per-channel weight scales) and writes an init file (docs/init-format.md). Prints
+    /// (the lid points on the painted lids), pose and light. Trains two small networks with candle
+    /// on the CPU (the initializer also sees every crop once in a mirror), quantizes them to int8
+    /// (per-channel weight scales) and writes an init file (docs/init-format.md). Prints
     /// the quantized networks' accuracy on held-out renders as JSON. Deterministic for a seed.
     TrainInit(init::TrainInitArgs),
     /// Find the face in an image and read its 68 landmarks, pose and light with an init file.
