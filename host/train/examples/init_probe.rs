@@ -1,12 +1,14 @@
 //! Trains only the initializer, in float, with one of a few architectures and a budget of fresh
 //! scenes and passes, and reports its median landmark error / IOD and |yaw error| on 600 held-out
-//! crops (cut around the true box with the training's jitter; no finder, no quantization): a
-//! quick way to see what limits the initializer (docs/evaluation.md, stop 34).
+//! crops (cut around the true box with the training's jitter; no finder), in float and after the
+//! training's int8 quantization run by the core: a quick way to see what limits the initializer
+//! (docs/evaluation.md, stops 34 and 35).
 //! `cargo run --release -p gpmm-train --example init_probe -- MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES`
 //! (VARIANT: base, the default initializer, or wide, 1.5× its channels).
 use candle_core::Device;
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
-use gpmm_core::net::{LayerKind, Shape};
+use gpmm_core::net::{LayerKind, NetScratch, Network, Shape};
+use gpmm_host::init::encode::encode_network;
 use gpmm_host::init::head::HeadContext;
 use gpmm_host::init::scene::{Openings, SceneRanges, SceneSource};
 use gpmm_train::data::{samples, Geometry, Sample};
@@ -38,23 +40,45 @@ fn specs(variant: &str, d: usize) -> Vec<Spec> {
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
-fn heldout_error(net: &Net, data: &[Sample], geo: &Geometry, device: &Device) -> Res<(f64, f64)> {
-    let (mut errs, mut yaws, l) = (Vec::new(), Vec::new(), geo.landmarks);
-    for chunk in data.chunks(128) {
-        let x = batch_tensor(chunk.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
-        let out: Vec<Vec<f32>> = net.forward(&x)?.0.to_vec2()?;
-        for (s, o) in chunk.iter().zip(&out) {
-            let t = &s.target;
-            let iod = ((t[72] - t[90]).powi(2) + (t[73] - t[91]).powi(2)).sqrt();
-            let e: f32 =
-                (0..l).map(|k| ((o[2 * k] - t[2 * k]).powi(2) + (o[2 * k + 1] - t[2 * k + 1]).powi(2)).sqrt()).sum::<f32>() / l as f32;
-            errs.push(f64::from(e / iod));
-            yaws.push(f64::from((o[2 * l] - t[2 * l]).abs().to_degrees()));
-        }
+/// Median landmark error / IOD and |yaw error| of `outputs` (one per sample of `data`).
+fn medians(data: &[Sample], outputs: &[Vec<f32>], l: usize) -> (f64, f64) {
+    let (mut errs, mut yaws) = (Vec::new(), Vec::new());
+    for (s, o) in data.iter().zip(outputs) {
+        let t = &s.target;
+        let iod = ((t[72] - t[90]).powi(2) + (t[73] - t[91]).powi(2)).sqrt();
+        let e: f32 = (0..l).map(|k| ((o[2 * k] - t[2 * k]).powi(2) + (o[2 * k + 1] - t[2 * k + 1]).powi(2)).sqrt()).sum::<f32>() / l as f32;
+        errs.push(f64::from(e / iod));
+        yaws.push(f64::from((o[2 * l] - t[2 * l]).abs().to_degrees()));
     }
     errs.sort_by(f64::total_cmp);
     yaws.sort_by(f64::total_cmp);
-    Ok((errs[errs.len() / 2], yaws[yaws.len() / 2]))
+    (errs[errs.len() / 2], yaws[yaws.len() / 2])
+}
+
+fn heldout_error(net: &Net, data: &[Sample], geo: &Geometry, device: &Device) -> Res<(f64, f64)> {
+    let mut outputs: Vec<Vec<f32>> = Vec::new();
+    for chunk in data.chunks(128) {
+        let x = batch_tensor(chunk.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
+        outputs.extend(net.forward(&x)?.0.to_vec2::<f32>()?);
+    }
+    Ok(medians(data, &outputs, geo.landmarks))
+}
+
+/// The same measure after quantizing as the training does (activation ranges from `calib`) and
+/// running the core's int8 network.
+fn quantized_error(net: &Net, calib: &[Sample], data: &[Sample], geo: &Geometry, device: &Device) -> Res<(f64, f64)> {
+    let x = batch_tensor(calib.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
+    let bytes = encode_network(&net.to_float(&net.calibrate(&x)?)?)?;
+    let (core, _) = Network::parse(&bytes).map_err(|e| format!("{e:?}"))?;
+    let mut scratch = Box::new(NetScratch::<{ 64 * 1024 }>::new());
+    let mut outputs = Vec::with_capacity(data.len());
+    for s in data {
+        scratch.input_mut(s.crop.len()).map_err(|e| format!("{e:?}"))?.copy_from_slice(&s.crop);
+        let mut out = vec![0.0f32; core.output().len()];
+        core.run(&mut scratch, &mut out).map_err(|e| format!("{e:?}"))?;
+        outputs.push(out);
+    }
+    Ok(medians(data, &outputs, geo.landmarks))
 }
 
 fn main() -> Res<()> {
@@ -114,8 +138,10 @@ fn main() -> Res<()> {
         }
     }
     let (e, y) = heldout_error(&net, &held, &geo, &device)?;
+    let calib = samples(source, &geo, 1, 0, 256);
+    let (qe, qy) = quantized_error(&net, &calib, &held, &geo, &device)?;
     println!(
-        "{variant} chunks {chunks} passes {passes} macs {macs} steps {total} loss {last:.4} held-out IOD {e:.4} yaw {y:.2} time {:.0} s",
+        "{variant} chunks {chunks} passes {passes} macs {macs} steps {total} loss {last:.4} held-out IOD {e:.4} yaw {y:.2} int8 IOD {qe:.4} yaw {qy:.2} time {:.0} s",
         t0.elapsed().as_secs_f64()
     );
     Ok(())
