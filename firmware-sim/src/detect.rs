@@ -11,7 +11,7 @@
 use crate::fit::instructions_now;
 use crate::{clock, fail, hexlog, stack, PROFILE};
 use gpmm_core::format::detection::{self, DetectCounts, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
-use gpmm_core::net::face::{bounded_refinement, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox, InitFile};
+use gpmm_core::net::face::{bounded_reading, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox, InitFile};
 use gpmm_core::net::{NetError, NetScratch};
 
 /// Bytes of each activation buffer.
@@ -94,10 +94,10 @@ pub(crate) fn networks(init: &InitFile<'_>, frame: &Frame<'_>, counts: &mut Dete
         return (face, None);
     }
     // Within the instruction bound: a second look of the finder takes a refinement pass's place.
-    let refine = bounded_refinement(&face, frame.refine as usize);
-    let (det, initializer) = clock::measure(|| read_landmarks(init, frame.rgb, w, h, face, refine, &mut scratch));
+    let reading = bounded_reading(&face, frame.refine as usize, init.landmarks);
+    let (det, initializer) = clock::measure(|| read_landmarks(init, frame.rgb, w, h, face, reading, &mut scratch));
     counts.instructions_initializer = initializer;
-    counts.initializer_runs = refine as u32 + 1;
+    counts.initializer_runs = reading.runs(init.landmarks) as u32;
     (face, Some(det.unwrap_or_else(|e| refused("initializer", e))))
 }
 

@@ -2,7 +2,8 @@
 //! corrupted and truncated files refused, and the detector's outputs on any image.
 
 use gpmm_core::format::FormatError;
-use gpmm_core::net::face::{FINDER_CHANNELS, INIT_MAGIC};
+use gpmm_core::model::ibug::ibug68_partner;
+use gpmm_core::net::face::{read_landmarks, FaceBox, Reading, FINDER_CHANNELS, INIT_MAGIC};
 use gpmm_core::net::{LayerKind, NetError, NetScratch, Network, Shape};
 use gpmm_host::init::encode::{encode_network, FloatLayer, FloatNet};
 use gpmm_host::init::{init_file_bytes, InitModel};
@@ -193,18 +194,53 @@ fn init_file_reads_back_and_detects_on_any_image() {
     // Any image, any aspect: a detection with finite landmarks (random weights: no meaning).
     for (w, h) in [(40u32, 30u32), (17, 50), (1, 1)] {
         let img = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7) as u8, (y * 5) as u8, 100]));
-        let det = init.detect(&img, 0.0, 2).unwrap().expect("min score 0 always finds");
+        let det = init.detect(&img, 0.0, Reading { refine: 2, mirror: true }).unwrap().expect("min score 0 always finds");
         assert_eq!(det.landmarks.len(), 68);
         assert!(det.landmarks.iter().flatten().chain(&det.angles).all(|v| v.is_finite()));
         assert!((0.0..=1.0).contains(&det.face.score));
     }
     // A finder score threshold above 1 finds nothing.
     let img = RgbImage::new(20, 20);
-    assert!(init.detect(&img, 1.5, 0).unwrap().is_none());
+    assert!(init.detect(&img, 1.5, Reading::passes(0)).unwrap().is_none());
     // The same bytes always give the same detection.
-    let a = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, 1).unwrap();
-    let b = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, 1).unwrap();
+    let a = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, Reading::DEFAULT).unwrap();
+    let b = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, Reading::DEFAULT).unwrap();
     assert_eq!(a, b);
+}
+
+#[test]
+fn the_mirrored_reading_reads_a_mirror_image_as_the_mirror_of_the_face() {
+    let bytes = init_bytes(7);
+    let init = InitModel::from_bytes(&bytes).unwrap();
+    let file = init.file().unwrap();
+    let (w, h) = (48u32, 40u32);
+    // A smooth, asymmetric image and its mirror image.
+    let img = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 5) as u8, (y * 6 + x) as u8, (200 - 3 * x) as u8]));
+    let flipped = image::imageops::flip_horizontal(&img);
+    let face = FaceBox { cx: 20.0, cy: 21.0, size: 18.0, score: 1.0, looks: 1 };
+    let mirror_box = FaceBox { cx: w as f32 - face.cx, ..face };
+    let mut scratch = Box::new(NetScratch::<{ 64 * 1024 }>::new());
+    let mut read = |rgb: &RgbImage, face: FaceBox, reading: Reading| {
+        read_landmarks(&file, rgb.as_raw(), w as usize, h as usize, face, reading, &mut scratch).unwrap()
+    };
+    let both = Reading::passes(0);
+    let (single, single_flipped) = (read(&img, face, both), read(&flipped, mirror_box, both));
+    let mirror = Reading { refine: 0, mirror: true };
+    let (a, b) = (read(&img, face, mirror), read(&flipped, mirror_box, mirror));
+    // Averaged with its mirrored reading, a face reads as exactly the mirror of its mirror image.
+    let worst = (0..68)
+        .map(|k| {
+            let (p, q) = (a.landmarks[k], b.landmarks[ibug68_partner(k)]);
+            (p[0] - (w as f32 - q[0])).abs().max((p[1] - q[1]).abs())
+        })
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "mirror readings differ by {worst} px");
+    assert!((a.angles[0] + b.angles[0]).abs() < 1e-4 && (a.angles[1] - b.angles[1]).abs() < 1e-4);
+    // A single reading (random weights) has no such symmetry, so the test would see a missing flip.
+    let single_worst = (0..68)
+        .map(|k| (single.landmarks[k][0] - (w as f32 - single_flipped.landmarks[ibug68_partner(k)][0])).abs())
+        .fold(0.0f32, f32::max);
+    assert!(single_worst > 0.05, "single readings already symmetric ({single_worst} px)");
 }
 
 #[test]

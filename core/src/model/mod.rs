@@ -6,6 +6,7 @@
 //! its coefficients.
 
 pub mod basis;
+pub mod ibug;
 pub mod instance;
 pub mod morphable;
 pub mod params;

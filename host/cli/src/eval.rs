@@ -82,6 +82,10 @@ pub struct DetectEvalArgs {
     /// Re-centre the initializer's crop on its landmarks this many times.
     #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE)]
     pub refine: usize,
+    /// Read the face once, without the mirrored second reading that is averaged in by default
+    /// (one initializer run fewer; for comparisons and the device's budget).
+    #[arg(long)]
+    pub single_read: bool,
 }
 
 /// Model selection and building options shared by the evaluations.
@@ -478,7 +482,12 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     if images.is_empty() {
         bail!("{}: no image with a reference .pts found", a.dir.display());
     }
-    let (summary, rows) = gpmm_host::init::eval::evaluate(&mut init, &images, a.pts_one_based, a.refine)?;
+    let (summary, rows) = gpmm_host::init::eval::evaluate(
+        &mut init,
+        &images,
+        a.pts_one_based,
+        gpmm_core::net::face::Reading { refine: a.refine, mirror: !a.single_read },
+    )?;
     if let Some(dir) = &a.pts_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in rows.iter().filter(|r| !r.landmarks.is_empty()) {

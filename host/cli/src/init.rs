@@ -4,6 +4,7 @@
 use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use gpmm_core::net::face::Reading;
 use gpmm_host::gp::model_io;
 use gpmm_host::init::head::HeadContext;
 use gpmm_host::init::scene::{Openings, SceneSource};
@@ -90,6 +91,10 @@ pub struct DetectArgs {
     /// Re-centre the crop on the read landmarks this many times.
     #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE)]
     pub refine: usize,
+    /// Read the face once, without the mirrored second reading that is averaged in by default
+    /// (one initializer run fewer; for comparisons and the device's budget).
+    #[arg(long)]
+    pub single_read: bool,
     /// Smallest finder score (0..1) counted as a face.
     #[arg(long, default_value_t = DEFAULT_MIN_SCORE)]
     pub min_score: f32,
@@ -192,7 +197,7 @@ fn template_files(dir: &Path) -> Result<(PathBuf, PathBuf)> {
 pub fn detect(a: DetectArgs) -> Result<()> {
     let mut init = InitModel::load(&a.init)?;
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
-    let Some(det) = init.detect(&image, a.min_score, a.refine)? else {
+    let Some(det) = init.detect(&image, a.min_score, Reading { refine: a.refine, mirror: !a.single_read })? else {
         bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
     };
     if let Some(path) = &a.output {
@@ -221,7 +226,7 @@ pub fn detect(a: DetectArgs) -> Result<()> {
 pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path) -> Result<PathBuf> {
     let mut init = InitModel::load(init_path)?;
     let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
-    let Some(det) = init.detect(&image, DEFAULT_MIN_SCORE, gpmm_core::net::face::DEFAULT_REFINE)? else {
+    let Some(det) = init.detect(&image, DEFAULT_MIN_SCORE, Reading::DEFAULT)? else {
         bail!("{}: no face found by {}", image_path.display(), init_path.display());
     };
     std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;

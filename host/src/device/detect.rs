@@ -8,7 +8,7 @@ use crate::device::fit::{figure, run_firmware, tagged_hex, DeviceFitError};
 use crate::init::{InitError, InitModel};
 use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::FormatError;
-use gpmm_core::net::face::{bounded_refinement, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox};
+use gpmm_core::net::face::{bounded_reading, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox};
 use gpmm_core::net::NetScratch;
 use gpmm_core::profile::DeviceProfile;
 use image::RgbImage;
@@ -100,7 +100,7 @@ pub fn partition_bytes(init: &[u8], frame: &[u8], profile: &DeviceProfile) -> Re
 
 /// The host's run of the device's detection: the finder's box, and the detection if its score
 /// reaches `min_score` (the core's `find_face` and `read_landmarks` with the device's
-/// [`bounded_refinement`], as the firmware runs them).
+/// [`bounded_reading`], as the firmware runs them).
 pub fn host_detect(
     init: &mut InitModel,
     frame: &RgbImage,
@@ -114,8 +114,8 @@ pub fn host_detect(
     if !is_face(&face, min_score) {
         return Ok((face, None));
     }
-    let refine = bounded_refinement(&face, refine as usize);
-    let det = read_landmarks(&file, frame.as_raw(), w, h, face, refine, &mut scratch).map_err(InitError::Run)?;
+    let reading = bounded_reading(&face, refine as usize, file.landmarks);
+    let det = read_landmarks(&file, frame.as_raw(), w, h, face, reading, &mut scratch).map_err(InitError::Run)?;
     Ok((face, Some(det)))
 }
 

@@ -14,7 +14,7 @@ use gpmm_core::fit::{FitSettings, StandardFit};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
 use gpmm_core::format::{frame_fit, FormatError};
 use gpmm_core::net::crop::{crop_for_fit, fit_window};
-use gpmm_core::net::face::{bounded_refinement, find_face, is_face, read_landmarks, Detection, FaceBox};
+use gpmm_core::net::face::{bounded_reading, find_face, is_face, read_landmarks, Detection, FaceBox};
 use gpmm_core::net::resample::Window;
 use gpmm_core::net::{NetError, NetScratch};
 use gpmm_core::profile::DeviceProfile;
@@ -132,7 +132,7 @@ pub struct HostFrameFit {
 }
 
 /// Runs the device's path on the host: finder, initializer (`refine` more passes, bounded as the
-/// device bounds them: [`bounded_refinement`]) if the score
+/// device bounds them: [`bounded_reading`]) if the score
 /// reaches `min_score`, the core's crop to `side × side` and the core's standard fit on the blob.
 #[allow(clippy::too_many_arguments)]
 pub fn host_frame_fit(
@@ -152,8 +152,8 @@ pub fn host_frame_fit(
     if !is_face(&face, min_score) {
         return Ok(HostFrameFit { face, detection: None, fitted: None });
     }
-    let refine = bounded_refinement(&face, refine as usize);
-    let det = read_landmarks(&file, frame.as_raw(), w, h, face, refine, &mut scratch).map_err(FrameFitError::Net)?;
+    let reading = bounded_reading(&face, refine as usize, file.landmarks);
+    let det = read_landmarks(&file, frame.as_raw(), w, h, face, reading, &mut scratch).map_err(FrameFitError::Net)?;
     let s = side as usize;
     let (mut pixels, mut working) = (vec![[0u8; 3]; s * s], vec![[0.0f32; 2]; det.landmarks.len()]);
     let window = crop_for_fit(frame.as_raw(), w, h, &det.landmarks, s, &mut pixels, &mut working).map_err(FrameFitError::Net)?;

@@ -148,7 +148,7 @@ pub fn evaluate(
     init: &mut InitModel,
     images: &[EvalImage],
     one_based: bool,
-    refine: usize,
+    reading: gpmm_core::net::face::Reading,
 ) -> Result<(DetectSummary, Vec<DetectImage>), InitError> {
     let mut rows = Vec::new();
     for EvalImage { image, references, yaw_deg: yaw } in images {
@@ -159,7 +159,7 @@ pub fn evaluate(
                 read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), source: std::io::Error::other(e.to_string()) })?;
             faces.push(reference.points.iter().map(|p| [p[0], p[1]]).collect::<Vec<[f32; 2]>>());
         }
-        let det = init.detect(&img, 0.0, refine)?;
+        let det = init.detect(&img, 0.0, reading)?;
         let refs = nearest_face(&faces, det.as_ref().map(|d| (d.face.cx, d.face.cy)));
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let Some(det) = det else {

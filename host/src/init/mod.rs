@@ -11,7 +11,7 @@ pub mod mouth;
 pub mod scene;
 pub mod skin;
 
-use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile};
+use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile, Reading};
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
@@ -87,13 +87,13 @@ impl InitModel {
         InitFile::parse(self.bytes())
     }
 
-    /// Finds and reads the face in `image` (refining the crop `refine` times); `None` if the
-    /// finder's score is below `min_score`.
-    pub fn detect(&mut self, image: &RgbImage, min_score: f32, refine: usize) -> Result<Option<Detection>, InitError> {
+    /// Finds and reads the face in `image` as `reading` says; `None` if the finder's score is
+    /// below `min_score`.
+    pub fn detect(&mut self, image: &RgbImage, min_score: f32, reading: Reading) -> Result<Option<Detection>, InitError> {
         let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
         let file = InitFile::parse(bytes).map_err(InitError::Run)?;
         let (w, h) = image.dimensions();
-        detect(&file, image.as_raw(), w as usize, h as usize, min_score, refine, &mut self.scratch).map_err(InitError::Run)
+        detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, &mut self.scratch).map_err(InitError::Run)
     }
 }
 

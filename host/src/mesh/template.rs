@@ -145,39 +145,8 @@ pub const IBUG68_COUNT: usize = 68;
 /// Outer canthal distance (iBUG 36 to 45) that the default scale maps to, in millimetres.
 pub const OUTER_CANTHAL_MM: f64 = 90.0;
 
-/// The iBUG-68 bilateral pairs `(image-left, image-right)` in a frontal view
-/// (point 0 is the subject's right jaw end, seen on the image's left).
-pub const IBUG68_MIRROR_PAIRS: [(usize, usize); 29] = [
-    (0, 16),
-    (1, 15),
-    (2, 14),
-    (3, 13),
-    (4, 12),
-    (5, 11),
-    (6, 10),
-    (7, 9),
-    (17, 26),
-    (18, 25),
-    (19, 24),
-    (20, 23),
-    (21, 22),
-    (31, 35),
-    (32, 34),
-    (36, 45),
-    (37, 44),
-    (38, 43),
-    (39, 42),
-    (40, 47),
-    (41, 46),
-    (48, 54),
-    (49, 53),
-    (50, 52),
-    (59, 55),
-    (58, 56),
-    (60, 64),
-    (61, 63),
-    (67, 65),
-];
+/// The iBUG-68 bilateral pairs (the core's one definition, shared with the initializer's mirror read).
+pub use gpmm_core::model::ibug::IBUG68_MIRROR_PAIRS;
 
 /// The documented default face crop, in normalized millimetre coordinates (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]

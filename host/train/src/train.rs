@@ -360,7 +360,7 @@ pub fn validate(source: SceneSource<'_>, seed: u64, count: usize, detector: &mut
     for i in 0..count as u64 {
         let Some(scene) = render_scene(source, seed, i, &mut renderer) else { continue };
         scenes += 1;
-        let Some(det) = detector.detect(&scene.frame, 0.0, 1).map_err(err)? else { continue };
+        let Some(det) = detector.detect(&scene.frame, 0.0, gpmm_core::net::face::Reading::DEFAULT).map_err(err)? else { continue };
         let (hit, error) = score_detection(&det, &scene.landmarks);
         found += usize::from(hit);
         errors.extend(error);
