@@ -160,8 +160,9 @@ pub enum Command {
     ///
     /// The finder sees the whole image letterboxed to 96x96 (and, if the face is small in it, a
     /// second time a square three face sizes wide around it); the initializer a 64x64 crop around
-    /// the found face, then again around its own landmarks (--refine). Prints JSON (box, score,
-    /// angles, landmarks); -o writes a .pts that `gpmm fit --landmarks` reads.
+    /// the found face, then again around its own landmarks (--refine), and that last crop once
+    /// more flipped left-right, the two readings averaged (--single-read skips it). Prints JSON
+    /// (box, score, angles, landmarks); -o writes a .pts that `gpmm fit --landmarks` reads.
     Detect(init::DetectArgs),
 }
 
