@@ -330,10 +330,10 @@ pub fn is_face(face: &FaceBox, min_score: f32) -> bool {
 /// The device's reading of a face after `face`'s looks, within `refine + 2` network runs: a
 /// second look of the finder takes one pass's place, and the last pass left is spent on the
 /// mirrored reading of the same crop instead of a re-centred one when the initializer reads the
-/// 68 iBUG points (stop 35: development set 0.098 -> 0.091 of the IOD at the same runs). The
-/// firmware runs this (its instruction bound, docs/init-format.md); the host's `gpmm detect`
-/// runs all `refine` passes and the mirrored reading.
-/// `landmarks` is the initializer's point count ([`InitFile::landmarks`]).
+/// 68 iBUG points (`landmarks`, [`InitFile::landmarks`]; same runs, points as good or better:
+/// docs/evaluation.md, stop 35). The firmware runs this (its instruction bound,
+/// docs/init-format.md); the host's `gpmm detect` runs all `refine` passes and the mirrored
+/// reading.
 pub fn bounded_reading(face: &FaceBox, refine: usize, landmarks: usize) -> Reading {
     let passes = refine.saturating_sub(usize::from(face.looks.saturating_sub(1)));
     if passes > 0 && landmarks == IBUG68_POINTS {

@@ -64,11 +64,13 @@ pub struct TrainInitArgs {
     pub open_mouth: bool,
     /// Make the skin plainer in this fraction (0..1) of the scenes: the scan's colour diffused over
     /// the mesh (4-30 steps, blended in by half to all), so the networks also learn faces whose
-    /// colour carries less detail than the scan's (off by default).
+    /// colour carries less detail than the scan's (off by default: it did not help the development
+    /// set, docs/evaluation.md, stop 35).
     #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
     pub plain_skin: f32,
     /// Draw each scene's shape coefficients with a standard deviation from LOW..HIGH instead of 1
-    /// (e.g. 0.6,1.6: faces further from the scan than the model's prior draws; off by default).
+    /// (e.g. 0.6,1.5: faces further from the scan than the model's prior draws; off by default:
+    /// 0.6,1.5 did not help the development set, docs/evaluation.md, stop 35).
     #[arg(long, value_name = "LOW,HIGH", value_delimiter = ',')]
     pub shape_sigma: Option<Vec<f32>>,
 }
