@@ -2,12 +2,12 @@
 //! locates the face in the whole frame, the initializer reads the 68 landmarks, the head pose and
 //! the low-order light from a crop around it.
 
-use super::resample::{sample_rgb, Window};
+use super::resample::{flip_rows, sample_rgb, Window};
 use super::{NetError, NetScratch, Network};
 use crate::format::bytes::{check_crc, Reader, Writer};
 use crate::format::detection::DetectionFigures;
 use crate::format::FormatError;
-use crate::model::ibug::{ibug68_partner, IBUG68_POINTS};
+use crate::model::ibug::{IBUG68_MIRROR_PAIRS, IBUG68_POINTS};
 use heapless::Vec;
 
 /// The init file's magic.
@@ -252,19 +252,9 @@ fn look<const A: usize>(
     Ok(FaceBox { cx, cy, size, score: sigmoid(logit), looks: 1 })
 }
 
-/// Flips channel-last `side`-wide RGB rows left-right in place.
-fn flip_rows(pixels: &mut [i8], side: usize) {
-    for row in pixels.chunks_exact_mut(side * 3) {
-        let (left, right) = row.split_at_mut(side / 2 * 3);
-        for (a, b) in left.chunks_exact_mut(3).zip(right.chunks_exact_mut(3).rev()) {
-            a.swap_with_slice(b);
-        }
-    }
-}
-
 /// Runs the initializer on the crop around `(cx, cy, size)`; fills `det` (landmarks in frame px).
-/// `mirrored` shows it the crop flipped left-right and mirrors its reading back (68 iBUG points:
-/// x and the pairs, yaw, roll and the light's x coefficient), as the training's mirrored crops.
+/// `mirrored` shows it the crop flipped left-right and mirrors its reading back
+/// ([`mirror_outputs`], as the training mirrors its targets).
 fn read_face<const A: usize>(
     init: &InitFile<'_>,
     (rgb, w, h): (&[u8], usize, usize),
@@ -284,13 +274,15 @@ fn read_face<const A: usize>(
     let mut out = [0f32; MAX_NET_OUTPUT];
     let out = out.get_mut(..net.output().len()).ok_or(NetError::LengthMismatch)?;
     net.run(scratch, out)?;
+    if mirrored {
+        mirror_outputs(out, init.landmarks);
+    }
     det.landmarks.clear();
     let half = side as f32 * 0.5;
     let (points, rest) = out.split_at(2 * init.landmarks);
-    for k in 0..init.landmarks {
-        let (source, sign) = if mirrored { (ibug68_partner(k), -1.0) } else { (k, 1.0) };
-        if let Some([x, y]) = points.get(2 * source..2 * source + 2) {
-            let _ = det.landmarks.push(window.to_source((sign * x + 1.0) * half, (y + 1.0) * half).into());
+    for p in points.chunks_exact(2) {
+        if let [x, y] = p {
+            let _ = det.landmarks.push(window.to_source((x + 1.0) * half, (y + 1.0) * half).into());
         }
     }
     let (angles, light) = rest.split_at(3);
@@ -299,13 +291,34 @@ fn read_face<const A: usize>(
     light.iter().for_each(|&v| {
         let _ = det.light.push(v);
     });
-    if mirrored {
-        // Yaw and roll turn the other way; band 1's x coefficient (`Y11`, values 9..12) flips.
-        det.angles[0] = -det.angles[0];
-        det.angles[2] = -det.angles[2];
-        det.light.iter_mut().skip(9).take(3).for_each(|v| *v = -*v);
-    }
     Ok(())
+}
+
+/// Band 1's x coefficient among the initializer's light values (`Y11`, RGB; coefficient-major):
+/// the light values a left-right mirror negates.
+pub const LIGHT_X_VALUES: core::ops::Range<usize> = 9..12;
+
+/// Mirrors an initializer output (or a training target) of `landmarks` points in place, as a
+/// left-right flip of its crop changes it: each iBUG-68 point trades places with its mirror
+/// partner and its x (crop coordinates, −1..1) is negated, yaw and roll are negated, and so are
+/// the [`LIGHT_X_VALUES`]. `false`, and nothing changed, unless there are 68 points and `values`
+/// holds them and the three angles.
+pub fn mirror_outputs(values: &mut [f32], landmarks: usize) -> bool {
+    let points = 2 * landmarks;
+    if landmarks != IBUG68_POINTS || values.len() < points + 3 {
+        return false;
+    }
+    for &(a, b) in &IBUG68_MIRROR_PAIRS {
+        values.swap(2 * a, 2 * b);
+        values.swap(2 * a + 1, 2 * b + 1);
+    }
+    values.iter_mut().take(points).step_by(2).for_each(|x| *x = -*x);
+    if let Some(rest) = values.get_mut(points..) {
+        // Yaw and roll (values 0 and 2 after the points); pitch is its own mirror image.
+        rest.iter_mut().step_by(2).take(2).for_each(|angle| *angle = -*angle);
+        rest.iter_mut().skip(3 + LIGHT_X_VALUES.start).take(LIGHT_X_VALUES.len()).for_each(|v| *v = -*v);
+    }
+    true
 }
 
 /// The larger side of the points' bounding box and its centre.

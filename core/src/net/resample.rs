@@ -48,6 +48,19 @@ impl Window {
 /// Fixed-point fraction bits of the bilinear weights.
 const FRAC: u32 = 8;
 
+/// Flips channel-last `side`-wide RGB rows (a network input) left-right in place.
+pub fn flip_rows(pixels: &mut [i8], side: usize) {
+    if side == 0 {
+        return;
+    }
+    for row in pixels.chunks_exact_mut(side * 3) {
+        let (left, right) = row.split_at_mut(side / 2 * 3);
+        for (a, b) in left.chunks_exact_mut(3).zip(right.chunks_exact_mut(3).rev()) {
+            a.swap_with_slice(b);
+        }
+    }
+}
+
 /// Samples `src` (RGB, `w × h`, row-major) into `out` (`side × side × 3`, `i8`) through `window`.
 pub fn sample_rgb(src: &[u8], w: usize, h: usize, window: Window, side: usize, out: &mut [i8]) -> Result<(), NetError> {
     if out.len() != side * side * 3 {

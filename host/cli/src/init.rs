@@ -4,6 +4,7 @@
 use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use gpmm_core::model::ibug::IBUG68_POINTS;
 use gpmm_core::net::face::Reading;
 use gpmm_host::gp::model_io;
 use gpmm_host::init::head::HeadContext;
@@ -11,6 +12,7 @@ use gpmm_host::init::scene::{Openings, SceneSource};
 use gpmm_host::init::InitModel;
 use image::{Rgb, RgbImage};
 use indicatif::ProgressBar;
+use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `gpmm train-init`.
@@ -29,14 +31,14 @@ pub struct TrainInitArgs {
     pub quick: bool,
     /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 30 minutes on 2 cores).
     #[arg(long, value_name = "N")]
-    pub chunks: Option<usize>,
+    pub chunks: Option<NonZeroUsize>,
     /// The finder's passes over each chunk (each pass shows every scene of the chunk once more,
     /// in a new order; default 3).
     #[arg(long, value_name = "N")]
-    pub passes: Option<usize>,
+    pub passes: Option<NonZeroUsize>,
     /// The initializer's passes over each chunk (default: as many as the finder's).
     #[arg(long, value_name = "N")]
-    pub init_passes: Option<usize>,
+    pub init_passes: Option<NonZeroUsize>,
     /// Never show the initializer a mirrored crop (by default its second pass over each chunk sees
     /// the crops flipped left-right with mirrored labels, when the model has the 68 iBUG
     /// landmarks whose pairs say what a mirror swaps); for comparisons.
@@ -106,28 +108,13 @@ pub struct DetectArgs {
 pub fn train_init(a: TrainInitArgs) -> Result<()> {
     let model = model_io::load(&a.model)?;
     let mut opts = if a.quick { gpmm_train::TrainOptions::quick(a.seed) } else { gpmm_train::TrainOptions::full(a.seed) };
-    if let Some(c) = a.chunks {
-        if c == 0 {
-            bail!("--chunks must be at least 1");
-        }
-        opts.chunks = c;
-    }
-    if let Some(p) = a.passes {
-        if p == 0 {
-            bail!("--passes must be at least 1");
-        }
-        opts.passes = p;
-        opts.init_passes = p;
-    }
-    if let Some(p) = a.init_passes {
-        if p == 0 {
-            bail!("--init-passes must be at least 1");
-        }
-        opts.init_passes = p;
-    }
+    // Zero chunks or passes are refused by the argument parser (`NonZeroUsize`).
+    opts.chunks = a.chunks.map_or(opts.chunks, NonZeroUsize::get);
+    opts.passes = a.passes.map_or(opts.passes, NonZeroUsize::get);
+    opts.init_passes = a.init_passes.or(a.passes).map_or(opts.init_passes, NonZeroUsize::get);
     if a.no_mirror {
         opts.mirror = false;
-    } else if opts.mirror && model.landmarks.len() != 68 {
+    } else if opts.mirror && model.landmarks.len() != IBUG68_POINTS {
         eprintln!("{}: {} landmarks, not the 68 iBUG ones: no mirrored crops", a.model.display(), model.landmarks.len());
         opts.mirror = false;
     }

@@ -1,10 +1,9 @@
 //! Training samples: a rendered scene cut into the finder's letterboxed frame and the
 //! initializer's crop exactly as the core cuts them at run time, with their targets.
 
-use gpmm_core::net::face::landmark_box;
-use gpmm_core::net::resample::{sample_rgb, Window};
+use gpmm_core::net::face::{landmark_box, mirror_outputs};
+use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::init::scene::{render_scene, Scene, SceneSource};
-use gpmm_host::mesh::template::IBUG68_MIRROR_PAIRS;
 use gpmm_host::render::Renderer;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -98,38 +97,24 @@ pub fn samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, c
 }
 
 impl Sample {
-    /// The initializer's half of the sample seen in a mirror: the crop flipped left-right, the
-    /// landmarks' x negated and their iBUG-68 pairs swapped, yaw and roll negated, and the light's
-    /// x coefficient (SH band 1, `Y11`) negated. `None` unless the landmarks are the 68 iBUG
-    /// points (the pairs say which point is whose mirror image). The finder's half is kept.
+    /// The initializer's half of the sample seen in a mirror: the crop flipped left-right and the
+    /// target mirrored as the core mirrors a reading (`mirror_outputs`: iBUG pairs swapped, x, yaw,
+    /// roll and the light's x coefficient negated). `None` unless the landmarks are the 68 iBUG
+    /// points. The finder's half is kept.
     pub fn mirrored(&self, geo: &Geometry) -> Option<Sample> {
-        let (side, l) = (geo.crop_side, geo.landmarks);
-        if l != 68 || self.crop.len() != side * side * 3 || self.target.len() != geo.init_outputs() {
+        if self.crop.len() != geo.crop_side * geo.crop_side * 3 || self.target.len() != geo.init_outputs() {
             return None;
         }
         let mut crop = self.crop.clone();
-        for (row_out, row_in) in crop.chunks_exact_mut(side * 3).zip(self.crop.chunks_exact(side * 3)) {
-            for (px_out, px_in) in row_out.chunks_exact_mut(3).zip(row_in.chunks_exact(3).rev()) {
-                px_out.copy_from_slice(px_in);
-            }
-        }
-        let mut partner: Vec<usize> = (0..l).collect();
-        for &(a, b) in &IBUG68_MIRROR_PAIRS {
-            partner[a] = b;
-            partner[b] = a;
-        }
+        flip_rows(&mut crop, geo.crop_side);
         let mut target = self.target.clone();
-        for (k, &p) in partner.iter().enumerate() {
-            target[2 * k] = -self.target[2 * p];
-            target[2 * k + 1] = self.target[2 * p + 1];
-        }
-        target[2 * l] = -target[2 * l];
-        target[2 * l + 2] = -target[2 * l + 2];
-        // Light: 4 coefficients × RGB, coefficient-major; coefficient 3 is band 1's x.
-        for v in target.iter_mut().skip(2 * l + 3 + 9).take(3.min(geo.light.saturating_sub(9))) {
-            *v = -*v;
-        }
-        Some(Sample { frame: self.frame.clone(), cell: self.cell, place: self.place, crop, target })
+        mirror_outputs(&mut target, geo.landmarks).then(|| Sample {
+            frame: self.frame.clone(),
+            cell: self.cell,
+            place: self.place,
+            crop,
+            target,
+        })
     }
 }
 

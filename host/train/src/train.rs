@@ -223,7 +223,7 @@ pub fn train(
     if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
         return Err(format!("the model has {landmarks} landmarks; the initializer reads 1 to 68"));
     }
-    if opts.mirror && landmarks != 68 {
+    if opts.mirror && landmarks != gpmm_core::model::ibug::IBUG68_POINTS {
         return Err(format!("mirrored crops need the 68 iBUG landmarks; the model has {landmarks}"));
     }
     let device = Device::Cpu;
