@@ -115,3 +115,50 @@ fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
     }
     assert!(compared >= 3, "only {compared} of 4 scenes rendered");
 }
+
+#[test]
+fn dressed_heads_keep_the_face_and_its_labels() {
+    use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource};
+    use gpmm_host::render::Renderer;
+    let Some((mesh, lm)) = files() else { return };
+    let model = small_model(&mesh, &lm);
+    let head = HeadContext::load(&model, &mesh, &lm).unwrap();
+    let n = model.vertices();
+    let face = Instance::of_model(&model, &[1.5, -1.0], &[0.5]).unwrap();
+    let (mut changed, mut moved_out) = (0, 0);
+    for seed in 0..6 {
+        // The same draws for the bare head: dressing changes the head's colours and pushes hair out.
+        let bare = head.around(&model, &face, &mut Xoshiro256PlusPlus::seed_from_u64(seed));
+        let mut dress = Xoshiro256PlusPlus::seed_from_u64(100 + seed);
+        let (dressed, _) = head.dressed_around(&model, &face, &mut Xoshiro256PlusPlus::seed_from_u64(seed), &mut dress);
+        assert_eq!(&dressed.instance.positions[..n], &face.positions[..], "draw {seed}: the face moved");
+        assert_eq!(&dressed.instance.albedos[..n], &face.albedos[..], "draw {seed}: the face was recoloured");
+        assert_eq!(dressed.triangles, bare.triangles);
+        changed += usize::from(dressed.instance.albedos != bare.instance.albedos);
+        let lift = (n..dressed.instance.positions.len())
+            .map(|i| dist(dressed.instance.positions[i], bare.instance.positions[i]))
+            .fold(0.0f32, f32::max);
+        assert!(lift <= 35.0 + 1e-3, "draw {seed}: hair stands {lift} mm off the head");
+        moved_out += usize::from(lift > 1.0);
+    }
+    assert!(changed >= 5, "only {changed} of 6 heads were dressed");
+    assert!(moved_out >= 2, "hair stood off the head in only {moved_out} of 6 draws");
+    // Whole scenes: the same labels, other pixels.
+    let dressed = SceneRanges::default();
+    let base = SceneRanges { dressed: false, ..dressed.clone() };
+    let openings = Openings::of_model(&model, &base);
+    let mut renderer = Renderer::new();
+    let mut scene = |ranges: &SceneRanges, i: u64| {
+        let source = SceneSource { model: &model, head: Some(&head), ranges, openings: &openings };
+        render_scene(source, 9, i, &mut renderer)
+    };
+    let mut compared = 0;
+    for i in 0..4 {
+        let (Some(a), Some(d)) = (scene(&base, i), scene(&dressed, i)) else { continue };
+        compared += 1;
+        assert_eq!(d.landmarks, a.landmarks);
+        assert_eq!((d.angles, &d.light), (a.angles, &a.light));
+        assert_ne!(d.frame, a.frame, "scene {i}: dressing changed no pixel");
+    }
+    assert!(compared >= 3, "only {compared} of 4 scenes rendered");
+}

@@ -8,12 +8,18 @@ albedo (a skin tone per identity, darker lips and brows, smooth variation; none 
 transferred colours), anti-aliasing and the background (a textured, blurred image instead of a
 flat colour). Colours are written linear, as gpmm reads them (no gamma).
 
-    python make_set.py SYNTH_DIR OUT_DIR [--spp 64] [--scale 2] [--seed 0] [--ict DIR] [--wide K1,K2]
+    python make_set.py SYNTH_DIR OUT_DIR [--spp 64] [--scale 2] [--seed 0] [--ict DIR] [--wide K1,K2] [--person]
 
 --wide puts each face small in a wider frame: the frame is K (drawn from K1..K2) times the
 scene's size across its shorter side, 4:3 or 3:4, the face anywhere in it, the background drawn
 for the whole frame. The camera is the scene's with its principal point moved with the face (a
 crop of a larger frame); truth.json (sizes, principal points, landmarks) and the .pts follow.
+
+--person (with --wide) draws a person around the face in the wider frame, in 2D behind the
+render: a head of the face's skin tone, hair over and around it (sometimes long), a neck and
+clothed shoulders down to the frame's edge. Photos show faces on people; the ICT mesh is a face
+mask only. The shapes are drawn from the landmarks, by a generator of their own (none of gpmm's
+training code), so the set tests what a head, hair and clothes around a face do to a detector.
 """
 import argparse, json, math, os, shutil, sys
 import numpy as np
@@ -108,7 +114,49 @@ def background(w, h, rng):
     return np.clip(img, 0, 1)
 
 
-def widen(im, rgb, alpha, wide, rng):
+def ellipse(xx, yy, cx, cy, rx, ry):
+    return ((xx - cx) / rx) ** 2 + ((yy - cy) / ry) ** 2 < 1.0
+
+
+def person(img, lm, skin, rng):
+    """Paints a head, hair, neck and clothed shoulders around the face whose landmarks are `lm`
+    (frame pixels) into `img` (H x W x 3, linear), in place."""
+    h, w = img.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    jaw, brows = lm[0:17], lm[17:27]
+    centre = lm[27:36].mean(axis=0)
+    fw = max(np.ptp(jaw[:, 0]), 1.0)
+    fh = max(lm[8, 1] - brows[:, 1].min(), 1.0)
+    # The skull behind the face: shifted away from where the nose points.
+    turn = (lm[30, 0] - 0.5 * (jaw[0, 0] + jaw[16, 0])) / fw
+    hx = centre[0] - 0.9 * turn * fw
+    hy = brows[:, 1].min() + 0.05 * fh
+    rx, ry = fw * rng.uniform(0.62, 0.78), fh * rng.uniform(0.85, 1.0)
+    shade = lambda c, v: np.clip(c * v, 0, 1)
+    cloth = [np.array([0.03, 0.03, 0.05]), np.full(3, 0.7), rng.uniform(0.03, 0.6, 3)][rng.integers(3)]
+    top = lm[8, 1] + rng.uniform(0.35, 0.8) * fh
+    half = fw * rng.uniform(1.0, 1.4)
+    torso = (yy > top + 0.5 * np.clip(np.abs(xx - hx) - 0.6 * fw, 0, None) * 0.6) & (np.abs(xx - hx) < half + (yy - top) * 0.25)
+    img[torso] = shade(cloth, 0.8 + 0.2 * np.sin(xx[torso] / fw * 3)[:, None])
+    neck = (np.abs(xx - (hx + 0.5 * (centre[0] - hx))) < 0.38 * fw) & (yy > lm[8, 1] - 0.3 * fh) & (yy < top + 0.2 * fh)
+    img[neck] = shade(skin, 0.7)
+    hair = None
+    if rng.random() < 0.85:
+        tone = [np.array([0.02, 0.015, 0.01]), np.array([0.1, 0.06, 0.03]), np.array([0.3, 0.2, 0.1]), np.array([0.5, 0.4, 0.25]), np.full(3, 0.4)][rng.integers(5)]
+        grow = rng.uniform(1.05, 1.3)
+        hair = ellipse(xx, yy, hx, hy - 0.1 * fh, rx * grow, ry * grow * 0.95)
+        if rng.random() < 0.4:  # long: down past the chin
+            length = lm[8, 1] + rng.uniform(0.0, 1.2) * fh
+            hair |= (np.abs(xx - hx) < rx * grow) & (yy > hy) & (yy < length)
+        streaks = 1 + 0.25 * np.sin(xx / max(fw, 1) * rng.uniform(20, 60)) * np.cos(yy / max(fh, 1) * 3)
+        img[hair] = shade(tone, streaks[hair][:, None])
+    head = ellipse(xx, yy, hx, hy, rx, ry)
+    if hair is not None:
+        head &= yy > brows[:, 1].min() - rng.uniform(0.1, 0.35) * fh
+    img[head] = shade(skin, 0.85)
+
+
+def widen(im, rgb, alpha, wide, rng, skin=None):
     """The render placed in a wider frame over a background drawn for that frame; `im` (the
     truth.json entry) is updated to the new frame."""
     h, w = rgb.shape[:2]
@@ -117,6 +165,8 @@ def widen(im, rgb, alpha, wide, rng):
     big_w, big_h = (round(k * w * 4 / 3), round(k * h)) if long_side else (round(k * w), round(k * h * 4 / 3))
     ox, oy = int(rng.integers(0, big_w - w + 1)), int(rng.integers(0, big_h - h + 1))
     out = background(big_w, big_h, rng)
+    if skin is not None:
+        person(out, np.array(im["landmarks"]) + np.array([ox, oy]), skin, rng)
     region = out[oy:oy + h, ox:ox + w]
     out[oy:oy + h, ox:ox + w] = rgb + (1 - alpha) * region
     im["width"], im["height"] = big_w, big_h
@@ -135,7 +185,10 @@ def main():
     ap.add_argument("--scale", type=int, default=2, help="render at this multiple of the size, then box-downsample")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--wide", help="K1,K2: a frame K1..K2 times the scene's size, the face placed anywhere in it")
+    ap.add_argument("--person", action="store_true", help="with --wide: a head, hair, neck and clothes drawn around the face")
     a = ap.parse_args()
+    if a.person and not a.wide:
+        sys.exit("--person needs --wide (the person is drawn in the wider frame)")
     wide = [float(v) for v in a.wide.split(",")] if a.wide else None
     if wide is not None and not (len(wide) == 2 and 1.0 <= wide[0] <= wide[1]):
         sys.exit(f"--wide takes K1,K2 with 1 <= K1 <= K2 (got {a.wide})")
@@ -207,7 +260,11 @@ def main():
             out = rgb + (1 - alpha) * background(w, h, view_rng)
             shutil.copy(os.path.join(a.synth_dir, im["landmarks_file"]), a.out_dir)
         else:
-            out = widen(im, rgb, alpha, wide, np.random.default_rng([a.seed, im["identity"], im["yaw_index"], 11]))
+            skin = None
+            if a.person:  # the face's own linear skin tone, as rendered
+                inside = alpha[..., 0] > 0.99
+                skin = rgb[inside].mean(axis=0) if inside.any() else np.full(3, 0.4)
+            out = widen(im, rgb, alpha, wide, np.random.default_rng([a.seed, im["identity"], im["yaw_index"], 11]), skin)
             write_pts(os.path.join(a.out_dir, im["landmarks_file"]), im["landmarks"])
         Image.fromarray((np.clip(out, 0, 1) * 255 + 0.5).astype(np.uint8)).save(os.path.join(a.out_dir, im["image"]))
         print(f"\r{k + 1}/{len(truth['images'])} {im['image']}", end="", file=sys.stderr)

@@ -368,8 +368,8 @@ pub struct Reading {
 }
 
 impl Reading {
-    /// The host commands' reading: one refinement pass (development set, stop 30) and the
-    /// mirrored second reading (stop 35).
+    /// The host commands' reading: [`DEFAULT_REFINE`] refinement passes and the mirrored second
+    /// reading (stop 35).
     pub const DEFAULT: Self = Self { refine: DEFAULT_REFINE, mirror: true };
 
     /// `refine` passes and no mirrored reading (the device's bounded runs).
@@ -421,8 +421,15 @@ pub fn read_landmarks<const A: usize>(
     Ok(det)
 }
 
-/// Refinement passes the commands use unless told otherwise (one: development set, stop 30).
-pub const DEFAULT_REFINE: usize = 1;
+/// Refinement passes the host's commands use unless told otherwise (three: a crop cut from a box
+/// too large for the face, as photos of people give, needs more than one re-centring to close in;
+/// no change where the box is good; development sets, docs/evaluation.md, stop 36).
+pub const DEFAULT_REFINE: usize = 3;
+
+/// Refinement passes the device commands ask the firmware for unless told otherwise: one, which
+/// [`bounded_reading`] spends on the mirrored reading or a second look (the 100 M instruction
+/// bound, docs/init-format.md).
+pub const DEVICE_REFINE: usize = 1;
 
 /// Finds the face and reads it: [`find_face`], then [`read_landmarks`] if [`is_face`] at
 /// `min_score` (else `None`).

@@ -42,7 +42,7 @@ pub struct DeviceFitArgs {
     /// With --init: re-centre the initializer's crop on its landmarks this many times (0..=8), less
     /// one when the finder looked twice at a small face (on the device a second look takes a
     /// pass's place: the instruction bound).
-    #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE as u32, requires = "init")]
+    #[arg(long, default_value_t = gpmm_core::net::face::DEVICE_REFINE as u32, requires = "init")]
     pub refine: u32,
     /// With --init: smallest finder score (0..1) counted as a face (below it: "no face found").
     #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE, requires = "init")]
@@ -97,7 +97,7 @@ pub struct DeviceDetectArgs {
     /// Re-centre the crop on the read landmarks this many times (0..=8), less one when the finder
     /// looked twice at a small face (on the device a second look takes a pass's place: the
     /// instruction bound).
-    #[arg(long, default_value_t = gpmm_core::net::face::DEFAULT_REFINE as u32)]
+    #[arg(long, default_value_t = gpmm_core::net::face::DEVICE_REFINE as u32)]
     pub refine: u32,
     /// Smallest finder score (0..1) counted as a face.
     #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE)]

@@ -36,7 +36,9 @@ struct Anchor {
 #[derive(Debug, Clone)]
 pub struct HeadContext {
     /// Rest positions (mm, model frame), already inset beneath the surface.
-    positions: Vec<Vec3>,
+    pub(super) positions: Vec<Vec3>,
+    /// Rest vertex normals (unit, outward).
+    pub(super) normals: Vec<Vec3>,
     /// Rest albedos (linear RGB).
     albedos: Vec<Vec3>,
     /// Triangles over the head's vertices.
@@ -44,9 +46,23 @@ pub struct HeadContext {
     /// Per vertex: which face vertices it follows.
     anchors: Vec<Anchor>,
     /// Per vertex: whether hair may cover it (scalp and back of the head, never the face).
-    scalp: Vec<bool>,
+    pub(super) scalp: Vec<bool>,
     /// Height (mm, model frame) of the eyes, for the hairline.
-    eye_y: f32,
+    pub(super) eye_y: f32,
+    /// Height (mm, model frame) of the chin (landmark 8), for necklines.
+    pub(super) chin_y: f32,
+}
+
+/// Short hair painted on the scalp: its albedo, the hairline's height, and how far forward (z,
+/// mm) the back of the head is covered down to the ears.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Hair {
+    /// Linear albedo.
+    pub(super) tone: Vec3,
+    /// Height (mm, model frame) above which the scalp is covered.
+    pub(super) hairline: f32,
+    /// Depth (mm, model frame) behind which the head is covered down to the ears.
+    pub(super) back: f32,
 }
 
 /// A head instance around a face: the combined vertices and triangles, face first (so the
@@ -136,7 +152,8 @@ impl HeadContext {
             .map(|p| p[1])
             .collect();
         let eye_y = if eyes.is_empty() { 0.0 } else { eyes.iter().sum::<f32>() / eyes.len() as f32 };
-        Ok(Self { positions, albedos, triangles: head.mesh.triangles.clone(), anchors, scalp, eye_y })
+        let chin_y = model.landmarks.get(8).and_then(|&i| face.get(i as usize)).map_or(eye_y - 120.0, |p| p[1]);
+        Ok(Self { positions, normals, albedos, triangles: head.mesh.triangles.clone(), anchors, scalp, eye_y, chin_y })
     }
 
     /// Vertices of the head.
@@ -147,6 +164,49 @@ impl HeadContext {
     /// The head around `face` (an instance of `model`): shape and colour changes of the face
     /// carried over to the head (shape fading away from the face), with random hair from `rng`.
     pub fn around(&self, model: &GpModel, face: &Instance, rng: &mut impl Rng) -> HeadedInstance {
+        let hair = self.draw_hair(rng);
+        let mut headed = self.around_bare(model, face);
+        if let Some(hair) = hair {
+            self.paint_hair(&mut headed, face.positions.len(), hair, |_| hair.tone);
+        }
+        headed
+    }
+
+    /// Short hair in 60 % of draws.
+    pub(super) fn draw_hair(&self, rng: &mut impl Rng) -> Option<Hair> {
+        rng.random_bool(0.6).then(|| {
+            let tones = [[0.02f32, 0.015, 0.01], [0.08, 0.04, 0.02], [0.25, 0.15, 0.07], [0.45, 0.35, 0.2], [0.35, 0.35, 0.35]];
+            let t = tones[rng.random_range(0..tones.len())];
+            let v = rng.random_range(0.7f32..1.3);
+            Hair {
+                tone: t.map(|c| (c * v).min(1.0)),
+                hairline: self.eye_y + rng.random_range(20.0f32..55.0),
+                back: rng.random_range(-40.0f32..10.0),
+            }
+        })
+    }
+
+    /// Whether `hair` covers head vertex `i` (rest position `p`): the scalp above the hairline,
+    /// and the back of the head down to the ears.
+    pub(super) fn covers(&self, i: usize, hair: &Hair) -> bool {
+        let p = self.positions[i];
+        self.scalp[i] && (p[1] > hair.hairline || (p[2] < hair.back && p[1] > self.eye_y - 25.0))
+    }
+
+    /// Paints `hair` over the head part of `headed` (head vertex `i` at `n + i`), each covered
+    /// vertex with `tone(i)`.
+    pub(super) fn paint_hair(&self, headed: &mut HeadedInstance, n: usize, hair: Hair, tone: impl Fn(usize) -> Vec3) {
+        for i in 0..self.positions.len() {
+            if self.covers(i, &hair) {
+                if let Some(c) = headed.instance.albedos.get_mut(n + i) {
+                    *c = tone(i);
+                }
+            }
+        }
+    }
+
+    /// The bare head around `face`: its shape and colour changes carried over.
+    pub(super) fn around_bare(&self, model: &GpModel, face: &Instance) -> HeadedInstance {
         let n = face.positions.len();
         let mean = &model.shape.mean;
         let colour_mean = &model.color.mean;
@@ -162,12 +222,6 @@ impl HeadContext {
             }
             d
         };
-        let hair = rng.random_bool(0.6).then(|| {
-            let tones = [[0.02f32, 0.015, 0.01], [0.08, 0.04, 0.02], [0.25, 0.15, 0.07], [0.45, 0.35, 0.2], [0.35, 0.35, 0.35]];
-            let t = tones[rng.random_range(0..tones.len())];
-            let v = rng.random_range(0.7f32..1.3);
-            (t.map(|c| (c * v).min(1.0)), self.eye_y + rng.random_range(20.0f32..55.0), rng.random_range(-40.0f32..10.0))
-        });
         let mut positions = face.positions.clone();
         let mut albedos = face.albedos.clone();
         for (i, a) in self.anchors.iter().enumerate() {
@@ -175,14 +229,7 @@ impl HeadContext {
             let dc = delta(&face.albedos, colour_mean, a);
             let p = self.positions[i];
             positions.push(std::array::from_fn(|k| p[k] + a.fade * ds[k]));
-            let mut c: Vec3 = std::array::from_fn(|k| (self.albedos[i][k] + dc[k]).clamp(0.0, 1.0));
-            if let Some((tone, hairline, back)) = hair {
-                // The scalp above the hairline, and the back of the head down to the ears.
-                if self.scalp[i] && (p[1] > hairline || (p[2] < back && p[1] > self.eye_y - 25.0)) {
-                    c = tone;
-                }
-            }
-            albedos.push(c);
+            albedos.push(std::array::from_fn(|k| (self.albedos[i][k] + dc[k]).clamp(0.0, 1.0)));
         }
         let mut triangles = model.triangles.clone();
         triangles.extend(self.triangles.iter().map(|t| t.map(|v| v + n as u32)));

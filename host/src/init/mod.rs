@@ -3,6 +3,7 @@
 //! initializer run on an image ([`InitModel`]). Training itself (candle) lives in `gpmm-train`.
 
 pub mod almond;
+pub mod dress;
 pub mod encode;
 pub mod eval;
 pub mod eyes;
@@ -11,7 +12,7 @@ pub mod mouth;
 pub mod scene;
 pub mod skin;
 
-use gpmm_core::net::face::{detect, write_init_file, Detection, InitFile, Reading};
+use gpmm_core::net::face::{detect, read_landmarks, write_init_file, Detection, FaceBox, InitFile, Reading};
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
@@ -94,6 +95,16 @@ impl InitModel {
         let file = InitFile::parse(bytes).map_err(InitError::Run)?;
         let (w, h) = image.dimensions();
         detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, &mut self.scratch).map_err(InitError::Run)
+    }
+}
+
+impl InitModel {
+    /// Reads the face in a given box (no finder run), as `reading` says.
+    pub fn read_at(&mut self, image: &RgbImage, face: FaceBox, reading: Reading) -> Result<Detection, InitError> {
+        let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
+        let file = InitFile::parse(bytes).map_err(InitError::Run)?;
+        let (w, h) = image.dimensions();
+        read_landmarks(&file, image.as_raw(), w as usize, h as usize, face, reading, &mut self.scratch).map_err(InitError::Run)
     }
 }
 
