@@ -401,8 +401,12 @@ pub fn read_landmarks<const A: usize>(
         read_face(init, (rgb, w, h), crop, false, scratch, &mut det)?;
         if pass < reading.refine {
             let (cx, cy, size) = landmark_box(&det.landmarks);
-            // Only move to a plausible box (a broken read keeps the finder's).
-            if cx.is_finite() && cy.is_finite() && size.is_finite() && size > 1.0 {
+            // Only move to a plausible box: a broken read keeps the crop, and no chain of reads
+            // walks the crop off the finder's box (a network that reads every face smaller than
+            // it is would otherwise shrink it to a point over the passes).
+            let near = libm::hypotf(cx - face.cx, cy - face.cy) < face.size;
+            let scale = size > face.size / MAX_RECENTRE_SCALE && size < face.size * MAX_RECENTRE_SCALE;
+            if cx.is_finite() && cy.is_finite() && size.is_finite() && size > 1.0 && near && scale {
                 crop = (cx, cy, size);
             }
         }
@@ -420,6 +424,10 @@ pub fn read_landmarks<const A: usize>(
     }
     Ok(det)
 }
+
+/// How far re-centring may take the crop's size from the finder's box, either way (a factor: the
+/// finder's box was up to 2.6× the face on the shared photos, docs/evaluation.md, stop 36).
+pub const MAX_RECENTRE_SCALE: f32 = 3.0;
 
 /// Refinement passes the host's commands use unless told otherwise (three: a crop cut from a box
 /// too large for the face, as photos of people give, needs more than one re-centring to close in;

@@ -46,7 +46,8 @@ impl HeadContext {
         let mut backdrop = Backdrop::default();
         if let Some(hair) = hair {
             // Strands: brightness varying across the head (around the vertical axis) and a little
-            // along it; volume: the covered scalp pushed out by up to 35 mm, less near the hairline.
+            // along it; volume: the covered scalp pushed out by up to 35 mm (all of it above the
+            // hairline, a third to all on the back of the head below it).
             let (freq, phase, depth) = (dress.random_range(0.15f32..0.6), dress.random_range(0.0f32..6.3), dress.random_range(0.1f32..0.5));
             let volume = dress.random_range(0.0f32..35.0);
             let tone = |i: usize| -> Vec3 {

@@ -317,6 +317,7 @@ pub fn train(
         "open_mouth": opts.ranges.open_mouth,
         "plain_skin": opts.ranges.plain_skin.fraction,
         "shape_sigma": [opts.ranges.shape_sigma.0, opts.ranges.shape_sigma.1],
+        "aspects": opts.ranges.aspects,
         "dressed": opts.ranges.dressed,
         "wide_crops": opts.ranges.wide_crops,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
