@@ -168,6 +168,13 @@ pub struct Detection {
     pub light: Vec<f32, MAX_INIT_LIGHT>,
 }
 
+impl Detection {
+    /// A detection of `face` before the initializer has read it (no landmarks or light).
+    fn unread(face: FaceBox) -> Self {
+        Self { face, landmarks: Vec::new(), angles: [0.0; 3], light: Vec::new() }
+    }
+}
+
 fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + libm::expf(-x))
 }
@@ -395,7 +402,7 @@ pub fn read_landmarks<const A: usize>(
     reading: Reading,
     scratch: &mut NetScratch<A>,
 ) -> Result<Detection, NetError> {
-    let mut det = Detection { face, landmarks: Vec::new(), angles: [0.0; 3], light: Vec::new() };
+    let mut det = Detection::unread(face);
     let mut crop = (face.cx, face.cy, face.size);
     for pass in 0..=reading.refine {
         read_face(init, (rgb, w, h), crop, false, scratch, &mut det)?;
@@ -412,7 +419,7 @@ pub fn read_landmarks<const A: usize>(
         }
     }
     if reading.mirror && init.landmarks == IBUG68_POINTS {
-        let mut seen = Detection { face, landmarks: Vec::new(), angles: [0.0; 3], light: Vec::new() };
+        let mut seen = Detection::unread(face);
         read_face(init, (rgb, w, h), crop, true, scratch, &mut seen)?;
         let mean = |a: &mut f32, b: f32| *a = 0.5 * (*a + b);
         for (p, q) in det.landmarks.iter_mut().zip(&seen.landmarks) {

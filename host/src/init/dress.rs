@@ -55,12 +55,8 @@ impl HeadContext {
                 let s = (p[0].atan2(p[2]) * 40.0 * freq + phase).sin() * (p[1] * 0.05 + phase).cos();
                 hair.tone.map(|c| (c * (1.0 + depth * s)).clamp(0.0, 1.0))
             };
-            self.paint_hair(&mut headed, n, hair, tone);
             let mut covered = Vec::new();
-            for i in 0..self.positions.len() {
-                if !self.covers(i, &hair) {
-                    continue;
-                }
+            for i in self.paint_hair(&mut headed, n, hair, tone) {
                 let lift = volume * ((self.positions[i][1] - hair.hairline + 25.0) / 25.0).clamp(0.3, 1.0);
                 if let Some(p) = headed.instance.positions.get_mut(n + i) {
                     *p = std::array::from_fn(|k| p[k] + lift * self.normals[i][k]);

@@ -188,21 +188,21 @@ impl HeadContext {
 
     /// Whether `hair` covers head vertex `i` (rest position `p`): the scalp above the hairline,
     /// and the back of the head down to the ears.
-    pub(super) fn covers(&self, i: usize, hair: &Hair) -> bool {
+    fn covers(&self, i: usize, hair: &Hair) -> bool {
         let p = self.positions[i];
         self.scalp[i] && (p[1] > hair.hairline || (p[2] < hair.back && p[1] > self.eye_y - 25.0))
     }
 
     /// Paints `hair` over the head part of `headed` (head vertex `i` at `n + i`), each covered
-    /// vertex with `tone(i)`.
-    pub(super) fn paint_hair(&self, headed: &mut HeadedInstance, n: usize, hair: Hair, tone: impl Fn(usize) -> Vec3) {
-        for i in 0..self.positions.len() {
-            if self.covers(i, &hair) {
-                if let Some(c) = headed.instance.albedos.get_mut(n + i) {
-                    *c = tone(i);
-                }
+    /// vertex with `tone(i)`; returns the covered head vertices (`i`).
+    pub(super) fn paint_hair(&self, headed: &mut HeadedInstance, n: usize, hair: Hair, tone: impl Fn(usize) -> Vec3) -> Vec<usize> {
+        let covered: Vec<usize> = (0..self.positions.len()).filter(|&i| self.covers(i, &hair)).collect();
+        for &i in &covered {
+            if let Some(c) = headed.instance.albedos.get_mut(n + i) {
+                *c = tone(i);
             }
         }
+        covered
     }
 
     /// The bare head around `face`: its shape and colour changes carried over.

@@ -91,20 +91,22 @@ impl InitModel {
     /// Finds and reads the face in `image` as `reading` says; `None` if the finder's score is
     /// below `min_score`.
     pub fn detect(&mut self, image: &RgbImage, min_score: f32, reading: Reading) -> Result<Option<Detection>, InitError> {
-        let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
-        let file = InitFile::parse(bytes).map_err(InitError::Run)?;
+        let (file, scratch) = self.parts()?;
         let (w, h) = image.dimensions();
-        detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, &mut self.scratch).map_err(InitError::Run)
+        detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(InitError::Run)
     }
-}
 
-impl InitModel {
     /// Reads the face in a given box (no finder run), as `reading` says.
     pub fn read_at(&mut self, image: &RgbImage, face: FaceBox, reading: Reading) -> Result<Detection, InitError> {
-        let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
-        let file = InitFile::parse(bytes).map_err(InitError::Run)?;
+        let (file, scratch) = self.parts()?;
         let (w, h) = image.dimensions();
-        read_landmarks(&file, image.as_raw(), w as usize, h as usize, face, reading, &mut self.scratch).map_err(InitError::Run)
+        read_landmarks(&file, image.as_raw(), w as usize, h as usize, face, reading, scratch).map_err(InitError::Run)
+    }
+
+    /// The parsed file and the scratch its networks run in.
+    fn parts(&mut self) -> Result<(InitFile<'_>, &mut NetScratch<HOST_NET_SCRATCH>), InitError> {
+        let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
+        Ok((InitFile::parse(bytes).map_err(InitError::Run)?, &mut self.scratch))
     }
 }
 

@@ -139,8 +139,8 @@ pub enum TemplateError {
     },
 }
 
-/// Number of landmarks of the iBUG-68 scheme.
-pub const IBUG68_COUNT: usize = 68;
+/// Number of landmarks of the iBUG-68 scheme (the core's one definition).
+pub use gpmm_core::model::ibug::IBUG68_POINTS as IBUG68_COUNT;
 
 /// Outer canthal distance (iBUG 36 to 45) that the default scale maps to, in millimetres.
 pub const OUTER_CANTHAL_MM: f64 = 90.0;
