@@ -192,6 +192,11 @@ pub fn pass_order(seed: u64, chunk: usize, pass: usize, n: usize) -> Vec<usize> 
 pub fn initializer_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
     let x = batch_tensor(batch.iter().map(|s| s.crop.as_slice()), geo.crop_side, device)?;
     let (out, _) = net.forward(&x)?;
+    output_loss(out, batch, geo, device)
+}
+
+/// The initializer's loss of outputs `out` (`[batch, outputs]`): weighted L1 against the targets.
+pub fn output_loss(out: Tensor, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
     let d = geo.init_outputs();
     let target = Tensor::from_vec(batch.iter().flat_map(|s| s.target.iter().copied()).collect::<Vec<f32>>(), (batch.len(), d), device)?;
     let weights: Vec<f32> = (0..d)
