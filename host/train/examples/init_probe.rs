@@ -4,7 +4,9 @@
 //! training's int8 quantization run by the core: a quick way to see what limits the initializer
 //! (docs/evaluation.md, stops 34 and 35).
 //! `cargo run --release -p gpmm-train --example init_probe -- MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES`
-//! (VARIANT: base, the default initializer, or wide, 1.5× its channels).
+//! (VARIANT: base, the default initializer; wide, 1.5× its channels; d256, a 256-wide hidden layer;
+//! r80, an 80 px crop; m12, a crop of 1.2 face sizes; wing, the wing loss on the landmarks;
+//! heat or heatlite, a soft-argmax head: one heat map per landmark on the 8 × 8 map, float only).
 use candle_core::Device;
 use candle_core::{Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
