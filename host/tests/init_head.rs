@@ -162,3 +162,37 @@ fn dressed_heads_keep_the_face_and_its_labels() {
     }
     assert!(compared >= 3, "only {compared} of 4 scenes rendered");
 }
+
+#[test]
+fn shadows_darken_the_scenes_and_keep_their_labels() {
+    use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource};
+    use gpmm_host::render::Renderer;
+    let Some((mesh, lm)) = files() else { return };
+    let model = small_model(&mesh, &lm);
+    let head = HeadContext::load(&model, &mesh, &lm).unwrap();
+    let plain = SceneRanges::default();
+    let shadows = SceneRanges { shadows: true, ..plain.clone() };
+    let openings = Openings::of_model(&model, &plain);
+    let mut renderer = Renderer::new();
+    let mut scene = |ranges: &SceneRanges, i: u64| {
+        let source = SceneSource { model: &model, head: Some(&head), ranges, openings: &openings };
+        render_scene(source, 5, i, &mut renderer)
+    };
+    let brightness = |f: &image::RgbImage| f.as_raw().iter().map(|&v| u64::from(v)).sum::<u64>();
+    let (mut sunlit, mut darker) = (0, 0);
+    for i in 0..12 {
+        let (Some(p), Some(s)) = (scene(&plain, i), scene(&shadows, i)) else { continue };
+        // Shadows and the sun change pixels and the light, never where the face is or how it is turned.
+        assert_eq!(s.landmarks, p.landmarks);
+        assert_eq!(s.angles, p.angles);
+        if s.light != p.light {
+            sunlit += 1;
+        } else {
+            // Under the scene's own light a shadow only takes light away.
+            assert!(brightness(&s.frame) <= brightness(&p.frame) + 64, "scene {i}: brighter with shadows");
+            darker += usize::from(brightness(&s.frame) < brightness(&p.frame));
+        }
+    }
+    assert!((1..=8).contains(&sunlit), "{sunlit} of 12 scenes in a hard sun");
+    assert!(darker >= 2, "shadows darkened only {darker} scenes");
+}

@@ -325,6 +325,7 @@ pub fn train(
         "aspects": opts.ranges.aspects,
         "dressed": opts.ranges.dressed,
         "wide_crops": opts.ranges.wide_crops,
+        "shadows": opts.ranges.shadows,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
