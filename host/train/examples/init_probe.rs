@@ -26,36 +26,26 @@ const fn dense(cin: usize, cout: usize, relu: bool) -> Spec {
     Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu, cin, cout }
 }
 
+/// The default initializer's layout with first-layer channels `c` (doubled twice on the way
+/// down), a last map of `side × side` cells and a hidden layer of `hidden` values.
+fn stack(c: usize, side: usize, hidden: usize, d: usize) -> Vec<Spec> {
+    vec![
+        conv(3, c, 2),
+        conv(c, 2 * c, 2),
+        conv(2 * c, 2 * c, 1),
+        conv(2 * c, 4 * c, 2),
+        conv(4 * c, 4 * c, 2),
+        dense(side * side * 4 * c, hidden, true),
+        dense(hidden, d, false),
+    ]
+}
+
 fn specs(variant: &str, d: usize) -> Vec<Spec> {
     match variant {
         "base" | "wing" | "m12" => initializer_specs(d),
-        "r80" => vec![
-            conv(3, 16, 2),
-            conv(16, 32, 2),
-            conv(32, 32, 1),
-            conv(32, 64, 2),
-            conv(64, 64, 2),
-            dense(5 * 5 * 64, 128, true),
-            dense(128, d, false),
-        ],
-        "wide" => vec![
-            conv(3, 24, 2),
-            conv(24, 48, 2),
-            conv(48, 48, 1),
-            conv(48, 96, 2),
-            conv(96, 96, 2),
-            dense(1536, 128, true),
-            dense(128, d, false),
-        ],
-        "d256" => vec![
-            conv(3, 16, 2),
-            conv(16, 32, 2),
-            conv(32, 32, 1),
-            conv(32, 64, 2),
-            conv(64, 64, 2),
-            dense(1024, 256, true),
-            dense(256, d, false),
-        ],
+        "r80" => stack(16, 5, 128, d),
+        "wide" => stack(24, 4, 128, d),
+        "d256" => stack(16, 4, 256, d),
         _ => Vec::new(),
     }
 }
