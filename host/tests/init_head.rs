@@ -6,8 +6,9 @@ use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
 use gpmm_host::init::head::HeadContext;
+use gpmm_host::init::scene::{render_scene, Openings, Scene, SceneRanges, SceneSource};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
-use gpmm_host::render::Instance;
+use gpmm_host::render::{Instance, Renderer};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::path::{Path, PathBuf};
@@ -31,6 +32,26 @@ fn small_model(mesh: &Path, landmarks: &Path) -> GpModel {
 
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Whole training scenes of `model`'s faces on `head` (the default ranges' eye and mouth openings).
+struct Scenes<'a> {
+    model: &'a GpModel,
+    head: &'a HeadContext,
+    openings: Openings,
+    renderer: Renderer,
+}
+
+impl<'a> Scenes<'a> {
+    fn new(model: &'a GpModel, head: &'a HeadContext) -> Self {
+        Self { model, head, openings: Openings::of_model(model, &SceneRanges::default()), renderer: Renderer::new() }
+    }
+
+    /// Scene `i` of the stream `seed` drawn with `ranges`.
+    fn render(&mut self, ranges: &SceneRanges, seed: u64, i: u64) -> Option<Scene> {
+        let source = SceneSource { model: self.model, head: Some(self.head), ranges, openings: &self.openings };
+        render_scene(source, seed, i, &mut self.renderer)
+    }
 }
 
 #[test]
@@ -85,22 +106,16 @@ fn a_model_of_another_scan_is_refused_with_the_file_named() {
 
 #[test]
 fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
-    use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource};
-    use gpmm_host::render::Renderer;
     let Some((mesh, lm)) = files() else { return };
     let model = small_model(&mesh, &lm);
     let head = HeadContext::load(&model, &mesh, &lm).unwrap();
     let base = SceneRanges::default();
-    let openings = Openings::of_model(&model, &base);
     let mut plain = base.clone();
     plain.plain_skin.fraction = 1.0;
     let mut wide = base.clone();
     wide.shape_sigma = (1.6, 1.6);
-    let mut renderer = Renderer::new();
-    let mut scene = |ranges: &SceneRanges, i: u64| {
-        let source = SceneSource { model: &model, head: Some(&head), ranges, openings: &openings };
-        render_scene(source, 5, i, &mut renderer)
-    };
+    let mut scenes = Scenes::new(&model, &head);
+    let mut scene = |ranges: &SceneRanges, i: u64| scenes.render(ranges, 5, i);
     let mut compared = 0;
     for i in 0..4 {
         let (Some(a), Some(p), Some(w)) = (scene(&base, i), scene(&plain, i), scene(&wide, i)) else { continue };
@@ -118,8 +133,6 @@ fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
 
 #[test]
 fn dressed_heads_keep_the_face_and_its_labels() {
-    use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource};
-    use gpmm_host::render::Renderer;
     let Some((mesh, lm)) = files() else { return };
     let model = small_model(&mesh, &lm);
     let head = HeadContext::load(&model, &mesh, &lm).unwrap();
@@ -146,12 +159,8 @@ fn dressed_heads_keep_the_face_and_its_labels() {
     // Whole scenes: the same labels, other pixels.
     let dressed = SceneRanges::default();
     let base = SceneRanges { dressed: false, ..dressed.clone() };
-    let openings = Openings::of_model(&model, &base);
-    let mut renderer = Renderer::new();
-    let mut scene = |ranges: &SceneRanges, i: u64| {
-        let source = SceneSource { model: &model, head: Some(&head), ranges, openings: &openings };
-        render_scene(source, 9, i, &mut renderer)
-    };
+    let mut scenes = Scenes::new(&model, &head);
+    let mut scene = |ranges: &SceneRanges, i: u64| scenes.render(ranges, 9, i);
     let mut compared = 0;
     for i in 0..4 {
         let (Some(a), Some(d)) = (scene(&base, i), scene(&dressed, i)) else { continue };
@@ -165,19 +174,13 @@ fn dressed_heads_keep_the_face_and_its_labels() {
 
 #[test]
 fn shadows_darken_the_scenes_and_keep_their_labels() {
-    use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource};
-    use gpmm_host::render::Renderer;
     let Some((mesh, lm)) = files() else { return };
     let model = small_model(&mesh, &lm);
     let head = HeadContext::load(&model, &mesh, &lm).unwrap();
     let plain = SceneRanges::default();
     let shadows = SceneRanges { shadows: true, ..plain.clone() };
-    let openings = Openings::of_model(&model, &plain);
-    let mut renderer = Renderer::new();
-    let mut scene = |ranges: &SceneRanges, i: u64| {
-        let source = SceneSource { model: &model, head: Some(&head), ranges, openings: &openings };
-        render_scene(source, 5, i, &mut renderer)
-    };
+    let mut scenes = Scenes::new(&model, &head);
+    let mut scene = |ranges: &SceneRanges, i: u64| scenes.render(ranges, 5, i);
     let brightness = |f: &image::RgbImage| f.as_raw().iter().map(|&v| u64::from(v)).sum::<u64>();
     let (mut sunlit, mut darker) = (0, 0);
     for i in 0..12 {

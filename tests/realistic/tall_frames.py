@@ -8,12 +8,7 @@ a little noise) to fill the rest; truth.json and the .pts follow.
 import argparse, json, os
 import numpy as np
 from PIL import Image
-from detect_landmarks import write_pts  # the same directory
-
-
-def read_pts(path):
-    body = open(path).read().split("{")[1].split("}")[0]
-    return np.array([[float(v) for v in line.split()] for line in body.splitlines() if line.strip()])
+from detect_landmarks import read_pts, write_pts  # the same directory
 
 
 def main():

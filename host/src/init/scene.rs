@@ -12,7 +12,7 @@ use crate::init::skin::PlainSkin;
 use crate::render::{Background, Instance, RenderSettings, Renderer, View};
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::net::face::landmark_box;
-use gpmm_core::{Cull, ShLight};
+use gpmm_core::Cull;
 use image::{Rgb, RgbImage, RgbaImage};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -106,7 +106,9 @@ pub const SUNLIT_SHARE: f32 = 0.3;
 /// Number of light values a scene labels (SH bands 0 and 1, RGB).
 pub const LIGHT_LABELS: usize = 12;
 
-fn random_light(rng: &mut impl Rng) -> (ShLight, SceneLight) {
+/// The scene's light as drawn, and the small band-2 coefficients real light has (one per
+/// coefficient, the same in R, G and B).
+fn random_light(rng: &mut impl Rng) -> (SceneLight, [f32; SH_COEFFS - 4]) {
     // Indoor to outdoor: a tinted ambient part and one directional light from anywhere in front.
     let level = rng.random_range(0.35f32..1.1);
     let tint = [rng.random_range(0.8f32..1.2), 1.0, rng.random_range(0.8f32..1.2)];
@@ -114,13 +116,8 @@ fn random_light(rng: &mut impl Rng) -> (ShLight, SceneLight) {
     let strength = level * rng.random_range(0.0f32..0.9);
     let diffuse = tint.map(|t| t * strength);
     let dir = [rng.random_range(-1.0f32..1.0), rng.random_range(-1.0f32..1.0), rng.random_range(0.0f32..1.0)];
-    let drawn = SceneLight { ambient, diffuse, direction: dir };
-    let mut light = drawn.sh();
-    // A little of band 2, as real light has.
-    for c in light.coeffs.iter_mut().skip(4).take(SH_COEFFS - 4) {
-        *c = [rng.random_range(-0.08f32..0.08); 3];
-    }
-    (light, drawn)
+    let band2 = std::array::from_fn(|_| rng.random_range(-0.08f32..0.08));
+    (SceneLight { ambient, diffuse, direction: dir }, band2)
 }
 
 /// A procedural background: a gradient, value noise at a random scale, and a few shapes.
@@ -265,7 +262,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let fov_h = rng.random_range(ranges.fov.0..=ranges.fov.1);
     // The settings' field of view is across the shorter side.
     let fov_short = 2.0 * ((fov_h.to_radians() * 0.5).tan() * w.min(h) as f32 / w as f32).atan().to_degrees();
-    let (mut light, mut drawn_light) = random_light(&mut rng);
+    let (mut drawn_light, band2) = random_light(&mut rng);
     if ranges.shadows {
         // A share of the scenes in a hard sun (a strong directional light, less ambient), from a
         // stream of its own so that the rest of the scene is drawn as without shadows.
@@ -274,10 +271,10 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
             let (more, less) = (sun_rng.random_range(1.5f32..2.5), sun_rng.random_range(0.5f32..0.8));
             drawn_light.diffuse = drawn_light.diffuse.map(|c| c.max(0.25) * more);
             drawn_light.ambient = drawn_light.ambient.map(|c| c * less);
-            let hard = drawn_light.sh();
-            light.coeffs.iter_mut().zip(hard.coeffs).take(4).for_each(|(c, h)| *c = h);
         }
     }
+    let mut light = drawn_light.sh();
+    light.coeffs.iter_mut().skip(4).zip(band2).for_each(|(c, b)| *c = [b; 3]);
     let settings = RenderSettings {
         width: w,
         height: h,

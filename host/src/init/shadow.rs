@@ -13,9 +13,10 @@
 //! ambient light.
 
 use crate::render::Instance;
-use gpmm_core::pose::Pose;
+use gpmm_core::pose::{mat_vec, Pose};
 use gpmm_core::render::shading::vertex_normals;
 use gpmm_core::{ShLight, Vec3};
+use nalgebra::Vector3;
 
 /// Side of a depth-map cell (mm): about a vertex spacing of the template's face.
 pub const CELL_MM: f32 = 2.0;
@@ -49,28 +50,18 @@ impl SceneLight {
     }
 }
 
-fn dot(a: Vec3, b: Vec3) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn unit(a: Vec3) -> Option<Vec3> {
-    let n = dot(a, a).sqrt();
-    (n > 1e-9 && n.is_finite()).then(|| a.map(|v| v / n))
-}
-
 /// Which of `points` (camera space) are lit by a light from direction `toward` (unit), given the
 /// mesh `triangles` over them and each point's unit `normals`: `true` unless a triangle nearer
 /// the light covers it.
 pub fn lit(points: &[Vec3], normals: &[Vec3], triangles: &[[u32; 3]], toward: Vec3) -> Vec<bool> {
-    let Some(d) = unit(toward) else { return vec![true; points.len()] };
-    // Any vector not along d makes the light's image plane.
-    let helper = if d[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-    let (Some(u), Some(v)) = (unit(cross(d, helper)), unit(cross(d, cross(d, helper)))) else { return vec![true; points.len()] };
-    let light: Vec<[f32; 3]> = points.iter().map(|p| [dot(*p, u), dot(*p, v), dot(*p, d)]).collect();
+    let Some(d) = Vector3::from(toward).try_normalize(1e-9).filter(|d| d.iter().all(|c| c.is_finite())) else {
+        return vec![true; points.len()];
+    };
+    // The light's image plane: any vector not along d, made perpendicular to it, and d × that.
+    let helper = if d.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let Some(u) = d.cross(&helper).try_normalize(1e-9) else { return vec![true; points.len()] };
+    let v = d.cross(&u);
+    let light: Vec<[f32; 3]> = points.iter().map(|p| Vector3::from(*p)).map(|p| [p.dot(&u), p.dot(&v), p.dot(&d)]).collect();
     let finite = light.iter().filter(|q| q.iter().all(|c| c.is_finite()));
     let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
     for q in finite {
@@ -125,7 +116,7 @@ pub fn lit(points: &[Vec3], normals: &[Vec3], triangles: &[[u32; 3]], toward: Ve
         .zip(normals)
         .map(|(q, n)| {
             let Some(i) = at(q[0], q[1]) else { return true };
-            let cos = dot(*n, d).abs().clamp(0.05, 1.0);
+            let cos = Vector3::from(*n).dot(&d).abs().clamp(0.05, 1.0);
             let slope = (1.0 - cos * cos).sqrt() / cos;
             q[2] >= depth[i] - BIAS_MM - SLOPE_BIAS * cell * slope.min(MAX_SLOPE)
         })
@@ -143,11 +134,10 @@ pub fn cast_shadows(instance: &mut Instance, triangles: &[[u32; 3]], pose: &Pose
         return 0;
     }
     let rot = pose.rotation();
-    let turn = |p: Vec3| [dot(rot[0], p), dot(rot[1], p), dot(rot[2], p)];
     let points: Vec<Vec3> = instance.positions.iter().map(|p| pose.transform_point(*p)).collect();
-    let normals: Vec<Vec3> = normals.into_iter().map(turn).collect();
+    let normals: Vec<Vec3> = normals.into_iter().map(|n| mat_vec(&rot, n)).collect();
     let lit = lit(&points, &normals, triangles, light.direction);
-    let (full, ambient) = (light.sh(), ShLight::from_ambient_diffuse(light.ambient, [0.0; 3], light.direction));
+    let (full, ambient) = (light.sh(), ShLight::ambient(light.ambient));
     let mut shadowed = 0;
     for ((albedo, n), on) in instance.albedos.iter_mut().zip(&normals).zip(lit) {
         if on {
