@@ -28,6 +28,11 @@ pub struct RegisterArgs {
     /// Closest-point iterations.
     #[arg(long, default_value_t = gpmm_host::fit::register::RegisterOptions::default().iterations, value_name = "N")]
     pub iterations: usize,
+    /// Weight of each landmark pair in the first iteration, falling to min(W, 1) in the last; 0 uses
+    /// the landmarks for the rigid alignment only, so the surface alone decides where each model
+    /// vertex lands (e.g. to see where the model's landmark vertices fall on another face).
+    #[arg(long, default_value_t = gpmm_host::fit::register::RegisterOptions::default().landmark_weight, value_name = "W")]
+    pub landmark_weight: f64,
     /// Output directory: registered.ply (model topology, in the target's frame) and register.json.
     #[arg(short, long, value_name = "OUTDIR")]
     pub output: PathBuf,
@@ -59,6 +64,7 @@ pub fn register_mesh(a: RegisterArgs) -> Result<()> {
         shape_rank: a.shape_rank.unwrap_or(usize::MAX),
         color_rank: a.color_rank.unwrap_or(usize::MAX),
         iterations: a.iterations,
+        landmark_weight: a.landmark_weight,
         ..Default::default()
     };
     let landmarks_used = landmarks.is_some();

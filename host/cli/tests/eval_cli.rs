@@ -255,6 +255,43 @@ fn register_recovers_a_moved_instance_of_the_model() {
 }
 
 #[test]
+fn register_landmark_weight_zero_lets_the_surface_decide() {
+    let Some(f) = fixture() else { return };
+    let model = gpmm_host::gp::model_io::load(&f.model).unwrap();
+    let mesh = model.instance(&[0.8, -0.5, 0.4], &[]).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("target.ply");
+    gpmm_host::mesh::io::write_ply(&target, &mesh).unwrap();
+    // The target's brow points (17-26) are defined 10 mm higher than the model's: another landmark convention.
+    let d2 = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>();
+    let mut ids = model.landmarks.clone();
+    for id in ids.iter_mut().take(27).skip(17) {
+        let p = mesh.positions[*id as usize];
+        let up = [p[0], p[1] + 10.0, p[2]];
+        *id = (0..mesh.positions.len()).min_by(|&a, &b| d2(mesh.positions[a], up).total_cmp(&d2(mesh.positions[b], up))).unwrap() as u32;
+    }
+    let lm = dir.path().join("target.json");
+    std::fs::write(&lm, serde_json::json!({ "scheme": "ibug68", "vertex_ids": ids }).to_string()).unwrap();
+    // Mean distance of the registered brow vertices from where the model's brow vertices truly are on the target.
+    let brow_shift = |extra: &[&str]| {
+        let out = dir.path().join(format!("w{}", extra.len()));
+        let mut args = vec!["register", s(&f.model), s(&target), "--landmarks", s(&lm), "-o", s(&out)];
+        args.extend(extra);
+        ok(&gpmm(&args));
+        let reg = gpmm_host::mesh::io::read_mesh(&out.join("registered.ply"), None, None).unwrap();
+        (17..27).map(|k| d2(reg.positions[model.landmarks[k] as usize], mesh.positions[model.landmarks[k] as usize]).sqrt()).sum::<f64>()
+            / 10.0
+    };
+    let pulled = brow_shift(&[]);
+    let free = brow_shift(&["--landmark-weight", "0"]);
+    eprintln!("brow vertices off by {pulled:.2} mm with the default weight, {free:.2} mm with 0");
+    assert!(free < 1.0, "with weight 0 the brow vertices are {free} mm off");
+    assert!(pulled > 2.0 * free.max(0.2), "the default weight pulls them {pulled} mm (weight 0: {free} mm)");
+    let e = fails(&gpmm(&["register", s(&f.model), s(&target), "--landmark-weight=-1", "-o", s(&dir.path().join("bad"))]));
+    assert!(e.contains("landmark weight"), "{e}");
+}
+
+#[test]
 fn bad_input_gives_clear_errors() {
     let Some(f) = fixture() else { return };
     let dir = tempfile::tempdir().unwrap();

@@ -57,7 +57,8 @@ pub struct RegisterOptions {
     pub sigma_start_mm: f64,
     /// Noise σ of the last iteration (mm).
     pub sigma_end_mm: f64,
-    /// Weight of each landmark pair at the start (falls to 1).
+    /// Weight of each landmark pair at the start (falls to 1, or stays 0 when 0: the landmarks then
+    /// only give the initial rigid alignment).
     pub landmark_weight: f64,
     /// Noise σ of the colour fit (colours in \[0, 1\]).
     pub color_sigma: f64,
@@ -81,8 +82,13 @@ impl RegisterOptions {
     /// Checks the ranges.
     pub fn validate(&self) -> Result<(), RegisterError> {
         let pos = |v: f64| v.is_finite() && v > 0.0;
-        if !(pos(self.sigma_start_mm) && pos(self.sigma_end_mm) && pos(self.color_sigma) && self.landmark_weight.is_finite()) {
-            return Err(RegisterError::Invalid("the noise levels must be positive and the landmark weight finite".into()));
+        if !(pos(self.sigma_start_mm)
+            && pos(self.sigma_end_mm)
+            && pos(self.color_sigma)
+            && self.landmark_weight.is_finite()
+            && self.landmark_weight >= 0.0)
+        {
+            return Err(RegisterError::Invalid("the noise levels must be positive and the landmark weight finite and not negative".into()));
         }
         if self.iterations == 0 || self.iterations > 1000 {
             return Err(RegisterError::Invalid(format!("{} iterations: need 1 to 1000", self.iterations)));
@@ -368,7 +374,7 @@ pub fn register(model: &GpModel, target: &PreparedTarget, opts: &RegisterOptions
     for it in 0..iters {
         let f = if iters > 1 { it as f64 / (iters - 1) as f64 } else { 1.0 };
         let sigma = opts.sigma_start_mm * (opts.sigma_end_mm / opts.sigma_start_mm).powf(f);
-        let w_lm = (opts.landmark_weight * (1.0 - f) + f).max(0.0);
+        let w_lm = opts.landmark_weight * (1.0 - f) + opts.landmark_weight.min(1.0) * f;
         let x = basis_instance(&bs, mean, &alpha);
         // Closest points (target frame), accepted if off the border and not far out.
         let hits: Vec<([f64; 3], bool)> = x
