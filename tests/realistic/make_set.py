@@ -9,6 +9,7 @@ transferred colours), anti-aliasing and the background (a textured, blurred imag
 flat colour). Colours are written linear, as gpmm reads them (no gamma).
 
     python make_set.py SYNTH_DIR OUT_DIR [--spp 64] [--scale 2] [--seed 0] [--ict DIR] [--wide K1,K2] [--person]
+                       [--sun-off] [--flat-background] [--unpainted-skin] [--albedo NPY]
 
 --wide puts each face small in a wider frame: the frame is K (drawn from K1..K2) times the
 scene's size across its shorter side, 4:3 or 3:4, the face anywhere in it, the background drawn
@@ -20,6 +21,13 @@ render: a head of the face's skin tone, hair over and around it (sometimes long)
 clothed shoulders down to the frame's edge. Photos show faces on people; the ICT mesh is a face
 mask only. The shapes are drawn from the landmarks, by a generator of their own (none of gpmm's
 training code), so the set tests what a head, hair and clothes around a face do to a detector.
+
+Ablations (each changes one thing and keeps every random draw, so the rest of each image is the
+same): --sun-off lights the face by the environment alone (its radiance raised by the sun's
+share); --flat-background puts a mid-grey behind the face; --unpainted-skin leaves out the darker
+lips and brows; --albedo NPY gives every face the per-vertex linear RGB colours of NPY (ICT's
+vertex order, e.g. a model's colours from `landmark_definitions.py transfer --albedo`) instead of
+the skin generator's. They measure which of the renderer's choices a detector is sensitive to.
 """
 import argparse, json, math, os, shutil, sys
 import numpy as np
@@ -29,6 +37,9 @@ from detect_landmarks import write_pts  # the same directory; mediapipe is impor
 MIRROR = [(0, 16), (1, 15), (2, 14), (3, 13), (4, 12), (5, 11), (6, 10), (7, 9), (17, 26), (18, 25), (19, 24), (20, 23),
           (21, 22), (31, 35), (32, 34), (36, 45), (37, 44), (38, 43), (39, 42), (40, 47), (41, 46), (48, 54), (49, 53),
           (50, 52), (59, 55), (58, 56), (60, 64), (61, 63), (67, 65)]
+
+
+SUN_SHARE = 0.45  # the sun's irradiance over pi (a white surface facing it reflects this much)
 
 
 def face_frame(lm):
@@ -82,7 +93,7 @@ def project(p, f, cx, cy):
     return np.stack([cx + f * p[:, 0] / -p[:, 2], cy - f * p[:, 1] / -p[:, 2]], axis=1)
 
 
-def skin_albedo(face, lm_ids, rng):
+def skin_albedo(face, lm_ids, rng, painted=True):
     """A skin tone per identity, darker/redder lips, darker brows, smooth variation (linear RGB)."""
     tone = np.array([rng.uniform(0.35, 0.75), 0.0, 0.0])
     tone[1] = tone[0] * rng.uniform(0.62, 0.72)
@@ -93,8 +104,9 @@ def skin_albedo(face, lm_ids, rng):
         d = np.min(np.linalg.norm(face[:, None, :] - points[None, :, :], axis=2), axis=1)
         w = strength * np.exp(-(d / radius) ** 2)[:, None]
         return alb * (1 - w) + color * w
-    alb = blend(lm[48:68], 4.0, tone * np.array([1.0, 0.55, 0.6]), 0.8)
-    alb = blend(lm[17:27], 3.0, tone * 0.35, 0.7)
+    if painted:
+        alb = blend(lm[48:68], 4.0, tone * np.array([1.0, 0.55, 0.6]), 0.8)
+        alb = blend(lm[17:27], 3.0, tone * 0.35, 0.7)
     for _ in range(6):
         c = face[rng.integers(len(face))]
         d = np.linalg.norm(face - c, axis=1)
@@ -186,7 +198,13 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--wide", help="K1,K2: a frame K1..K2 times the scene's size, the face placed anywhere in it")
     ap.add_argument("--person", action="store_true", help="with --wide: a head, hair, neck and clothes drawn around the face")
+    ap.add_argument("--sun-off", action="store_true", help="ablation: no sun; the environment light takes its share")
+    ap.add_argument("--flat-background", action="store_true", help="ablation: a mid-grey background (not with --wide)")
+    ap.add_argument("--unpainted-skin", action="store_true", help="ablation: no darker lips and brows")
+    ap.add_argument("--albedo", help="ablation: per-vertex linear RGB albedo (.npy, ICT's vertex order) for every face")
     a = ap.parse_args()
+    if a.flat_background and a.wide:
+        sys.exit("--flat-background is for sets without --wide (a wide frame draws its own background)")
     if a.person and not a.wide:
         sys.exit("--person needs --wide (the person is drawn in the wider frame)")
     wide = [float(v) for v in a.wide.split(",")] if a.wide else None
@@ -199,6 +217,11 @@ def main():
     modes = np.load(os.path.join(a.ict, "identity_modes.npy"), mmap_mode="r")
     tris = np.load(os.path.join(a.ict, "triangles.npy")).astype(np.int64)
     lm_ids = np.array(json.load(open(os.path.join(a.ict, "landmarks_ibug68.json")))["vertex_ids"])
+    fixed_albedo = None
+    if a.albedo:
+        fixed_albedo = np.load(a.albedo)
+        if fixed_albedo.shape != neutral.shape:
+            sys.exit(f"{a.albedo}: shape {fixed_albedo.shape}, need {neutral.shape} (one RGB per ICT vertex)")
     loops = sorted(boundary_loops(tris.tolist(), len(neutral)), key=len)
     holes = loops[:-1]  # the longest loop is the outer border and stays open
     os.makedirs(a.out_dir, exist_ok=True)
@@ -221,7 +244,9 @@ def main():
         allv = np.concatenate(verts)
         allf = np.concatenate(faces)
         rng = np.random.default_rng([a.seed, im["identity"]])
-        alb = np.concatenate([skin_albedo(face, lm_ids, rng), np.full((len(holes), 3), 0.03)])
+        alb = np.concatenate([skin_albedo(face, lm_ids, rng, painted=not a.unpainted_skin), np.full((len(holes), 3), 0.03)])
+        if fixed_albedo is not None:
+            alb[: len(face)] = fixed_albedo
         rot = rotation(*(math.radians(im[key]) for key in ("yaw_deg", "pitch_deg", "roll_deg")))
         cam = allv @ rot.T + np.array(im["translation_mm"])
         w, h, f = im["width"], im["height"], im["focal_px"]
@@ -250,14 +275,15 @@ def main():
                 "sampler": {"type": "independent", "sample_count": a.spp},
             },
             "face": mesh,
-            "env": {"type": "constant", "radiance": {"type": "rgb", "value": (amb * np.array([1.0, 0.97, 0.92])).tolist()}},
-            "sun": {"type": "directional", "direction": (-sun).tolist(), "irradiance": {"type": "rgb", "value": [math.pi * 0.45] * 3}},
+            "env": {"type": "constant", "radiance": {"type": "rgb", "value": ((amb + SUN_SHARE * a.sun_off) * np.array([1.0, 0.97, 0.92])).tolist()}},
+            "sun": {"type": "directional", "direction": (-sun).tolist(), "irradiance": {"type": "rgb", "value": [0.0 if a.sun_off else math.pi * SUN_SHARE] * 3}},
         })
         img = np.array(mi.render(scene))
         img = img.reshape(h, a.scale, w, a.scale, 4).mean(axis=(1, 3))
         rgb, alpha = img[..., :3], img[..., 3:4]
         if wide is None:
-            out = rgb + (1 - alpha) * background(w, h, view_rng)
+            bg = background(w, h, view_rng)
+            out = rgb + (1 - alpha) * (np.full_like(bg, 0.35) if a.flat_background else bg)
             shutil.copy(os.path.join(a.synth_dir, im["landmarks_file"]), a.out_dir)
         else:
             skin = None
