@@ -64,32 +64,21 @@ def ply_positions(path):
 
 def closest_barycentric(p, a, b, c):
     """Barycentric weights of the point of triangle abc closest to p."""
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = ab @ ap, ac @ ap
-    if d1 <= 0 and d2 <= 0:
-        return np.array([1.0, 0, 0])
-    bp = p - b
-    d3, d4 = ab @ bp, ac @ bp
-    if d3 >= 0 and d4 <= d3:
-        return np.array([0, 1.0, 0])
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0 and d1 >= 0 and d3 <= 0:
-        v = d1 / (d1 - d3)
-        return np.array([1 - v, v, 0])
-    cp = p - c
-    d5, d6 = ab @ cp, ac @ cp
-    if d6 >= 0 and d5 <= d6:
-        return np.array([0, 0, 1.0])
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0 and d2 >= 0 and d6 <= 0:
-        w = d2 / (d2 - d6)
-        return np.array([1 - w, 0, w])
-    va = d3 * d6 - d5 * d4
-    if va <= 0 and d4 - d3 >= 0 and d5 - d6 >= 0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return np.array([0, 1 - w, w])
-    s = 1 / (va + vb + vc)
-    return np.array([1 - (vb + vc) * s, vb * s, vc * s])
+    e = np.stack([b - a, c - a], axis=1)
+    u, v = np.linalg.lstsq(e, p - a, rcond=None)[0]
+    if min(u, v, 1 - u - v) >= 0:
+        return np.array([1 - u - v, u, v])
+    best = None  # outside: the closest point lies on an edge
+    corners = (a, b, c)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        d = corners[j] - corners[i]
+        t = float(np.clip((p - corners[i]) @ d / (d @ d), 0.0, 1.0))
+        dist = np.linalg.norm(corners[i] + t * d - p)
+        if best is None or dist < best[0]:
+            w = np.zeros(3)
+            w[i], w[j] = 1 - t, t
+            best = (dist, w)
+    return best[1]
 
 
 class Ict:
