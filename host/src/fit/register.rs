@@ -17,7 +17,8 @@
 //!    - shape: the posterior mean (MAP) of α given the accepted points with isotropic noise σ, plus
 //!      the landmark pairs weighted ×w: `(Bᵀ W B / σ² + I) α = Bᵀ W (y − μ) / σ²`. σ falls
 //!      geometrically from [`RegisterOptions::sigma_start_mm`] to [`RegisterOptions::sigma_end_mm`]
-//!      (coarse to fine) and w from [`RegisterOptions::landmark_weight`] to 1.
+//!      (coarse to fine) and w from [`RegisterOptions::landmark_weight`] to 1 (it stays 0 when that
+//!      is 0: the landmarks then only give the initial alignment).
 //! 3. **Colour**: the target's colours at the final closest points (interpolated barycentrically)
 //!    give the colour coefficients the same way (noise [`RegisterOptions::color_sigma`]).
 //!
