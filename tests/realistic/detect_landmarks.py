@@ -14,13 +14,13 @@ images with no detection (they are left out: gpmm bench-fit reports them as fail
 """
 import argparse, json, os, sys
 import numpy as np
-from PIL import Image
 
 UPSCALE = 4  # MediaPipe wants faces larger than 128 px
 
 
 def mesh_points(path):
-    import mediapipe as mp
+    import mediapipe as mp  # only here: reading and writing .pts needs numpy alone
+    from PIL import Image
     img = Image.open(path).convert("RGB")
     w, h = img.size
     up = UPSCALE if max(w, h) < 400 else 1  # photos are large enough as they are

@@ -31,7 +31,6 @@ the skin generator's. They measure which of the renderer's choices a detector is
 """
 import argparse, json, math, os, shutil, sys
 import numpy as np
-from PIL import Image
 from detect_landmarks import write_pts  # the same directory; mediapipe is imported only to detect
 
 MIRROR = [(0, 16), (1, 15), (2, 14), (3, 13), (4, 12), (5, 11), (6, 10), (7, 9), (17, 26), (18, 25), (19, 24), (20, 23),
@@ -210,7 +209,8 @@ def main():
     wide = [float(v) for v in a.wide.split(",")] if a.wide else None
     if wide is not None and not (len(wide) == 2 and 1.0 <= wide[0] <= wide[1]):
         sys.exit(f"--wide takes K1,K2 with 1 <= K1 <= K2 (got {a.wide})")
-    import mitsuba as mi
+    import mitsuba as mi  # only here: landmark_definitions.py imports this file's projection with numpy alone
+    from PIL import Image
     mi.set_variant("scalar_rgb")
     truth = json.load(open(os.path.join(a.synth_dir, "truth.json")))
     neutral = np.load(os.path.join(a.ict, "neutral.npy")).astype(np.float64) * 10.0
