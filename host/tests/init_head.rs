@@ -105,7 +105,7 @@ fn a_model_of_another_scan_is_refused_with_the_file_named() {
 }
 
 #[test]
-fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
+fn plainer_skin_wider_shapes_and_colours_change_only_what_they_say() {
     let Some((mesh, lm)) = files() else { return };
     let model = small_model(&mesh, &lm);
     let head = HeadContext::load(&model, &mesh, &lm).unwrap();
@@ -114,11 +114,15 @@ fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
     plain.plain_skin.fraction = 1.0;
     let mut wide = base.clone();
     wide.shape_sigma = (1.6, 1.6);
+    let mut colourful = base.clone();
+    colourful.colour_spread = (1.5, 2.5);
     let mut scenes = Scenes::new(&model, &head);
     let mut scene = |ranges: &SceneRanges, i: u64| scenes.render(ranges, 5, i);
     let mut compared = 0;
     for i in 0..4 {
-        let (Some(a), Some(p), Some(w)) = (scene(&base, i), scene(&plain, i), scene(&wide, i)) else { continue };
+        let (Some(a), Some(p), Some(w), Some(c)) = (scene(&base, i), scene(&plain, i), scene(&wide, i), scene(&colourful, i)) else {
+            continue;
+        };
         compared += 1;
         // Plainer skin: same labels and pose, other pixels.
         assert_eq!(p.landmarks, a.landmarks);
@@ -127,6 +131,9 @@ fn plainer_skin_and_wider_shapes_change_only_what_they_say() {
         // Wider shapes: same pose and light, the face itself moved.
         assert_eq!((w.angles, &w.light), (a.angles, &a.light));
         assert_ne!(w.landmarks, a.landmarks, "scene {i}: the shape did not change");
+        // Wider colours: same labels, pose and light, other pixels.
+        assert_eq!((c.landmarks.clone(), c.angles, &c.light), (a.landmarks.clone(), a.angles, &a.light));
+        assert_ne!(c.frame, a.frame, "scene {i}: the colours did not change");
     }
     assert!(compared >= 3, "only {compared} of 4 scenes rendered");
 }

@@ -41,6 +41,9 @@ pub struct SceneRanges {
     /// Range of the standard deviation each scene's shape coefficients are drawn with (a range
     /// wider than 1 shows faces further from the scan; `(1, 1)`: standard normal, the default).
     pub shape_sigma: (f32, f32),
+    /// Range of the factor each scene's colour coefficients (drawn with standard deviation 0.8)
+    /// are scaled by (wider than 1: skin further from the scan's; `(1, 1)`, the default, keeps them).
+    pub colour_spread: (f32, f32),
     /// Paint open eyes over the scan's shut ones in most scenes (`crate::init::eyes`).
     pub open_eyes: bool,
     /// Draw an open mouth (teeth, dark gap) over the scan's closed one in some scenes
@@ -77,6 +80,7 @@ impl Default for SceneRanges {
             face_fraction: (0.15, 0.8),
             components: 60,
             shape_sigma: (1.0, 1.0),
+            colour_spread: (1.0, 1.0),
             open_eyes: true,
             open_mouth: false,
             plain_skin: PlainSkin::default(),
@@ -249,7 +253,17 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
         lo
     };
     shape.iter_mut().for_each(|c| *c *= spread);
-    let color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
+    let mut color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
+    let (lo, hi) = ranges.colour_spread;
+    if hi > lo || lo != 1.0 {
+        // From a stream of its own, as the shape's spread.
+        let spread = if hi > lo {
+            Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xB5AD_4ECE_DA1C_E2A9) ^ 0xC01).random_range(lo..=hi)
+        } else {
+            lo
+        };
+        color.iter_mut().for_each(|c| *c *= spread);
+    }
     let mut instance = Instance::of_model(model, &shape, &color).ok()?;
     let view = View {
         yaw: rng.random_range(-ranges.yaw..=ranges.yaw),

@@ -322,6 +322,7 @@ pub fn train(
         "open_mouth": opts.ranges.open_mouth,
         "plain_skin": opts.ranges.plain_skin.fraction,
         "shape_sigma": [opts.ranges.shape_sigma.0, opts.ranges.shape_sigma.1],
+        "colour_spread": [opts.ranges.colour_spread.0, opts.ranges.colour_spread.1],
         "aspects": opts.ranges.aspects,
         "dressed": opts.ranges.dressed,
         "wide_crops": opts.ranges.wide_crops,
