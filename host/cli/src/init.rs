@@ -76,8 +76,8 @@ pub struct TrainInitArgs {
     #[arg(long, value_name = "LOW,HIGH", value_delimiter = ',')]
     pub shape_sigma: Option<Vec<f32>>,
     /// Scale each scene's colour coefficients (drawn with standard deviation 0.8) by a factor from
-    /// LOW..HIGH (e.g. 1,2.5: skin further from the scan's; off by default, docs/evaluation.md,
-    /// stop 38).
+    /// LOW..HIGH (e.g. 1,2.5: skin further from the scan's; off by default: 1,2.5 did not help the
+    /// development sets on two seeds, docs/evaluation.md, stop 38).
     #[arg(long, value_name = "LOW,HIGH", value_delimiter = ',')]
     pub colour_spread: Option<Vec<f32>>,
     /// Leave the heads around the faces undressed: bald busts with bare shoulders, as the
