@@ -244,26 +244,20 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
     let mut shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
-    // The spread from a stream of its own: the rest of the scene is the same as with standard
+    // Each spread from a stream of its own: the rest of the scene is the same as with standard
     // draws (and multiplying by 1 changes no coefficient).
-    let (lo, hi) = ranges.shape_sigma;
-    let spread = if hi > lo {
-        Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xE703_7ED1_A0B4_28DB) ^ 0x54A).random_range(lo..=hi)
-    } else {
-        lo
-    };
-    shape.iter_mut().for_each(|c| *c *= spread);
-    let mut color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
-    let (lo, hi) = ranges.colour_spread;
-    if hi > lo || lo != 1.0 {
-        // From a stream of its own, as the shape's spread.
-        let spread = if hi > lo {
-            Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xB5AD_4ECE_DA1C_E2A9) ^ 0xC01).random_range(lo..=hi)
+    let spread = |(lo, hi): (f32, f32), stream: (u64, u64)| {
+        if hi > lo {
+            Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(stream.0) ^ stream.1).random_range(lo..=hi)
         } else {
             lo
-        };
-        color.iter_mut().for_each(|c| *c *= spread);
-    }
+        }
+    };
+    let shape_spread = spread(ranges.shape_sigma, (0xE703_7ED1_A0B4_28DB, 0x54A));
+    shape.iter_mut().for_each(|c| *c *= shape_spread);
+    let mut color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
+    let colour_spread = spread(ranges.colour_spread, (0xB5AD_4ECE_DA1C_E2A9, 0xC01));
+    color.iter_mut().for_each(|c| *c *= colour_spread);
     let mut instance = Instance::of_model(model, &shape, &color).ok()?;
     let view = View {
         yaw: rng.random_range(-ranges.yaw..=ranges.yaw),
