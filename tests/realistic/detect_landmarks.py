@@ -16,6 +16,8 @@ import argparse, json, os, sys
 import numpy as np
 
 UPSCALE = 4  # MediaPipe wants faces larger than 128 px
+# The iBUG-68 landmark groups, for per-group figures.
+GROUPS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48), "mouth": range(48, 68)}
 
 
 def mesh_points(path):

@@ -27,10 +27,8 @@ write writes the transferred points of every image as .pts (e.g. to fit with `gp
 """
 import argparse, json, math, os, struct, subprocess, sys, tempfile
 import numpy as np
-from make_set import face_frame, rotation, project  # the same directory: the set's own projection
-from detect_landmarks import read_pts, write_pts
-
-GROUPS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48), "mouth": range(48, 68)}
+from make_set import Ict, face_frame, rotation, project  # the same directory: the set's own faces and projection
+from detect_landmarks import GROUPS, read_pts, write_pts
 
 
 def model_tensor(path, name):
@@ -79,20 +77,6 @@ def closest_barycentric(p, a, b, c):
             w[i], w[j] = 1 - t, t
             best = (dist, w)
     return best[1]
-
-
-class Ict:
-    """ICT's neutral face, identity modes, triangles and landmark ids (millimetres, as make_set.py)."""
-
-    def __init__(self, d):
-        self.neutral = np.load(os.path.join(d, "neutral.npy")).astype(np.float64) * 10.0
-        self.modes = np.load(os.path.join(d, "identity_modes.npy"), mmap_mode="r")
-        self.tris = np.load(os.path.join(d, "triangles.npy")).astype(np.int64)
-        self.landmarks = np.array(json.load(open(os.path.join(d, "landmarks_ibug68.json")))["vertex_ids"])
-
-    def shape(self, coeffs):
-        c = np.asarray(coeffs, dtype=np.float64)
-        return self.neutral + np.tensordot(c, self.modes[: len(c)].astype(np.float64), axes=1) * 10.0
 
 
 def transfer(a):

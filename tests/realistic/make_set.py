@@ -63,6 +63,21 @@ def rotation(yaw, pitch, roll):
     return rz @ ry @ rx
 
 
+class Ict:
+    """ICT's neutral face, identity modes, triangles and iBUG-68 vertex ids, in millimetres."""
+
+    def __init__(self, d):
+        self.neutral = np.load(os.path.join(d, "neutral.npy")).astype(np.float64) * 10.0
+        self.modes = np.load(os.path.join(d, "identity_modes.npy"), mmap_mode="r")
+        self.tris = np.load(os.path.join(d, "triangles.npy")).astype(np.int64)
+        self.landmarks = np.array(json.load(open(os.path.join(d, "landmarks_ibug68.json")))["vertex_ids"])
+
+    def shape(self, coeffs):
+        """The identity with these shape coefficients (vertices in mm)."""
+        c = np.asarray(coeffs, dtype=np.float64)
+        return self.neutral + np.tensordot(c, self.modes[: len(c)].astype(np.float64), axes=1) * 10.0
+
+
 def boundary_loops(tris, n):
     """Loops of edges used by one triangle, following the triangles' own direction."""
     count = {}
@@ -213,10 +228,8 @@ def main():
     from PIL import Image
     mi.set_variant("scalar_rgb")
     truth = json.load(open(os.path.join(a.synth_dir, "truth.json")))
-    neutral = np.load(os.path.join(a.ict, "neutral.npy")).astype(np.float64) * 10.0
-    modes = np.load(os.path.join(a.ict, "identity_modes.npy"), mmap_mode="r")
-    tris = np.load(os.path.join(a.ict, "triangles.npy")).astype(np.int64)
-    lm_ids = np.array(json.load(open(os.path.join(a.ict, "landmarks_ibug68.json")))["vertex_ids"])
+    ict = Ict(a.ict)
+    neutral, tris, lm_ids = ict.neutral, ict.tris, ict.landmarks
     fixed_albedo = None
     if a.albedo:
         fixed_albedo = np.load(a.albedo)
@@ -229,8 +242,7 @@ def main():
     worst = 0.0
     ids = {i["id"]: i for i in truth["identities"]}
     for k, im in enumerate(truth["images"]):
-        coeffs = np.array(ids[im["identity"]]["shape_coefficients"], dtype=np.float64)
-        shape = neutral + np.tensordot(coeffs, modes[: len(coeffs)].astype(np.float64), axes=1) * 10.0
+        shape = ict.shape(ids[im["identity"]]["shape_coefficients"])
         axes, center = face_frame(shape[lm_ids])
         face = (shape - center) @ axes.T
         # Close the eye and mouth holes with fans around their centroids (dark inside).

@@ -8,9 +8,7 @@ in bands, and per landmark group the error and the mean offset toward the lit si
 """
 import argparse, json, os
 import numpy as np
-from detect_landmarks import read_pts  # the same directory
-
-GROUPS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48), "mouth": range(48, 68)}
+from detect_landmarks import GROUPS, read_pts  # the same directory
 BANDS = ((-1.0, 0.3), (0.3, 0.6), (0.6, 0.85), (0.85, 1.01))
 
 
