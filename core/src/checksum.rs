@@ -18,8 +18,8 @@
 //! [`crc32`] is the standard CRC-32 (IEEE 802.3, reflected, polynomial `0xEDB88320`; the same as
 //! zlib's and `crc32fast`'s), table-driven with a table computed at compile time (1 KiB of flash).
 
-use crate::tile::{Tile, TileSink};
-use crate::Vec3;
+use crate::geometry::Vec3;
+use crate::render::tile::{Tile, TileSink};
 
 /// A colour channel in [0, 1] rounded to `0..=255` (clamped; NaN gives 0).
 pub fn quantize(c: f32) -> u8 {
@@ -89,7 +89,7 @@ impl<const TW: usize, const TH: usize> TileSink<TW, TH> for FrameChecksum {
         let (w, h) = tile.size();
         for ((ly, crow), trow) in (0u32..h).zip(tile.colors()).zip(tile.triangles()) {
             for ((lx, c), t) in (0u32..w).zip(crow).zip(trow) {
-                if *t != crate::tile::NO_TRIANGLE {
+                if *t != crate::render::tile::NO_TRIANGLE {
                     self.add_pixel(x0.wrapping_add(lx), y0.wrapping_add(ly), *c);
                 }
             }
@@ -136,7 +136,7 @@ pub fn crc32(bytes: &[u8]) -> u32 {
 #[allow(clippy::indexing_slicing, clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::{Cull, ProjectedVertex, TileRasterizer};
+    use crate::render::{Cull, ProjectedVertex, TileRasterizer};
 
     #[test]
     fn crc32_check_value() {

@@ -26,7 +26,7 @@ pub struct DeviceProfile {
     pub projected_pool: usize,
     /// Covered pixels the fit's compact frame cache holds (2 B each, plus a coverage bit per
     /// image pixel): a colour or light proposal re-shades a frame up to this size instead of
-    /// rendering it (`gpmm_core::frame_cache`).
+    /// rendering it (`gpmm_core::render::frame_cache`).
     pub frame_cache_pixels: usize,
     /// Bytes of each of the two activation buffers (`gpmm_core::net::NetScratch`) the device gives
     /// the landmark-free start's networks: the largest activation of the default finder and

@@ -4,10 +4,11 @@
 //! `u32`-backed buffers so that they start 4-byte aligned like a flash partition.
 #![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
-use gpmm_core::blob::{
+use gpmm_core::checksum::crc32;
+use gpmm_core::format::blob::{
     blob_crc, parse_header, BlobDims, BlobError, Layout, ModelBlob, Section, SectionProblem, CRC_OFFSET, HEADER_BYTES, SECTION_COUNT,
 };
-use gpmm_core::{crc32, Basis, DenseBasis, FactoredBasis};
+use gpmm_core::model::{Basis, DenseBasis, FactoredBasis};
 use proptest::prelude::*;
 
 // ------------------------------------------------------------------ encoder

@@ -7,11 +7,12 @@ mod fit_support;
 
 use fit_support::*;
 use gpmm_core::fit::{
-    image_chain_with, image_log_likelihood, landmark_chain_with, BackgroundLikelihood, BackgroundModel, ChainObserver, FitParams,
-    GaussianPixel, ImageProblem, LightSolveConfig, Mixture, OneOf, PixelLikelihood, PosteriorMoments, Prior, Problem, Proposal,
-    ProposalContext, ProposalStep, StandardProposal, StepOutcome, TargetImage, DEFAULT_PIXEL_SIGMA,
+    image_chain, image_log_likelihood, landmark_chain, BackgroundLikelihood, BackgroundModel, ChainObserver, GaussianPixel, ImageProblem,
+    LightSolveConfig, Mixture, OneOf, PixelLikelihood, PosteriorMoments, Prior, Problem, Proposal, ProposalContext, ProposalStep,
+    StandardProposal, StepOutcome, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
-use gpmm_core::Vec3;
+use gpmm_core::geometry::Vec3;
+use gpmm_core::model::FitParams;
 use rand_core::{Rng, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::cell::Cell;
@@ -140,7 +141,7 @@ fn a_user_pixel_likelihood_and_user_proposals_run_in_the_image_chain() {
     let mut obs = ByName::default();
     let mut moments = PosteriorMoments::<{ fit_support::KS }, { fit_support::KC }>::new(40);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(21);
-    let fit = image_chain_with(&problem, &ip, &start, steps, &mut inst, &mut raster, &mut rng, (&mut obs, &mut moments)).unwrap();
+    let fit = image_chain(&problem, &ip, &start, steps, &mut inst, &mut raster, &mut rng, (&mut obs, &mut moments)).unwrap();
 
     // A second observer beside the first summarized the states after the burn-in.
     assert_eq!(moments.samples(), steps - 40);
@@ -204,7 +205,7 @@ fn user_proposals_run_in_the_landmark_chain() {
     let mut obs = ByName::default();
     let mut moments = PosteriorMoments::<{ fit_support::KS }, { fit_support::KC }>::new(150);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
-    let fit = landmark_chain_with(&problem, &truth, 200, &mut rng, (&mut obs, &mut moments)).unwrap();
+    let fit = landmark_chain(&problem, &truth, 200, &mut rng, (&mut obs, &mut moments)).unwrap();
     assert_eq!(fit.best, truth);
     assert_eq!(fit.last, truth);
     // The state never moved: its mean is the state, its spread zero.

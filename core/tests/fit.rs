@@ -6,12 +6,15 @@ mod common;
 mod fit_support;
 
 use fit_support::*;
+use gpmm_core::error::FitError;
 use gpmm_core::fit::{
     image_chain, image_log_likelihood, initial_guess, landmark_chain, solve_color, solve_light, BackgroundModel, ColorScene,
-    ColorSolveConfig, FitError, FitParams, GaussianPixel, ImageProblem, LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior,
-    Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
+    ColorSolveConfig, GaussianPixel, ImageProblem, LandmarkTarget, LightSolveConfig, Mixture, NoObserver, Prior, Problem, TargetImage,
+    DEFAULT_PIXEL_SIGMA,
 };
-use gpmm_core::{Basis, FactoredBasis, ShLight};
+use gpmm_core::model::{Basis, FactoredBasis};
+use gpmm_core::model::{FitParams, MorphableModel};
+use gpmm_core::render::ShLight;
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::time::Instant;
@@ -45,7 +48,7 @@ fn start_pose_and_landmark_chain_recover_the_pose() {
     let steps = 4000;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(42);
     let t0 = Instant::now();
-    let fit = landmark_chain(&problem, &init, steps, &mut rng).unwrap();
+    let fit = landmark_chain(&problem, &init, steps, &mut rng, NoObserver).unwrap();
     let dt = t0.elapsed().as_secs_f64();
     eprintln!("landmark chain: {steps} steps in {:.1} ms = {:.2} us/step", dt * 1e3, dt * 1e6 / f64::from(steps));
     let b = &fit.best;
@@ -65,7 +68,7 @@ fn start_pose_and_landmark_chain_recover_the_pose() {
     let proposed: u32 = fit.acceptance.proposed.iter().sum();
     assert_eq!(proposed, steps);
     // The start is worse than the chain's result.
-    let start = landmark_chain(&problem, &init, 0, &mut rng).unwrap();
+    let start = landmark_chain(&problem, &init, 0, &mut rng, NoObserver).unwrap();
     assert!(start.best_landmarks.rmse() > 1.5 * fit.best_landmarks.rmse().max(0.3));
 }
 
@@ -237,7 +240,7 @@ fn run_both(
     let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H, silhouette: None };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let t0 = Instant::now();
-    let lm_fit = landmark_chain(&problem, &init, lm_steps, &mut rng).unwrap();
+    let lm_fit = landmark_chain(&problem, &init, lm_steps, &mut rng, NoObserver).unwrap();
     let t_lm = t0.elapsed().as_secs_f64();
     let img_mix = Mixture::image_default(W as f32);
     let problem = Problem { mixture: &img_mix, ..problem };
@@ -253,7 +256,7 @@ fn run_both(
     let mut inst = bufs.instance();
     let mut raster = Raster::new();
     let t0 = Instant::now();
-    let img_fit = image_chain(&problem, &ip, &lm_fit.best, img_steps, &mut inst, &mut raster, &mut rng).unwrap();
+    let img_fit = image_chain(&problem, &ip, &lm_fit.best, img_steps, &mut inst, &mut raster, &mut rng, NoObserver).unwrap();
     let t_img = t0.elapsed().as_secs_f64();
     (lm_fit, img_fit, t_lm, t_img)
 }
@@ -336,12 +339,12 @@ fn bad_input_is_an_error_not_a_panic() {
     assert_eq!(LandmarkTarget::new(&nan, &scene.valid, 2.0).err(), Some(FitError::NonFinite));
     let short = &scene.points[..60];
     let lm_short = LandmarkTarget::new(short, &scene.valid[..60], 2.0).unwrap();
-    let init = FitParams::<KS, KC>::new(gpmm_core::Pose::frontal(600.0), 300.0, ShLight::frontal(), KS, KC);
+    let init = FitParams::<KS, KC>::new(gpmm_core::render::Pose::frontal(600.0), 300.0, ShLight::frontal(), KS, KC);
     let prior = Prior::around(&init);
     let mixture = Mixture::landmark_default(W as f32);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
     let problem = Problem { model, landmarks: lm_short, prior: &prior, mixture: &mixture, width: W, height: H, silhouette: None };
-    assert_eq!(landmark_chain(&problem, &init, 10, &mut rng).err(), Some(FitError::LengthMismatch));
+    assert_eq!(landmark_chain(&problem, &init, 10, &mut rng, NoObserver).err(), Some(FitError::LengthMismatch));
     assert_eq!(
         initial_guess::<u32, KS, KC>(&model, &lm_short, 300.0, W, H, ShLight::frontal(), KS, KC).err(),
         Some(FitError::LengthMismatch)
@@ -349,15 +352,15 @@ fn bad_input_is_an_error_not_a_panic() {
     let lm = target(&scene.points, &scene.valid);
     let problem = Problem { landmarks: lm, ..problem };
     // Zero-size working image, NaN start, empty mixture, start behind the camera.
-    assert_eq!(landmark_chain(&Problem { width: 0, ..problem }, &init, 10, &mut rng).err(), Some(FitError::EmptyImage));
+    assert_eq!(landmark_chain(&Problem { width: 0, ..problem }, &init, 10, &mut rng, NoObserver).err(), Some(FitError::EmptyImage));
     let mut bad = init.clone();
     bad.pose.yaw = f32::NAN;
-    assert_eq!(landmark_chain(&problem, &bad, 10, &mut rng).err(), Some(FitError::NonFinite));
+    assert_eq!(landmark_chain(&problem, &bad, 10, &mut rng, NoObserver).err(), Some(FitError::NonFinite));
     let empty = Mixture::new();
-    assert_eq!(landmark_chain(&Problem { mixture: &empty, ..problem }, &init, 10, &mut rng).err(), Some(FitError::BadConfig));
+    assert_eq!(landmark_chain(&Problem { mixture: &empty, ..problem }, &init, 10, &mut rng, NoObserver).err(), Some(FitError::BadConfig));
     let mut behind = init.clone();
     behind.pose.translation[2] = 600.0;
-    assert_eq!(landmark_chain(&problem, &behind, 10, &mut rng).err(), Some(FitError::ImpossibleStart));
+    assert_eq!(landmark_chain(&problem, &behind, 10, &mut rng, NoObserver).err(), Some(FitError::ImpossibleStart));
     // Images: zero size, wrong pixel count, size different from the problem's.
     assert_eq!(TargetImage::new(&[], 0, 0).err(), Some(FitError::EmptyImage));
     assert_eq!(TargetImage::new(&scene.pixels, W, H + 1).err(), Some(FitError::LengthMismatch));
@@ -368,22 +371,22 @@ fn bad_input_is_an_error_not_a_panic() {
     let mut bufs = Buffers::new(synth.vertices());
     let mut inst = bufs.instance();
     let mut raster = Raster::new();
-    assert_eq!(image_chain(&problem, &ip, &init, 5, &mut inst, &mut raster, &mut rng).err(), Some(FitError::LengthMismatch));
+    assert_eq!(image_chain(&problem, &ip, &init, 5, &mut inst, &mut raster, &mut rng, NoObserver).err(), Some(FitError::LengthMismatch));
     // A bad pixel σ is refused when the term is made; a light solve on every 0th vertex by the chain.
     assert_eq!(GaussianPixel::new(-1.0).err(), Some(FitError::BadConfig));
     let no_stride = LightSolveConfig { stride: 0, ..LightSolveConfig::default() };
     let ip = ImageProblem { light_solve: no_stride, image: TargetImage::new(&scene.pixels, W, H).unwrap(), ..ip };
-    assert_eq!(image_chain(&problem, &ip, &init, 5, &mut inst, &mut raster, &mut rng).err(), Some(FitError::BadConfig));
+    assert_eq!(image_chain(&problem, &ip, &init, 5, &mut inst, &mut raster, &mut rng, NoObserver).err(), Some(FitError::BadConfig));
     // Per-vertex buffers of the wrong length.
     let mut small_bufs = Buffers::new(synth.vertices() - 1);
     let n = synth.vertices();
-    let b = gpmm_core::fit::InstanceBuffers {
+    let b = gpmm_core::model::InstanceBuffers {
         positions: &mut small_bufs.positions,
         albedos: &mut small_bufs.albedos,
         normals: &mut small_bufs.normals,
         projected: &mut small_bufs.projected,
     };
-    assert_eq!(gpmm_core::fit::Instance::<KS, KC>::new(b, n).err(), Some(FitError::LengthMismatch));
+    assert_eq!(gpmm_core::model::Instance::<KS, KC>::new(b, n).err(), Some(FitError::LengthMismatch));
     // Model views: bad landmark index, mismatched means, bases of the wrong size.
     let mut bad_lm = synth.landmarks.clone();
     bad_lm[0] = n as u32;
@@ -413,7 +416,7 @@ fn bad_input_is_an_error_not_a_panic() {
     let mut lm_pos = vec![[0.0f32; 3]; 68];
     assert_eq!(
         model.landmark_positions(&[0.0; KS + 1], &mut lm_pos).err(),
-        Some(FitError::Model(gpmm_core::ModelError::TooManyCoefficients))
+        Some(FitError::Model(gpmm_core::model::ModelError::TooManyCoefficients))
     );
 }
 
@@ -452,9 +455,9 @@ fn timing_breakdown_of_an_image_evaluation() {
     }
     let shape = t0.elapsed().as_secs_f64() / f64::from(n);
     let t0 = Instant::now();
-    let mut sink = |_: &gpmm_core::Tile<16, 16>| {};
+    let mut sink = |_: &gpmm_core::render::Tile<16, 16>| {};
     for _ in 0..n {
-        raster.render(inst.projected(), model.triangles(), W, H, gpmm_core::Cull::Clockwise, &mut sink).unwrap();
+        raster.render(inst.projected(), model.triangles(), W, H, gpmm_core::render::Cull::Clockwise, &mut sink).unwrap();
     }
     let raster_only = t0.elapsed().as_secs_f64() / f64::from(n);
     eprintln!(
@@ -491,7 +494,7 @@ fn landmark_vertices_alone_match_the_full_instance() {
             }
         }
     }
-    let db = gpmm_core::DenseBasis::new(&dense, KS, n).unwrap();
+    let db = gpmm_core::model::DenseBasis::new(&dense, KS, n).unwrap();
     for &id in model.landmarks().iter().take(5) {
         let mut out = [0.0f32; 3];
         db.add_vertex(&c, id as usize, &mut out).unwrap();

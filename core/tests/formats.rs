@@ -7,7 +7,7 @@ use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::device_mesh::{self, DeviceMeshView, DeviceScene};
 use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
 use gpmm_core::format::{fit_input, FormatError};
-use gpmm_core::{Camera, Pose, ShLight};
+use gpmm_core::render::{Camera, Pose, ShLight};
 
 /// Bytes copied into a 4-byte aligned buffer (formats are read in place).
 fn aligned(bytes: &[u8]) -> Vec<u32> {

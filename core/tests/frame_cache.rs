@@ -7,13 +7,15 @@ mod fit_support;
 
 use fit_support::*;
 use gpmm_core::fit::{
-    image_chain, image_log_likelihood, landmark_chain, BackgroundModel, FitParams, GaussianPixel, ImageEval, ImageProblem, Instance,
-    InstanceBuffers, LightSolveConfig, Mixture, Prior, Problem, SpareBuffers, TargetImage, DEFAULT_PIXEL_SIGMA,
+    image_chain, image_log_likelihood, landmark_chain, BackgroundModel, GaussianPixel, ImageEval, ImageProblem, LightSolveConfig, Mixture,
+    NoObserver, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
-use gpmm_core::frame_cache::{CachedFragment, CompactBuffers, FrameBuffers, FrameCache};
-use gpmm_core::light::SH_COEFFS;
-use gpmm_core::shading::{ShadingBuffers, ShadingCache};
-use gpmm_core::{ProjectedVertex, ShLight, Vec3};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::model::{FitParams, Instance, InstanceBuffers, SpareBuffers};
+use gpmm_core::render::frame_cache::{CachedFragment, CompactBuffers, FrameBuffers, FrameCache};
+use gpmm_core::render::light::SH_COEFFS;
+use gpmm_core::render::shading::{ShadingBuffers, ShadingCache};
+use gpmm_core::render::{ProjectedVertex, ShLight};
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
@@ -160,8 +162,8 @@ fn a_recomputed_shape_gets_its_serial_and_geometry_back() {
 
 #[test]
 fn a_compact_cache_keeps_the_chains_frame() {
-    use gpmm_core::frame_cache::GeometryKey;
-    use gpmm_core::Pose;
+    use gpmm_core::render::frame_cache::GeometryKey;
+    use gpmm_core::render::Pose;
     let (mut covered, mut ids) = (vec![0u32; 512], vec![0u16; 64]);
     let mut frames = FrameCache::compact(CompactBuffers { covered: &mut covered, triangles: &mut ids });
     let pose = Pose { yaw: 0.1, pitch: 0.0, roll: 0.0, translation: [0.0, 0.0, -500.0] };
@@ -182,7 +184,7 @@ fn a_compact_cache_keeps_the_chains_frame() {
 
 #[test]
 fn drawn_set_ups_and_stepped_edges_give_the_direct_weights() {
-    use gpmm_core::raster::FragmentSetup;
+    use gpmm_core::render::raster::FragmentSetup;
     let synth = Synth::new(11);
     let model = synth.model();
     let mut bufs = Buffers::new(synth.vertices());
@@ -243,7 +245,7 @@ fn chain(caches: Caches, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) 
     let lm_mix = Mixture::landmark_default(W as f32);
     let problem = Problem { model, landmarks: lm, prior: &prior, mixture: &lm_mix, width: W, height: H, silhouette: None };
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
-    let lm_fit = landmark_chain(&problem, &init, 500, &mut rng).unwrap();
+    let lm_fit = landmark_chain(&problem, &init, 500, &mut rng, NoObserver).unwrap();
     let img_mix = Mixture::image_default(W as f32);
     let problem = Problem { mixture: &img_mix, ..problem };
     let image = TargetImage::new(&pixels, W, H).unwrap();
@@ -258,12 +260,12 @@ fn chain(caches: Caches, seed: u64) -> (gpmm_core::fit::FitResult<KS, KC>, u32) 
     if caches != Caches::None {
         let mut bufs = CachedBuffers::new(synth.vertices());
         let mut inst = if caches == Caches::Host { bufs.instance() } else { bufs.compact_instance() };
-        let r = image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng).unwrap();
+        let r = image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng, NoObserver).unwrap();
         (r, inst.frames().unwrap().reshaded)
     } else {
         let mut bufs = Buffers::new(synth.vertices());
         let mut inst = bufs.instance();
-        (image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng).unwrap(), 0)
+        (image_chain(&problem, &ip, &lm_fit.best, 300, &mut inst, &mut raster, &mut rng, NoObserver).unwrap(), 0)
     }
 }
 
@@ -280,7 +282,7 @@ fn a_chain_with_caches_is_the_chain_without() {
 
 #[test]
 fn the_shading_cache_gives_shade_vertices_colours_and_errors() {
-    use gpmm_core::{shade_vertices, Pose, VertexError};
+    use gpmm_core::render::{shade_vertices, Pose, VertexError};
     let n = 50;
     let normals: Vec<Vec3> = (0..n).map(|i| [(i as f32 * 0.37).sin(), (i as f32 * 0.11).cos(), 0.5 + (i % 7) as f32 * 0.1]).collect();
     let albedo_a: Vec<Vec3> = (0..n).map(|i| [0.2 + (i % 5) as f32 * 0.1, 0.3, 0.7 - (i % 3) as f32 * 0.1]).collect();

@@ -1,8 +1,8 @@
 //! Spherical-harmonics irradiance against hand-computed formulas.
 #![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
-use gpmm_core::light::{lambert_basis, sh_basis, LAMBERT_KERNEL, SH_COEFFS};
-use gpmm_core::{shade_vertices, Pose, ProjectedVertex, ShLight};
+use gpmm_core::render::light::{lambert_basis, sh_basis, LAMBERT_KERNEL, SH_COEFFS};
+use gpmm_core::render::{shade_vertices, Pose, ProjectedVertex, ShLight};
 use std::f64::consts::PI;
 
 fn normals() -> Vec<[f32; 3]> {

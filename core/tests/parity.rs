@@ -4,7 +4,7 @@
 mod common;
 
 use common::{head_mesh, reference_render, FrameSink};
-use gpmm_core::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, TileRasterizer, NO_TRIANGLE};
+use gpmm_core::render::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, TileRasterizer, NO_TRIANGLE};
 
 fn compare<const TW: usize, const TH: usize, const BIN: usize>(pose: Pose, light: ShLight, width: u32, height: u32) {
     let (pos, albedo, tris) = head_mesh(40, 60, 0.12, None);

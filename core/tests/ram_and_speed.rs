@@ -4,7 +4,7 @@
 mod common;
 
 use common::head_mesh;
-use gpmm_core::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer};
+use gpmm_core::render::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer};
 use std::mem::size_of;
 
 #[test]

@@ -4,7 +4,7 @@
 mod common;
 
 use common::{head_mesh, reference_render, screen_grid, sv, FrameSink, Rng};
-use gpmm_core::{
+use gpmm_core::render::{
     project_vertices, shade_vertices, vertex_normals, vertex_stage, Camera, Cull, Pose, ProjectedVertex, RasterError, ShLight,
     TileRasterizer, VertexError, NO_TRIANGLE,
 };
@@ -16,7 +16,7 @@ fn stage(pos: &[[f32; 3]], albedo: &[[f32; 3]], tris: &[[u32; 3]], pose: &Pose, 
     out
 }
 
-fn render<const BIN: usize>(v: &[ProjectedVertex], tris: &[[u32; 3]], w: u32, h: u32) -> (FrameSink, gpmm_core::FrameStats) {
+fn render<const BIN: usize>(v: &[ProjectedVertex], tris: &[[u32; 3]], w: u32, h: u32) -> (FrameSink, gpmm_core::render::FrameStats) {
     let mut sink = FrameSink::new(w, h);
     let stats = TileRasterizer::<16, 16, BIN>::new().render(v, tris, w, h, Cull::Clockwise, &mut sink).unwrap();
     assert!(sink.writes.iter().all(|&n| n == 1));
@@ -165,7 +165,7 @@ fn frame_errors_are_reported_before_any_tile() {
     let v = [sv(0.0, 0.0, 0.01, [0.0; 3]), sv(10.0, 0.0, 0.01, [0.0; 3]), sv(0.0, 10.0, 0.01, [0.0; 3])];
     let mut r = TileRasterizer::<8, 8, 4>::new();
     let tiles = std::cell::Cell::new(0);
-    let mut count = |_: &gpmm_core::Tile<8, 8>| tiles.set(tiles.get() + 1);
+    let mut count = |_: &gpmm_core::render::Tile<8, 8>| tiles.set(tiles.get() + 1);
     assert_eq!(r.render(&v, &[[0u32, 1, 3]], 16, 16, Cull::None, &mut count), Err(RasterError::IndexOutOfRange));
     assert_eq!(r.render(&v, &[[0u32, 1, 2]], 40000, 16, Cull::None, &mut count), Err(RasterError::ImageTooLarge));
     assert_eq!(tiles.get(), 0);
@@ -176,7 +176,10 @@ fn frame_errors_are_reported_before_any_tile() {
     assert_eq!((stats.tiles, stats.covered_pixels), (1, 1));
     assert_eq!(tiles.get(), 1);
     let mut z = TileRasterizer::<0, 8, 4>::new();
-    assert_eq!(z.render(&v, &[[0u32, 1, 2]], 4, 4, Cull::None, &mut |_: &gpmm_core::Tile<0, 8>| {}), Err(RasterError::ZeroTileSize));
+    assert_eq!(
+        z.render(&v, &[[0u32, 1, 2]], 4, 4, Cull::None, &mut |_: &gpmm_core::render::Tile<0, 8>| {}),
+        Err(RasterError::ZeroTileSize)
+    );
 }
 
 #[test]

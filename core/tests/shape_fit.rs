@@ -5,10 +5,10 @@ mod common;
 mod fit_support;
 
 use fit_support::*;
-use gpmm_core::fit::{
-    solve_shape, FitError, FitParams, Instance, InstanceBuffers, ShapeSolveConfig, SolveScratch, SpareBuffers, DEFAULT_PIXEL_SIGMA,
-};
-use gpmm_core::Vec3;
+use gpmm_core::error::FitError;
+use gpmm_core::fit::{solve_shape, ShapeSolveConfig, DEFAULT_PIXEL_SIGMA};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::model::{FitParams, Instance, InstanceBuffers, SolveScratch, SpareBuffers};
 
 /// Per-vertex buffers with a spare instance, plus the solve's scratch.
 struct Room {

@@ -4,7 +4,7 @@
 mod common;
 
 use common::{head_mesh, screen_grid, FrameSink, Rng};
-use gpmm_core::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, TileRasterizer, NO_TRIANGLE};
+use gpmm_core::render::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, TileRasterizer, NO_TRIANGLE};
 
 /// Renders each triangle alone and counts, per pixel, how many triangles cover it.
 fn hits_per_pixel<const TW: usize, const TH: usize>(

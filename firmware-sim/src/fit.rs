@@ -10,16 +10,16 @@
 //! model) is stack.
 
 use crate::{clock, fail, hexlog, stack, Rasterizer, PROFILE};
-use gpmm_core::blob::ModelBlob;
-use gpmm_core::fit::{
-    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, MorphableModel, Stage, StandardFit, TargetImage,
-    MAX_LANDMARKS,
-};
+use gpmm_core::error::FitError;
+use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, Stage, StandardFit, TargetImage};
+use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::fit_input::{self, FitInput};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
 use gpmm_core::format::frame_fit;
-use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
-use gpmm_core::{ProjectedVertex, Vec3};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::model::{Instance, InstanceBuffers, MorphableModel, MAX_LANDMARKS};
+use gpmm_core::render::frame_cache::{CompactBuffers, FrameCache};
+use gpmm_core::render::ProjectedVertex;
 use rand_core::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 

@@ -14,10 +14,11 @@
 use crate::fit::{self, fit_failed, instructions_now, Buffers, Sizes};
 use crate::{clock, detect, fail, PROFILE};
 
-use gpmm_core::blob::ModelBlob;
-use gpmm_core::fit::{FitSettings, MorphableModel, TargetImage};
+use gpmm_core::fit::{FitSettings, TargetImage};
+use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::detection::{DetectCounts, Frame};
 use gpmm_core::format::frame_fit::{self, FrameFitJob};
+use gpmm_core::model::MorphableModel;
 use gpmm_core::net::crop::crop_for_fit;
 use gpmm_core::net::face::{Detection, InitFile, MAX_INIT_LANDMARKS};
 

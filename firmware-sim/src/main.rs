@@ -33,11 +33,13 @@ mod stack;
 
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
+use gpmm_core::checksum::FrameChecksum;
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
-use gpmm_core::frame_cache::CompactBuffers;
+use gpmm_core::geometry::Vec3;
 use gpmm_core::net::face::INIT_MAGIC;
 use gpmm_core::profile::{DeviceProfile, M4F, M7};
-use gpmm_core::{vertex_stage, Cull, FrameChecksum, ProjectedVertex, TileRasterizer, Vec3};
+use gpmm_core::render::frame_cache::CompactBuffers;
+use gpmm_core::render::{vertex_stage, Cull, ProjectedVertex, TileRasterizer};
 
 /// The device profile this image is built and linked for (build.rs writes its memory map).
 pub(crate) const PROFILE: DeviceProfile = if cfg!(feature = "m7") { M7 } else { M4F };

@@ -18,8 +18,8 @@ fn data_dir() -> PathBuf {
 /// Counts covered pixels: the cheapest possible tile consumer (isolates the rasterizer).
 struct Count(u64);
 
-impl gpmm_core::TileSink<TILE, TILE> for Count {
-    fn consume(&mut self, tile: &gpmm_core::Tile<TILE, TILE>) {
+impl gpmm_core::render::TileSink<TILE, TILE> for Count {
+    fn consume(&mut self, tile: &gpmm_core::render::Tile<TILE, TILE>) {
         let (w, h) = tile.size();
         for y in 0..h as usize {
             for x in 0..w as usize {

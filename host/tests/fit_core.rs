@@ -4,10 +4,11 @@
 //! `--release -- --nocapture` for the figures).
 
 use gpmm_core::fit::{
-    image_chain, initial_guess, landmark_chain, BackgroundModel, FitParams, GaussianPixel, ImageProblem, Instance, InstanceBuffers,
-    LandmarkTarget, LightSolveConfig, Mixture, MorphableModel, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
+    image_chain, initial_guess, landmark_chain, BackgroundModel, GaussianPixel, ImageProblem, LandmarkTarget, LightSolveConfig, Mixture,
+    NoObserver, Prior, Problem, TargetImage, DEFAULT_PIXEL_SIGMA,
 };
-use gpmm_core::{Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer, NO_TRIANGLE};
+use gpmm_core::model::{FitParams, Instance, InstanceBuffers, MorphableModel};
+use gpmm_core::render::{Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer, NO_TRIANGLE};
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
@@ -54,10 +55,10 @@ fn fits_a_rendered_face_with_known_pose() {
     let mut truth = FitParams::<KS, KC>::new(pose, 420.0, light, KS, KC);
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(2024);
     for c in truth.shape.iter_mut() {
-        *c = 0.7 * gpmm_core::fit::normal::standard_normal(&mut rng);
+        *c = 0.7 * gpmm_core::fit::chain::normal::standard_normal(&mut rng);
     }
     for c in truth.color.iter_mut() {
-        *c = 0.7 * gpmm_core::fit::normal::standard_normal(&mut rng);
+        *c = 0.7 * gpmm_core::fit::chain::normal::standard_normal(&mut rng);
     }
 
     let (mut pos, mut alb, mut nor, mut proj) =
@@ -100,7 +101,7 @@ fn fits_a_rendered_face_with_known_pose() {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(5);
     let lm_steps = 5000;
     let t0 = Instant::now();
-    let lm_fit = landmark_chain(&problem, &init, lm_steps, &mut rng).unwrap();
+    let lm_fit = landmark_chain(&problem, &init, lm_steps, &mut rng, NoObserver).unwrap();
     let t_lm = t0.elapsed().as_secs_f64();
 
     let image = TargetImage::new(&pixels, W, H).unwrap();
@@ -109,10 +110,10 @@ fn fits_a_rendered_face_with_known_pose() {
     let ip = ImageProblem { image, pixel, background: &bg, light_solve: LightSolveConfig::default() };
     let img_mix = Mixture::image_default(W as f32);
     let problem = Problem { mixture: &img_mix, ..problem };
-    let start = image_chain(&problem, &ip, &lm_fit.best, 0, &mut inst, &mut raster, &mut rng).unwrap();
+    let start = image_chain(&problem, &ip, &lm_fit.best, 0, &mut inst, &mut raster, &mut rng, NoObserver).unwrap();
     let img_steps = 1500;
     let t0 = Instant::now();
-    let fit = image_chain(&problem, &ip, &lm_fit.best, img_steps, &mut inst, &mut raster, &mut rng).unwrap();
+    let fit = image_chain(&problem, &ip, &lm_fit.best, img_steps, &mut inst, &mut raster, &mut rng, NoObserver).unwrap();
     let t_img = t0.elapsed().as_secs_f64();
 
     let deg = |p: &FitParams<KS, KC>| [p.pose.yaw, p.pose.pitch, p.pose.roll].map(f32::to_degrees);

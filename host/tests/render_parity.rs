@@ -3,7 +3,7 @@
 //! barycentrics, inclusive edges, z-buffer on 1/w, perspective-correct colour. The cropped template
 //! at several poses and two image sizes must agree on >= 99% of covered pixels, colours within 2/255.
 
-use gpmm_core::{Cull, ShLight};
+use gpmm_core::render::{Cull, ShLight};
 use gpmm_host::mesh::template::{load_template, Template, TemplateOptions};
 use gpmm_host::render::{to_u8, Background, Framing, Instance, RenderSettings, Renderer, View};
 use std::path::PathBuf;

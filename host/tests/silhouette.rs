@@ -2,9 +2,10 @@
 //! the core selects for the contour landmarks of the side turned away are where the surface turns
 //! away from the camera (normal ⟂ viewing ray), unlike the fixed contour vertices on that cheek.
 
-use gpmm_core::fit::{FitParams, Instance, InstanceBuffers, LandmarkTarget, MorphableModel, Silhouette, MAX_CONTOUR, NO_VERTEX};
-use gpmm_core::render::pose::mat_vec;
-use gpmm_core::{Pose, ProjectedVertex, ShLight};
+use gpmm_core::fit::{LandmarkTarget, Silhouette, MAX_CONTOUR, NO_VERTEX};
+use gpmm_core::geometry::mat_vec;
+use gpmm_core::model::{FitParams, Instance, InstanceBuffers, MorphableModel};
+use gpmm_core::render::{Pose, ProjectedVertex, ShLight};
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-use gpmm_core::FrameChecksum;
+use gpmm_core::checksum::FrameChecksum;
 use gpmm_host::device::mesh::{smoke_test_scene, DeviceMesh};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use serde_json::Value;

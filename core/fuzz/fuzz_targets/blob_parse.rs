@@ -3,7 +3,7 @@
 //! used the way the fitter uses it. Any panic is a bug.
 #![no_main]
 
-use gpmm_core::blob::{blob_crc, ModelBlob, CRC_OFFSET};
+use gpmm_core::format::blob::{blob_crc, ModelBlob, CRC_OFFSET};
 use libfuzzer_sys::fuzz_target;
 
 /// `bytes` copied into a 4-byte aligned buffer (like a flash partition).

@@ -3,52 +3,50 @@
 //!
 //! 1. Start: a scaled-orthographic least-squares pose of the mean face's landmarks
 //!    ([`initial_guess`]; run twice, the first probe measures the depth at which the focal length
-//!    puts the face at [`StartSettings::nominal_distance_mm`](super::settings::StartSettings)), ambient light, zero coefficients;
+//!    puts the face at [`StartSettings::nominal_distance_mm`](crate::fit::settings::StartSettings)), ambient light, zero coefficients;
 //!    the prior is centred on it ([`Prior::around`]).
 //! 2. The landmark chain (prior × landmarks, no rendering) in two phases (by default the first
-//!    only: [`LandmarkSettings::pose_share`](super::settings::LandmarkSettings) 1, the shape coming
+//!    only: [`LandmarkSettings::pose_share`](crate::fit::settings::LandmarkSettings) 1, the shape coming
 //!    from step 3's solve), as the paper's fit script fits the pose to the landmarks before
 //!    anything else: first the pose alone
 //!    ([`Mixture::landmark_pose`]: no shape, no distance changes; the jaw contour's σ scaled by
-//!    [`LandmarkSettings::contour_sigma_factor`](super::settings::LandmarkSettings)), then the shape with yaw and distance held
+//!    [`LandmarkSettings::contour_sigma_factor`](crate::fit::settings::LandmarkSettings)), then the shape with yaw and distance held
 //!    ([`Mixture::landmark_shape`]). Letting shape and yaw move together trades one for the
 //!    other: on faces from another model (ICT) such a joint chain underestimated a 30° yaw by
 //!    5–7°, because the template's landmark depths (the silhouette contour above all) differ from
 //!    the face's.
 //! 3. The landmark chain's best sample gets the closed-form least-squares SH light on every
 //!    visible vertex, then (if [`FitSettings::start`] asks for rounds) the colour coefficients
-//!    solved for that light and the light again for the new albedo ([`super::color_fit`]), then
-//!    the shape solve's rounds (Gauss–Newton on landmarks and image, [`super::shape_fit`]; the
+//!    solved for that light and the light again for the new albedo ([`crate::fit::solve::color`]), then
+//!    the shape solve's rounds (Gauss–Newton on landmarks and image, [`crate::fit::solve::shape`]; the
 //!    host's default, not on a device).
 //! 4. The image chain from there (prior × landmarks × image, delayed acceptance; the parameters
 //!    its mixture moves: by default pose, colour and light, the shape staying the solve's);
-//!    optionally its best sample's colour and light solved again ([`ImageSettings::color_polish_rounds`](super::settings::ImageSettings)),
+//!    optionally its best sample's colour and light solved again ([`ImageSettings::color_polish_rounds`](crate::fit::settings::ImageSettings)),
 //!    kept if that raises the log posterior.
 //!
 //! Nothing allocates: the per-vertex buffers and the rasterizer are the caller's.
 
-use super::chain::{
-    image_chain_with, image_log_likelihood, landmark_chain, landmark_chain_with, ChainState, FitResult, ImageProblem, Problem,
-};
-use super::color_fit::{solve_color, ColorScene, ColorSolveConfig};
-use super::contour::{hide_turned_away_contour, Silhouette};
-use super::image::{BackgroundModel, ImageEval, TargetImage};
-use super::init::{initial_guess, landmark_pivot};
-use super::landmarks::{LandmarkEval, LandmarkTarget};
-use super::light_fit::solve_light;
-use super::likelihood::GaussianPixel;
-use super::observer::{Acceptance, ChainObserver, ChainSample, ProposalStep};
-use super::params::FitParams;
-use super::prior::Prior;
-use super::proposal::{Mixture, StandardProposal};
-use super::settings::FitSettings;
-use super::shape_fit::{solve_shape, ShapeSolveConfig};
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::chain::observer::{Acceptance, ChainObserver, ChainSample, NoObserver, ProposalStep};
+use crate::fit::chain::proposal::{Mixture, StandardProposal};
+use crate::fit::chain::{image_chain, image_log_likelihood, landmark_chain, ChainState, FitResult, ImageProblem, Problem};
+use crate::fit::likelihood::contour::{hide_turned_away_contour, Silhouette};
+use crate::fit::likelihood::image::{BackgroundModel, ImageEval, TargetImage};
+use crate::fit::likelihood::landmarks::{LandmarkEval, LandmarkTarget};
+use crate::fit::likelihood::pixel::GaussianPixel;
+use crate::fit::likelihood::prior::Prior;
+use crate::fit::settings::FitSettings;
+use crate::fit::solve::color::{solve_color, ColorScene, ColorSolveConfig};
+use crate::fit::solve::light::solve_light;
+use crate::fit::solve::shape::{solve_shape, ShapeSolveConfig};
+use crate::fit::start::{initial_guess, landmark_pivot};
 use crate::format::fit_record::FitFigures;
+use crate::geometry::TriIndex;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
-use crate::render::shading::TriIndex;
-use crate::TileRasterizer;
+use crate::model::params::FitParams;
+use crate::render::TileRasterizer;
 use rand_core::Rng;
 
 /// Landmark count of the iBUG-68 scheme, whose first 17 points are the jaw contour.
@@ -162,7 +160,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     let (w, h) = (image.width(), image.height());
     let side = w.max(h) as f32;
     let lm = LandmarkTarget::new(landmarks, valid, settings.landmarks.sigma * side)?.with_student_t(settings.landmarks.student_t)?;
-    let contour = settings.landmarks.contour_landmarks.min(super::MAX_CONTOUR);
+    let contour = settings.landmarks.contour_landmarks.min(crate::fit::MAX_CONTOUR);
     let silhouette = if settings.landmarks.silhouette && lm.len() == IBUG68 { Some(Silhouette::new(model, &lm, contour)?) } else { None };
     let lm = match &silhouette {
         Some(s) => lm.with_outward(s.outward())?,
@@ -199,7 +197,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         start.light = l;
     }
     // Contour points on the side turned away are left to the pose phase.
-    let mut seen = [false; super::MAX_LANDMARKS];
+    let mut seen = [false; crate::model::MAX_LANDMARKS];
     let seen = seen.get_mut(..valid.len()).ok_or(FitError::TooManyLandmarks)?;
     seen.copy_from_slice(valid);
     if lm.len() == IBUG68 {
@@ -224,15 +222,15 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     };
     let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
-    let start_landmarks = landmark_chain(&problem, &start, 0, rng)?.best_landmarks;
+    let start_landmarks = landmark_chain(&problem, &start, 0, rng, NoObserver)?.best_landmarks;
     let img_steps = settings.image.steps;
     let phase = PhaseObserver { observer, stage: Stage::ImageChain, offset: 0, total: img_steps, steps: img_steps, report_end: true };
-    let mut image = image_chain_with(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
+    let mut image = image_chain(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
     polish(&problem, &ip, settings, &mut image, instance, raster)?;
     Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
 }
 
-/// The image chain's best sample after [`ImageSettings::color_polish_rounds`](super::settings::ImageSettings)
+/// The image chain's best sample after [`ImageSettings::color_polish_rounds`](crate::fit::settings::ImageSettings)
 /// colour-and-light rounds, kept if its log posterior (prior, landmarks, image) is higher.
 #[inline(never)]
 fn polish<I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
@@ -264,7 +262,7 @@ fn polish<I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const 
 }
 
 /// `rounds` colour-and-light rounds on `start` (step 3 of [`standard_fit`] with
-/// [`StartSettings::color_rounds`](super::settings::StartSettings), and the polish): the colour
+/// [`StartSettings::color_rounds`](crate::fit::settings::StartSettings), and the polish): the colour
 /// coefficients solved for the light, then the light for the new albedo; a failed solve ends
 /// the rounds and keeps what was found before it. `instance` must hold `start`.
 #[inline(never)]
@@ -315,7 +313,7 @@ fn color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
     Ok(())
 }
 
-/// [`StartSettings::shape_rounds`](super::settings::StartSettings) shape-and-light rounds on
+/// [`StartSettings::shape_rounds`](crate::fit::settings::StartSettings) shape-and-light rounds on
 /// `start` (step 3 of [`standard_fit`]): the leading shape components by Gauss–Newton on the
 /// image, then the light (and, with colour rounds, one colour round). A failed solve ends the
 /// rounds and keeps what was found before it; without the solve scratch the fit is refused
@@ -382,7 +380,7 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     observer: &mut dyn FitObserver,
 ) -> Result<(Acceptance, FitResult<KS, KC>), FitError> {
     let n = lm.len();
-    let mut factors = [1.0f32; super::MAX_LANDMARKS];
+    let mut factors = [1.0f32; crate::model::MAX_LANDMARKS];
     if n == IBUG68 {
         for f in factors.iter_mut().take(settings.landmarks.contour_landmarks) {
             *f = settings.landmarks.contour_sigma_factor;
@@ -396,12 +394,12 @@ fn landmark_phases<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usiz
     let pose_steps = ((total as f32 * settings.landmarks.pose_share) as u32).min(total);
     let phase =
         PhaseObserver { observer: &mut *observer, stage: Stage::LandmarkChain, offset: 0, total, steps: pose_steps, report_end: false };
-    let pose = landmark_chain_with(&pose_problem, init, pose_steps, rng, phase)?;
+    let pose = landmark_chain(&pose_problem, init, pose_steps, rng, phase)?;
     let shape_mix = Mixture::from_shares(&settings.proposals.landmark_shape, &settings.proposals.drift, w.max(h) as f32)?;
     let shape_problem = Problem { landmarks: lm, mixture: &shape_mix, ..pose_problem };
     let shape_steps = total - pose_steps;
     let phase = PhaseObserver { observer, stage: Stage::LandmarkChain, offset: pose_steps, total, steps: shape_steps, report_end: true };
-    let landmark = landmark_chain_with(&shape_problem, &pose.best, shape_steps, rng, phase)?;
+    let landmark = landmark_chain(&shape_problem, &pose.best, shape_steps, rng, phase)?;
     Ok((pose.acceptance, landmark))
 }
 
@@ -414,7 +412,7 @@ pub fn project_landmarks<I: TriIndex, const KS: usize, const KC: usize>(
     height: u32,
     out: &mut [[f32; 2]],
 ) -> Result<usize, FitError> {
-    let mut lm = [[0.0f32; 3]; super::MAX_LANDMARKS];
+    let mut lm = [[0.0f32; 3]; crate::model::MAX_LANDMARKS];
     let n = model.landmark_positions(params.shape_coeffs(), &mut lm)?;
     if out.len() < n {
         return Err(FitError::LengthMismatch);

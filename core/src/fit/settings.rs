@@ -3,10 +3,11 @@
 //! mixtures ([`ProposalSettings`]) and the light ([`LightSettings`]). Every knob the standard fit
 //! used to hard-code is here, with its old value as the default.
 
-use super::image::DEFAULT_PIXEL_SIGMA;
-use super::light_fit::LightSolveConfig;
-use super::FitError;
-use crate::{ShLight, Vec3};
+use crate::error::FitError;
+use crate::fit::likelihood::image::DEFAULT_PIXEL_SIGMA;
+use crate::fit::solve::light::LightSolveConfig;
+use crate::geometry::Vec3;
+use crate::render::ShLight;
 
 /// Landmark σ (fraction of the fit's image side) for landmarks read by the initializer of a
 /// landmark-free fit (`gpmm fit --init`, `gpmm device-fit --init`): looser than a face-mesh
@@ -19,7 +20,7 @@ pub const INIT_LANDMARK_SIGMA: f32 = 0.015;
 /// a device; [`FitSettings::without_shape_solve`]): 40 % pose, 60 % shape.
 pub const CHAIN_SHAPE_POSE_SHARE: f32 = 0.4;
 
-/// Settings of [`super::standard_fit`] (defaults: the documented default fit), in groups: the
+/// Settings of [`crate::fit::standard_fit`] (defaults: the documented default fit), in groups: the
 /// landmark chain, the image chain, the ranks fitted, the start, the proposal mixtures and the
 /// light solves.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -63,7 +64,7 @@ pub struct LandmarkSettings {
     /// Degrees of freedom of a Student-t landmark term (0: Gaussian); small values let a few
     /// wrong detector points go.
     pub student_t: f32,
-    /// Whether the contour landmarks follow the model's silhouette ([`super::contour`]) instead
+    /// Whether the contour landmarks follow the model's silhouette ([`crate::fit::likelihood::contour`]) instead
     /// of fixed vertices.
     pub silhouette: bool,
     /// After the pose phase, contour landmarks whose model vertex faces away from the camera
@@ -138,10 +139,10 @@ pub struct StartSettings {
     /// Conjugate-gradient iterations of one colour solve.
     pub color_iterations: u32,
     /// Rounds of the start's shape solve (after the colour rounds): each moves the leading shape
-    /// components by Gauss–Newton on the image ([`super::shape_fit`]), then solves the light and
+    /// components by Gauss–Newton on the image ([`crate::fit::solve::shape`]), then solves the light and
     /// (with colour rounds) the colour again. Needs the host's solve scratch; 0 on the device.
     pub shape_rounds: u32,
-    /// Leading shape components the shape solve moves (at most [`super::shape_fit::MAX_SHAPE_SOLVE`]).
+    /// Leading shape components the shape solve moves (at most [`crate::fit::solve::shape::MAX_SHAPE_SOLVE`]).
     pub shape_components: usize,
     /// Gauss–Newton iterations of one shape solve.
     pub shape_iterations: u32,
@@ -258,7 +259,7 @@ impl FitSettings {
             && self.start.shape_stride >= 1
             && (-1.0..1.0).contains(&self.start.shape_min_cos)
             && positive(self.start.shape_weight)
-            && self.start.shape_components <= super::shape_fit::MAX_SHAPE_SOLVE
+            && self.start.shape_components <= crate::fit::solve::shape::MAX_SHAPE_SOLVE
             && positive(l.contour_sigma_factor)
             && i.background_floor >= 0.0
             && (0.0..=1.0).contains(&l.pose_share)

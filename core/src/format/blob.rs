@@ -16,8 +16,9 @@
 
 use crate::checksum::crc32_update;
 use crate::error::FitError;
+use crate::geometry::Vec3;
 use crate::model::MorphableModel;
-use crate::model::{Basis, ModelError, QuantValues, QuantizedBasis, Vec3};
+use crate::model::{Basis, ModelError, QuantValues, QuantizedBasis};
 use core::fmt;
 
 /// The magic bytes at offset 0.
@@ -434,7 +435,7 @@ impl BlobHeader {
     }
 }
 
-/// The CRC-32 (zlib/IEEE, as [`crate::crc32`]) of a whole blob with its CRC field taken as zero.
+/// The CRC-32 (zlib/IEEE, as [`crate::checksum::crc32`]) of a whole blob with its CRC field taken as zero.
 pub fn blob_crc(blob: &[u8]) -> u32 {
     let head = blob.get(..CRC_OFFSET).unwrap_or(blob);
     let field = blob.len().saturating_sub(CRC_OFFSET).min(4);

@@ -27,9 +27,10 @@
 
 use super::bytes::{check_crc, check_magic, Reader, Writer};
 use super::FormatError;
-use crate::light::SH_COEFFS;
-use crate::raster::MAX_IMAGE_SIZE;
-use crate::{Camera, Pose, ShLight, Vec3};
+use crate::geometry::Vec3;
+use crate::render::light::SH_COEFFS;
+use crate::render::raster::MAX_IMAGE_SIZE;
+use crate::render::{Camera, Pose, ShLight};
 
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPDM";

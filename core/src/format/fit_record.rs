@@ -18,8 +18,8 @@
 
 use super::bytes::{check_crc, Reader, Writer};
 use super::FormatError;
-use crate::light::SH_COEFFS;
-use crate::ShLight;
+use crate::render::light::SH_COEFFS;
+use crate::render::ShLight;
 
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFR";

@@ -9,11 +9,12 @@
 //! keeps the covered pixels of the last frames for re-shading without the rasterizer.
 
 use crate::error::FitError;
-use crate::model::basis::Vec3;
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
 use crate::render::frame_cache::{FrameCache, GeometryKey};
-use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, ShadingCache, TriIndex};
+use crate::render::shading::{project_vertices, shade_vertices, vertex_normals, ProjectedVertex, ShadingCache};
 
 /// Caller-provided per-vertex buffers (each exactly one entry per model vertex).
 #[derive(Debug)]
@@ -44,7 +45,7 @@ fn serial_of<const K: usize>(key: &Option<(heapless::Vec<f32, K>, u64)>, coeffs:
     key.as_ref().filter(|(k, _)| k == coeffs).map(|(_, s)| *s)
 }
 
-/// Caller-provided room for a solver of the fit's start (see [`crate::fit::shape_fit`]).
+/// Caller-provided room for a solver of the fit's start (see [`crate::fit::solve::shape`]).
 #[derive(Debug)]
 pub struct SolveScratch<'b> {
     /// Sampled vertex ids.

@@ -11,7 +11,7 @@ pub mod instance;
 pub mod morphable;
 pub mod params;
 
-pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis, Vec3};
+pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis};
 pub use instance::{Instance, InstanceBuffers, SolveScratch, SolverView, SpareBuffers};
 pub use morphable::{MorphableModel, MAX_LANDMARKS};
 pub use params::FitParams;

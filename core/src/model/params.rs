@@ -1,6 +1,6 @@
 //! The parameter vector of a fit: pose, focal length, SH light, shape and colour coefficients.
 
-use crate::{Camera, Pose, ShLight};
+use crate::render::{Camera, Pose, ShLight};
 
 /// Parameters of one sample, with capacities `KS` (shape) and `KC` (colour) in const generics.
 ///

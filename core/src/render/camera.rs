@@ -39,7 +39,7 @@ impl Camera {
     }
 
     /// Projects a camera-space point; `None` in front of the near plane (`w < near`) or if non-finite.
-    pub fn project(&self, p: crate::Vec3) -> Option<ScreenPoint> {
+    pub fn project(&self, p: crate::geometry::Vec3) -> Option<ScreenPoint> {
         let w = -p[2];
         // Written so that NaN fails the test.
         if !(w >= self.near && w.is_finite()) {

@@ -3,11 +3,12 @@
 //! re-shading a cached frame ([`crate::render::frame_cache`]) uses them instead of rasterizing.
 
 use super::raster::{fetch, interpolated_inv_w, perspective_weights, setup, snap, Cull, EdgeInt, HALF, ONE, SMALL_EXTENT};
-use crate::render::shading::{ProjectedVertex, TriIndex};
+use crate::geometry::TriIndex;
+use crate::render::shading::ProjectedVertex;
 
 /// The vertex ids (in the rasterizer's set-up order) and perspective-correct weights with which
 /// triangle `tri` colours pixel `(x, y)` of a `width × height` frame, exactly as
-/// [`crate::TileRasterizer::render`] computes them (edge functions evaluated directly instead of
+/// [`crate::render::TileRasterizer::render`] computes them (edge functions evaluated directly instead of
 /// stepped: the same integers, so the same bits). `None` if the triangle would not be drawn.
 pub fn fragment_weights<I: TriIndex>(
     vertices: &[ProjectedVertex],

@@ -5,8 +5,8 @@
 //! triangle and weights stay as they were; only the vertex colours change. While a frame is
 //! rendered, [`FrameCache::recorder`] wraps the sink and notes, tile by tile, every covered pixel
 //! and its triangle. The first re-shade of that geometry derives each pixel's vertex ids and
-//! perspective-correct weights ([`crate::raster::fragment_weights`], the rasterizer's own
-//! arithmetic); every later one blends the new vertex colours with them ([`crate::raster::blend`])
+//! perspective-correct weights ([`crate::render::raster::fragment_weights`], the rasterizer's own
+//! arithmetic); every later one blends the new vertex colours with them ([`crate::render::raster::blend`])
 //! and hands the pixels, tile by tile and in the rasterizer's order, to a [`FragmentSink`]: the
 //! same colours in the same order, so the same sums to the bit.
 //!
@@ -17,15 +17,16 @@
 //!
 //! A small device keeps one compact slot instead ([`FrameCache::compact`]): a coverage bit per
 //! pixel and a 16-bit triangle id per covered pixel (2 bytes instead of 32); each re-shade then
-//! derives the weights again, pixel by pixel ([`crate::raster::FragmentSetup`], kept for 128
+//! derives the weights again, pixel by pixel ([`crate::render::raster::FragmentSetup`], kept for 128
 //! recent triangles on the stack), which still skips binning, the set-up of hidden triangles and
 //! the tile buffers.
 
-use crate::raster::{blend, fragment_weights, FragmentSetup};
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::render::pose::Pose;
-use crate::render::shading::{ProjectedVertex, TriIndex};
+use crate::render::raster::{blend, fragment_weights, FragmentSetup};
+use crate::render::shading::ProjectedVertex;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
-use crate::Vec3;
 
 /// What a frame's geometry depends on: the shape instance (by serial number), the pose and focal
 /// length (bit patterns) and the image size.

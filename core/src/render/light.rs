@@ -8,7 +8,7 @@
 //! The light lives in camera space (x right, y up, z toward the camera): normals are rotated by
 //! the pose before shading.
 
-use crate::Vec3;
+use crate::geometry::Vec3;
 
 /// Number of SH coefficients per channel (bands 0, 1, 2).
 pub const SH_COEFFS: usize = 9;

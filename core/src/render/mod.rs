@@ -14,7 +14,7 @@ pub mod tile;
 
 pub use camera::{Camera, ScreenPoint};
 pub use light::ShLight;
-pub use pose::{Mat3, Pose};
+pub use pose::Pose;
 pub use raster::{Cull, FrameStats, RasterError, TileRasterizer};
-pub use shading::{project_vertices, shade_vertices, vertex_normals, vertex_stage, ProjectedVertex, TriIndex, VertexError};
+pub use shading::{project_vertices, shade_vertices, vertex_normals, vertex_stage, ProjectedVertex, VertexError};
 pub use tile::{Fragment, Tile, TileSink, NO_TRIANGLE};

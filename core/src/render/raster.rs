@@ -31,9 +31,10 @@
 //!   counted in [`FrameStats`]; for a face in front of the camera this happens only when the camera
 //!   is inside or right next to the mesh.
 
-use crate::render::shading::{ProjectedVertex, TriIndex};
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
+use crate::render::shading::ProjectedVertex;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
-use crate::Vec3;
 
 pub use super::fragment::{fragment_weights, FragmentSetup};
 

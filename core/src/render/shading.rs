@@ -5,28 +5,10 @@
 //! light-only change needs [`shade_vertices`] again, a pose change both [`shade_vertices`] and
 //! [`project_vertices`], and a shape change [`vertex_normals`] too ([`vertex_stage`] does all).
 
+use crate::geometry::{mat_vec, TriIndex, Vec3};
 use crate::render::camera::Camera;
 use crate::render::light::{lambert_basis, ShLight, SH_COEFFS};
-use crate::render::pose::{mat_vec, Pose};
-use crate::Vec3;
-
-/// A vertex index type for triangle lists (`u16` on the device, `u32` on the host).
-pub trait TriIndex: Copy {
-    /// The index as `usize`.
-    fn index(self) -> usize;
-}
-
-impl TriIndex for u16 {
-    fn index(self) -> usize {
-        usize::from(self)
-    }
-}
-
-impl TriIndex for u32 {
-    fn index(self) -> usize {
-        self as usize
-    }
-}
+use crate::render::pose::Pose;
 
 /// Why the vertex stage refused its input.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

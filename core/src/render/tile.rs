@@ -1,6 +1,6 @@
 //! A finished image tile handed to a [`TileSink`]: colour, depth, triangle id and barycentrics.
 
-use crate::Vec3;
+use crate::geometry::Vec3;
 
 /// Triangle id of a pixel no triangle covers.
 pub const NO_TRIANGLE: u32 = u32::MAX;

@@ -1,7 +1,8 @@
 //! Shared test helpers: a full-frame sink, mesh generators, a tiny RNG and a reference rasterizer.
 #![allow(dead_code, clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
-use gpmm_core::{ProjectedVertex, Tile, TileSink, Vec3, NO_TRIANGLE};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::render::{ProjectedVertex, Tile, TileSink, NO_TRIANGLE};
 
 /// Writes every tile into a full image (host only; tests may allocate).
 pub struct FrameSink {

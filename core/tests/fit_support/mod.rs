@@ -3,8 +3,11 @@
 #![allow(dead_code, clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
 use crate::common::{head_mesh, FrameSink, Rng};
-use gpmm_core::fit::{FitParams, Instance, InstanceBuffers, LandmarkTarget, MorphableModel};
-use gpmm_core::{Basis, Cull, FactoredBasis, Pose, ProjectedVertex, ShLight, TileRasterizer, Vec3};
+use gpmm_core::fit::LandmarkTarget;
+use gpmm_core::geometry::Vec3;
+use gpmm_core::model::{Basis, FactoredBasis};
+use gpmm_core::model::{FitParams, Instance, InstanceBuffers, MorphableModel};
+use gpmm_core::render::{Cull, Pose, ProjectedVertex, ShLight, TileRasterizer};
 
 pub const KS: usize = 8;
 pub const KC: usize = 4;
@@ -127,7 +130,7 @@ pub fn render_target(synth: &Synth, params: &FitParams<KS, KC>) -> Vec<[u8; 3]> 
     let to8 = |c: f32| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
     (0..(W * H) as usize)
         .map(|i| {
-            if sink.tri[i] == gpmm_core::NO_TRIANGLE {
+            if sink.tri[i] == gpmm_core::render::NO_TRIANGLE {
                 let (x, y) = ((i % W as usize) as f32, (i / W as usize) as f32);
                 [to8(0.2 + x / 400.0), to8(0.35 + y / 500.0), to8(0.6 - x / 600.0)]
             } else {

@@ -3,7 +3,7 @@
 use crate::progress::spinner;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use gpmm_core::ShLight;
+use gpmm_core::render::ShLight;
 use gpmm_host::gp::model::GpModel;
 use gpmm_host::gp::model_io;
 use gpmm_host::mesh::io as mesh_io;

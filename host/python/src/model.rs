@@ -42,7 +42,7 @@ fn layout(b: &PartBasis) -> &'static str {
 }
 
 /// A light from a preset name / JSON text / file, or from 9 rows of 3 numbers.
-fn light_arg(obj: &Bound<'_, PyAny>) -> PyResult<gpmm_core::ShLight> {
+fn light_arg(obj: &Bound<'_, PyAny>) -> PyResult<gpmm_core::render::ShLight> {
     if let Ok(s) = obj.extract::<String>() {
         return parse_light(&s).map_err(err_msg);
     }

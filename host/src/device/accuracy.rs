@@ -5,7 +5,8 @@ use crate::device::quantize::{QuantizeError, QuantizedModel};
 use crate::gp::model::GpModel;
 use crate::mesh::closest::closest_on_triangle;
 use crate::mesh::geometry::dist2;
-use gpmm_core::{ModelBlob, Vec3};
+use gpmm_core::format::blob::ModelBlob;
+use gpmm_core::geometry::Vec3;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -46,7 +47,7 @@ pub fn quantization_error(reference: &GpModel, blob: &ModelBlob<'_>, draws: usiz
             blob.rank_color()
         )));
     }
-    let model_err = |e: gpmm_core::ModelError| QuantizeError::Model(e.to_string());
+    let model_err = |e: gpmm_core::model::ModelError| QuantizeError::Model(e.to_string());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let (mut s2, mut smax, mut c2, mut cmax, mut count) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0usize);
     for _ in 0..draws {

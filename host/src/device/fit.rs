@@ -10,13 +10,13 @@
 
 use crate::device::quantize::BlobBuf;
 use crate::fit::Prepared;
-use gpmm_core::fit::{
-    project_landmarks, standard_fit, FitError, FitSettings, Instance, InstanceBuffers, RankSettings, StandardFit, TargetImage,
-};
+use gpmm_core::error::FitError;
+use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, RankSettings, StandardFit, TargetImage};
 use gpmm_core::format::{fit_input, fit_record, FormatError};
-use gpmm_core::frame_cache::{CompactBuffers, FrameCache};
+use gpmm_core::model::{Instance, InstanceBuffers};
 use gpmm_core::profile::{DeviceProfile, M4F};
-use gpmm_core::ProjectedVertex;
+use gpmm_core::render::frame_cache::{CompactBuffers, FrameCache};
+use gpmm_core::render::ProjectedVertex;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
@@ -31,7 +31,7 @@ pub const DEVICE_KS: usize = M4F.shape_capacity;
 pub const DEVICE_KC: usize = M4F.color_capacity;
 /// The devices' renderer (the profile's tile and bin sizes): the image likelihood sums in the
 /// same order as on the device.
-pub type DeviceRasterizer = gpmm_core::TileRasterizer<{ M4F.tile }, { M4F.tile }, { M4F.bin }>;
+pub type DeviceRasterizer = gpmm_core::render::TileRasterizer<{ M4F.tile }, { M4F.tile }, { M4F.bin }>;
 
 /// Why a device fit failed.
 #[derive(Debug, thiserror::Error)]
@@ -345,7 +345,7 @@ pub(crate) fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError
 mod tests {
     use super::*;
     use gpmm_core::format::fit_record::{DeviceCounts, FitFigures};
-    use gpmm_core::ShLight;
+    use gpmm_core::render::ShLight;
 
     #[test]
     fn the_record_is_read_back_from_hex_lines() {

@@ -12,7 +12,8 @@ use std::path::Path;
 
 use gpmm_core::checksum::FrameChecksum;
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
-use gpmm_core::{vertex_stage, Camera, Cull, FrameStats, Pose, ProjectedVertex, ShLight, TileRasterizer, Vec3};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::render::{vertex_stage, Camera, Cull, FrameStats, Pose, ProjectedVertex, ShLight, TileRasterizer};
 
 use crate::gp::model::GpModel;
 use crate::mesh::Mesh;
@@ -20,7 +21,7 @@ use crate::mesh::Mesh;
 pub use gpmm_core::format::device_mesh::{encoded_len as file_len, DeviceScene, HEADER_BYTES, MAGIC, MAX_VERTICES, VERSION};
 
 /// Largest image side the rasterizer accepts.
-pub const MAX_IMAGE_SIDE: u32 = gpmm_core::raster::MAX_IMAGE_SIZE;
+pub const MAX_IMAGE_SIDE: u32 = gpmm_core::render::raster::MAX_IMAGE_SIZE;
 
 /// Errors writing or reading a device mesh.
 #[derive(Debug, thiserror::Error)]
@@ -42,7 +43,7 @@ pub enum DeviceMeshError {
     Format(String),
     /// The model could not produce its mean instance.
     #[error("model instance: {0}")]
-    Model(gpmm_core::ModelError),
+    Model(gpmm_core::model::ModelError),
     /// The renderer refused the mesh or scene.
     #[error("render: {0}")]
     Render(String),
@@ -231,7 +232,7 @@ mod tests {
         let t0 = HEADER_BYTES + 24 * 5;
         c[t0..t0 + 2].copy_from_slice(&9u16.to_le_bytes());
         let body = c.len() - 4;
-        let crc = gpmm_core::crc32(&c[..body]);
+        let crc = gpmm_core::checksum::crc32(&c[..body]);
         c[body..].copy_from_slice(&crc.to_le_bytes());
         assert!(matches!(DeviceMesh::from_bytes(&c), Err(DeviceMeshError::Format(_))));
         let mut bad = quad();

@@ -1,5 +1,5 @@
 //! Quantizing a model for a device and writing its flash image, the model blob
-//! (`docs/blob-format.md`; read in place by [`gpmm_core::blob::ModelBlob`]).
+//! (`docs/blob-format.md`; read in place by [`gpmm_core::format::blob::ModelBlob`]).
 //!
 //! [`quantize`] does three things to a [`GpModel`]:
 //! 1. **Simplify** to the vertex budget with meshoptimizer (as the template import does):
@@ -16,10 +16,11 @@
 //! original mean surface's vertices to the simplified mean surface).
 
 use crate::gp::model::{GpModel, ModelPart, PartBasis};
-use gpmm_core::blob::{
+use gpmm_core::format::blob::{
     blob_crc, parse_header, BlobDims, Layout, Section, CRC_OFFSET, HEADER_BYTES, MAGIC, MAX_METADATA_BYTES, MAX_VERTICES, VERSION,
 };
-use gpmm_core::{BlobError, ModelBlob, Vec3};
+use gpmm_core::format::blob::{BlobError, ModelBlob};
+use gpmm_core::geometry::Vec3;
 use std::path::Path;
 
 /// A device profile on the command line; its numbers are `gpmm_core::profile`'s (the one place

@@ -3,7 +3,7 @@
 //! Every image goes through exactly the path of `gpmm fit` (its `.pts`, the crop, both chains);
 //! images are fitted in parallel (rayon), each fit on one thread. Figures per image:
 //! - |yaw|, |pitch|, |roll| error (degrees): fitted minus true Euler angles. Both are angles of
-//!   the core's [`gpmm_core::Pose`] relative to a face frame built the same way from the iBUG
+//!   the core's [`gpmm_core::render::Pose`] relative to a face frame built the same way from the iBUG
 //!   landmarks (the template's in `gpmm build`, each ICT identity's in `gpmm synth`), so they are
 //!   directly comparable; a residual offset comes from how the two faces' landmarks sit relative
 //!   to their frames (e.g. a chin further forward tilts the chin → nose-bridge axis).

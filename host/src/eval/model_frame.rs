@@ -82,8 +82,8 @@ pub fn pose_of_face_frame(lm: &[[f64; 3]], pose_rad: [f32; 3]) -> Result<[f32; 3
 /// Euler angles (degrees) of `R(angles) · r0`.
 fn compose_deg(angles_deg: [f32; 3], r0: &[[f64; 3]; 3]) -> [f32; 3] {
     let [yaw, pitch, roll] = angles_deg.map(f32::to_radians);
-    let r = gpmm_core::Pose { yaw, pitch, roll, translation: [0.0; 3] }.rotation();
-    let m = gpmm_core::render::pose::mat_mul(&r, &r0.map(|row| row.map(|v| v as f32)));
+    let r = gpmm_core::render::Pose { yaw, pitch, roll, translation: [0.0; 3] }.rotation();
+    let m = gpmm_core::geometry::mat_mul(&r, &r0.map(|row| row.map(|v| v as f32)));
     crate::photo::euler_angles(&m.map(|row| row.map(f64::from))).map(|a| a.to_degrees() as f32)
 }
 

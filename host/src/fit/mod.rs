@@ -30,13 +30,12 @@ use crate::photo::calibration::{CalibrationError, LandmarkCalibration};
 use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
-use gpmm_core::fit::{
-    standard_fit, FitError, FitParams, Instance, InstanceBuffers, MorphableModel, RankSettings, SolveScratch, SpareBuffers, TargetImage,
-    MAX_LANDMARKS, MAX_SHAPE_SOLVE,
-};
-use gpmm_core::light::SH_COEFFS;
-use gpmm_core::shading::{ShadingBuffers, ShadingCache};
-use gpmm_core::{Cull, ProjectedVertex};
+use gpmm_core::error::FitError;
+use gpmm_core::fit::{standard_fit, RankSettings, TargetImage, MAX_SHAPE_SOLVE};
+use gpmm_core::model::{FitParams, Instance, InstanceBuffers, MorphableModel, SolveScratch, SpareBuffers, MAX_LANDMARKS};
+use gpmm_core::render::light::SH_COEFFS;
+use gpmm_core::render::shading::{ShadingBuffers, ShadingCache};
+use gpmm_core::render::{Cull, ProjectedVertex};
 use image::{RgbImage, Rgba, RgbaImage};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;

@@ -5,7 +5,7 @@ use crate::gp::kernel::{Hyperparameters, KernelPoint, ModelKernel};
 use crate::gp::lowrank::{low_rank, LowRank, NystromOptions, RankSpec};
 use crate::mesh::template::{Provenance, Template};
 use crate::mesh::Mesh;
-use gpmm_core::{Basis, DenseBasis, FactoredBasis, ModelError};
+use gpmm_core::model::{Basis, DenseBasis, FactoredBasis, ModelError};
 use rand::{Rng, RngExt};
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};

@@ -7,7 +7,7 @@
 //! the scan's rims meet) curves like `1 − s²`, and so do the rims of an opening.
 
 use crate::gp::model::GpModel;
-use gpmm_core::Vec3;
+use gpmm_core::geometry::Vec3;
 
 /// Vertices farther than this from the opening's plane (mm) are not part of it.
 const PLANE_MM: f32 = 10.0;

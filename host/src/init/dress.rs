@@ -9,7 +9,7 @@
 use crate::gp::model::GpModel;
 use crate::init::head::{Hair, HeadContext, HeadedInstance};
 use crate::render::Instance;
-use gpmm_core::Vec3;
+use gpmm_core::geometry::Vec3;
 use image::{Rgb, RgbImage};
 use rand::{Rng, RngExt};
 

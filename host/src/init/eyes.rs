@@ -9,7 +9,7 @@
 
 use crate::gp::model::GpModel;
 use crate::init::almond::{rim, Almond, Opening};
-use gpmm_core::Vec3;
+use gpmm_core::geometry::Vec3;
 use rand::{Rng, RngExt};
 
 /// Each eye's corners (iBUG), upper lid points and lower lid points.

@@ -9,7 +9,8 @@ use crate::mesh::closest::{closest_on_triangle, Grid};
 use crate::mesh::geometry::dist2;
 use crate::mesh::template::{face_crop_indices, load_template, Template, TemplateError, TemplateOptions};
 use crate::render::Instance;
-use gpmm_core::{vertex_normals, Vec3};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::render::vertex_normals;
 use rand::{Rng, RngExt};
 use std::path::Path;
 

@@ -13,7 +13,7 @@
 use crate::gp::model::GpModel;
 use crate::init::almond::{mean_landmark, rim, Almond, Opening};
 use crate::mesh::geometry::point_in_polygon;
-use gpmm_core::Vec3;
+use gpmm_core::geometry::Vec3;
 use image::RgbaImage;
 use rand::{Rng, RngExt};
 

@@ -13,9 +13,11 @@
 //! ambient light.
 
 use crate::render::Instance;
-use gpmm_core::pose::{mat_vec, Pose};
+use gpmm_core::geometry::mat_vec;
+use gpmm_core::geometry::Vec3;
+use gpmm_core::render::pose::Pose;
 use gpmm_core::render::shading::vertex_normals;
-use gpmm_core::{ShLight, Vec3};
+use gpmm_core::render::ShLight;
 use nalgebra::Vector3;
 
 /// Side of a depth-map cell (mm): about a vertex spacing of the template's face.

@@ -3,7 +3,7 @@
 //! one scan's does and read them from their shape and shading (make-up, smooth skin, other
 //! renderers' skin models).
 
-use gpmm_core::model::basis::Vec3;
+use gpmm_core::geometry::Vec3;
 use rand::{Rng, RngExt};
 
 /// How plain the skin of a scene is drawn.

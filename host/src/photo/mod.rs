@@ -193,7 +193,7 @@ pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u
             [k[2] * k[0] * v - k[1] * s, k[2] * k[1] * v + k[0] * s, cos + k[2] * k[2] * v],
         ]
     };
-    let pose = gpmm_core::Pose { yaw: angles[0], pitch: angles[1], roll: angles[2], translation: [0.0; 3] };
+    let pose = gpmm_core::render::Pose { yaw: angles[0], pitch: angles[1], roll: angles[2], translation: [0.0; 3] };
     let r = pose.rotation().map(|row| row.map(f64::from));
     let mut m = [[0.0f64; 3]; 3];
     for (i, row) in m.iter_mut().enumerate() {
@@ -205,7 +205,7 @@ pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u
 }
 
 /// Yaw, pitch and roll (radians) of a rotation `m` (rows) in the core's convention
-/// `R = Rz(roll) · Ry(yaw) · Rx(pitch)` ([`gpmm_core::Pose::rotation`]).
+/// `R = Rz(roll) · Ry(yaw) · Rx(pitch)` ([`gpmm_core::render::Pose::rotation`]).
 pub fn euler_angles(m: &[[f64; 3]; 3]) -> [f64; 3] {
     // R[2][0] = −sin(yaw), R[2][1..] = cos(yaw) (sin, cos)(pitch).
     let yaw = (-m[2][0]).clamp(-1.0, 1.0).asin();

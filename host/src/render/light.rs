@@ -2,7 +2,7 @@
 //! presets and SH JSON, `R,G,B` colours and backgrounds (one parser, the same messages).
 
 use super::Background;
-use gpmm_core::ShLight;
+use gpmm_core::render::ShLight;
 use std::path::Path;
 
 /// The light presets of `--light`.

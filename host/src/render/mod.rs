@@ -1,6 +1,6 @@
 //! Host rendering: a model instance through the core's [`TileRasterizer`] into an image.
 //!
-//! The per-vertex stage ([`gpmm_core::vertex_stage`]: normals, SH Lambert shading, projection) and
+//! The per-vertex stage ([`gpmm_core::render::vertex_stage`]: normals, SH Lambert shading, projection) and
 //! the tile rasterizer are the same code the device runs; the host only adds an [`ImageSink`] that
 //! copies each finished tile into an [`RgbaImage`], and a default [`Framing`] (camera focal length
 //! from a field of view, model distance from its bounding box). Colours are linear RGB in [0, 1]
@@ -12,10 +12,11 @@ pub mod light;
 
 use crate::gp::model::GpModel;
 use crate::mesh::Mesh;
-use gpmm_core::frame_cache::{CachedFragment, FrameBuffers, FrameCache};
-use gpmm_core::{
-    vertex_stage, Camera, Cull, FrameStats, ModelError, Pose, ProjectedVertex, RasterError, ShLight, Tile, TileRasterizer, TileSink, Vec3,
-    VertexError,
+use gpmm_core::geometry::Vec3;
+use gpmm_core::model::ModelError;
+use gpmm_core::render::frame_cache::{CachedFragment, FrameBuffers, FrameCache};
+use gpmm_core::render::{
+    vertex_stage, Camera, Cull, FrameStats, Pose, ProjectedVertex, RasterError, ShLight, Tile, TileRasterizer, TileSink, VertexError,
 };
 use image::{Rgba, RgbaImage};
 

@@ -8,8 +8,7 @@
 //! - [`DenseBasis`]: component `k` holds a full 3-vector per vertex (PCA of
 //!   learned or registered data).
 
-/// A 3-vector (position in mm, or linear RGB colour).
-pub type Vec3 = [f32; 3];
+use crate::geometry::Vec3;
 
 /// Why a model operation was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

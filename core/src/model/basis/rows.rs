@@ -1,5 +1,5 @@
 //! One vertex's row of a basis: every component's (scaled) vector there, whatever the layout
-//! (the colour solve's linear map, `crate::fit::color_fit`).
+//! (the colour solve's linear map, `crate::fit::solve::color`).
 
 use super::{Basis, Vec3};
 

@@ -64,13 +64,14 @@
 //! `x y` per line, `}`), and one `truth.json` ([`TruthFile`]). **Coordinate convention**:
 //! landmark coordinates are the camera's continuous, 0-based pixel coordinates: pixel (i, j)
 //! covers \[i, i+1) × \[j, j+1), its centre is (i + 0.5, j + 0.5), x right, y down (exactly
-//! the rasterizer's coordinates, [`gpmm_core::camera`]). Jaw landmarks 0-16 are the projected
+//! the rasterizer's coordinates, [`gpmm_core::render::camera`]). Jaw landmarks 0-16 are the projected
 //! vertices (not the silhouette); `landmarks_visible` flags landmarks hidden by the face itself
 //! (depth test against the rendered depth buffer).
 
 use std::path::{Path, PathBuf};
 
-use gpmm_core::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer, TileSink, Vec3};
+use gpmm_core::geometry::Vec3;
+use gpmm_core::render::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer, TileSink};
 use image::{Rgb, RgbImage};
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;

@@ -14,13 +14,14 @@
 //! This follows the idea of eos's contour fitting (nearest model-contour vertex to each detected
 //! contour point), with the outline found per pose instead of from a fixed vertex list.
 
-use super::landmarks::LandmarkTarget;
-use super::light_fit::facing;
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::likelihood::landmarks::LandmarkTarget;
+use crate::fit::solve::light::facing;
+use crate::geometry::mat_vec;
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::model::morphable::MorphableModel;
-use crate::render::pose::mat_vec;
-use crate::render::shading::TriIndex;
-use crate::{Camera, Pose, Vec3};
+use crate::render::{Camera, Pose};
 
 /// Largest number of candidate vertices of the silhouette pool.
 pub const CONTOUR_POOL: usize = 1024;

@@ -2,8 +2,8 @@
 //! chain loggers watch a chain). [`Acceptance`] counts per mixture component; users count by
 //! name, log or trace with their own observers.
 
-use super::proposal::MAX_PROPOSALS;
-use crate::{Pose, ShLight};
+use crate::fit::chain::proposal::MAX_PROPOSALS;
+use crate::render::{Pose, ShLight};
 
 /// What became of one proposal.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -39,7 +39,7 @@ pub struct ProposalStep {
     pub step: u32,
     /// The component's index in the mixture.
     pub id: usize,
-    /// The component's [`super::Proposal::name`].
+    /// The component's [`crate::fit::Proposal::name`].
     pub name: &'static str,
     /// What became of it.
     pub outcome: StepOutcome,
@@ -67,7 +67,7 @@ pub struct ChainSample<'a> {
 /// after it.
 pub trait ChainObserver {
     /// Called once per mixture component before the first step (index and
-    /// [`super::Proposal::name`]), so that reports can list components never drawn.
+    /// [`crate::fit::Proposal::name`]), so that reports can list components never drawn.
     fn component(&mut self, _id: usize, _name: &'static str) {}
 
     /// Called with the number of finished steps before each step and once at the end.
@@ -138,7 +138,7 @@ impl<A: ChainObserver, B: ChainObserver> ChainObserver for (A, B) {
     }
 }
 
-/// Per-component proposal counts (index = position in the [`super::Mixture`]); an observer.
+/// Per-component proposal counts (index = position in the [`crate::fit::Mixture`]); an observer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Acceptance {

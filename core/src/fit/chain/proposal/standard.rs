@@ -16,18 +16,19 @@
 //! - **Light**: every SH coefficient `+= σ·ε`. **LightIntensity**: all 27 scaled by `exp(σ·ε)`,
 //!   Hastings term `27·σ·ε`.
 //! - **LightSolve**: an independence proposal around the least-squares light `L*` of the current
-//!   geometry and albedo ([`crate::fit::light_fit`]): `L' = L* + σ·ε`. `L*` depends only on parameters
+//!   geometry and albedo ([`crate::fit::solve::light`]): `L' = L* + σ·ε`. `L*` depends only on parameters
 //!   a light proposal does not change, so the reverse move draws from the same Gaussian and the
 //!   Hastings term is `log N(L; L*, σ) − log N(L'; L*, σ)`. Detailed balance holds exactly; pick σ
 //!   wider than the light posterior so a far-away current light can still be left.
 
 use super::{Mixture, Proposal, ProposalContext};
-use crate::fit::normal::{add_normals, standard_normal};
-use crate::fit::params::FitParams;
+use crate::error::FitError;
+use crate::fit::chain::normal::{add_normals, standard_normal};
 use crate::fit::settings::{Drift, DriftSettings, MixtureShares};
-use crate::fit::FitError;
-use crate::render::pose::{mat_vec, PoseTrig};
-use crate::Vec3;
+use crate::geometry::mat_vec;
+use crate::geometry::Vec3;
+use crate::model::params::FitParams;
+use crate::render::pose::PoseTrig;
 use rand_core::Rng;
 
 /// Which block a proposal moves.
@@ -378,8 +379,8 @@ impl Proposal for StandardProposal {
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
-    use crate::fit::proposal::MAX_PROPOSALS;
-    use crate::{Pose, ShLight};
+    use crate::fit::chain::proposal::MAX_PROPOSALS;
+    use crate::render::{Pose, ShLight};
     use rand_core::SeedableRng;
     use rand_xoshiro::Xoshiro256PlusPlus;
 

@@ -16,24 +16,34 @@
 //! [`ChainObserver`]; [`Acceptance`] counts per mixture component. The best sample
 //! (highest log posterior seen) and the last sample are returned. Everything is a deterministic
 //! function of the inputs and the generator's state.
+//!
+//! Its parts: the [`proposal`]s and their mixtures, the [`observer`]s that watch a chain, the
+//! [`posterior`]'s moments over its samples, and the [`normal`] samples it draws.
 
-use super::contour::{Silhouette, MAX_CONTOUR, NO_VERTEX};
-use super::image::{BackgroundModel, ImageEval, TargetImage};
-use super::init::landmark_pivot;
-use super::landmarks::{evaluate_landmarks_rotated, LandmarkEval, LandmarkTarget, MAX_LANDMARKS};
-use super::light_fit::{solve_light, LightSolveConfig};
-use super::likelihood::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
-use super::normal::{uniform, uniform_open0};
-use super::observer::{Acceptance, ChainObserver, ChainSample, NoObserver, Progress, ProposalStep, StepOutcome};
-use super::params::FitParams;
-use super::prior::Prior;
-use super::proposal::{Mixture, Proposal, ProposalContext, StandardProposal};
-use super::FitError;
+pub mod normal;
+pub mod observer;
+pub mod posterior;
+pub mod proposal;
+
+use crate::error::FitError;
+use crate::fit::chain::normal::{uniform, uniform_open0};
+use crate::fit::chain::observer::{Acceptance, ChainObserver, ChainSample, ProposalStep, StepOutcome};
+use crate::fit::chain::proposal::{Mixture, Proposal, ProposalContext, StandardProposal};
+use crate::fit::likelihood::contour::{Silhouette, MAX_CONTOUR, NO_VERTEX};
+use crate::fit::likelihood::image::{BackgroundModel, ImageEval, TargetImage};
+use crate::fit::likelihood::landmarks::{evaluate_landmarks_rotated, LandmarkEval, LandmarkTarget};
+use crate::fit::likelihood::pixel::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
+use crate::fit::likelihood::prior::Prior;
+use crate::fit::solve::light::{solve_light, LightSolveConfig};
+use crate::fit::start::landmark_pivot;
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
+use crate::model::params::FitParams;
+use crate::model::MAX_LANDMARKS;
 use crate::render::pose::PoseTrig;
-use crate::render::shading::TriIndex;
-use crate::{Cull, ShLight, TileRasterizer, Vec3};
+use crate::render::{Cull, ShLight, TileRasterizer};
 use rand_core::Rng;
 
 /// What both chains need: the model, target landmarks, prior, proposal mixture and image size.
@@ -61,7 +71,7 @@ pub struct Problem<'a, I: TriIndex = u32, P = StandardProposal> {
 pub struct ImageProblem<'a, L = GaussianPixel, B = BackgroundModel> {
     /// The target image (its size must be the problem's).
     pub image: TargetImage<'a>,
-    /// The foreground (pixel) term, e.g. [`GaussianPixel`] with σ [`super::DEFAULT_PIXEL_SIGMA`].
+    /// The foreground (pixel) term, e.g. [`GaussianPixel`] with σ [`crate::fit::DEFAULT_PIXEL_SIGMA`].
     pub pixel: L,
     /// The background term.
     pub background: &'a B,
@@ -190,24 +200,10 @@ fn check<I: TriIndex, P, const KS: usize, const KC: usize>(problem: &Problem<'_,
     Ok(())
 }
 
-/// The first stage for `prop`, drawn by `proposal` from `cur`: prior and landmarks (recomputing
-/// landmark vertices only after a shape change), accepted with
-/// `min(1, exp(filter_term(x') − filter_term(x) + hastings))`. Draws one uniform from `rng`
-/// first, whatever the outcome. `Ok(None)`: rejected.
-pub fn filter_stage<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I, P>,
-    cur: &ChainState<KS, KC>,
-    prop: &FitParams<KS, KC>,
-    proposal: &Q,
-    hastings: f32,
-    rng: &mut R,
-) -> Result<Option<ChainState<KS, KC>>, FitError> {
-    let mut next = ChainState { params: prop.clone(), ..cur.clone() };
-    Ok(filter_into(problem, cur, &mut next, proposal, hastings, rng)?.then_some(next))
-}
-
-/// [`filter_stage`] into `next`, whose parameters are the proposal's (the rest of it is
-/// overwritten); `true` if accepted. The chain keeps two states and swaps their roles instead of
+/// The first stage for the proposal in `next` (its parameters, drawn by `proposal` from `cur`;
+/// the rest of `next` is overwritten): prior and landmarks (recomputing landmark vertices only
+/// after a shape change), accepted with `min(1, exp(filter_term(x') − filter_term(x) + hastings))`.
+/// Draws one uniform from `rng` first, whatever the outcome; `true` if accepted. The chain keeps two states and swaps their roles instead of
 /// moving a state of a few kilobytes per step.
 fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: usize, const KC: usize>(
     problem: &Problem<'_, I, P>,
@@ -460,30 +456,9 @@ where
 }
 
 /// Runs `steps` Metropolis-Hastings steps on `prior × landmarks` from `init`: no rendering, no
-/// per-vertex buffers (the landmark vertices are computed alone).
-pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, P: Proposal, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I, P>,
-    init: &FitParams<KS, KC>,
-    steps: u32,
-    rng: &mut R,
-) -> Result<FitResult<KS, KC>, FitError> {
-    run_chain(problem, &mut LandmarksOnly, init, steps, rng, NoObserver)
-}
-
-/// [`landmark_chain`], calling `on_step(done)` with the number of finished steps before each
-/// step and once at the end (for progress reports).
-pub fn landmark_chain_observed<R: Rng + ?Sized, I: TriIndex, P: Proposal, const KS: usize, const KC: usize>(
-    problem: &Problem<'_, I, P>,
-    init: &FitParams<KS, KC>,
-    steps: u32,
-    rng: &mut R,
-    on_step: impl FnMut(u32),
-) -> Result<FitResult<KS, KC>, FitError> {
-    run_chain(problem, &mut LandmarksOnly, init, steps, rng, Progress(on_step))
-}
-
-/// [`landmark_chain`] with an observer that sees progress and every proposal's outcome.
-pub fn landmark_chain_with<R: Rng + ?Sized, I: TriIndex, P: Proposal, O: ChainObserver, const KS: usize, const KC: usize>(
+/// per-vertex buffers (the landmark vertices are computed alone). `observer` sees progress and
+/// every proposal's outcome ([`NoObserver`](observer::NoObserver) for none, [`Progress`](observer::Progress) for a step count).
+pub fn landmark_chain<R: Rng + ?Sized, I: TriIndex, P: Proposal, O: ChainObserver, const KS: usize, const KC: usize>(
     problem: &Problem<'_, I, P>,
     init: &FitParams<KS, KC>,
     steps: u32,
@@ -549,54 +524,11 @@ where
 
 /// Runs `steps` delayed-acceptance steps on `prior × landmarks × image` from `init`, rendering
 /// each proposal that passes the prior-and-landmark stage through `raster` into the likelihood
-/// sink, with the per-vertex work cached in `instance`.
+/// sink, with the per-vertex work cached in `instance`. `observer` sees progress and every
+/// proposal's outcome ([`NoObserver`](observer::NoObserver) for none, [`Progress`](observer::Progress) for a step count: progress reports
+/// without restarting the chain, whose restart re-renders its start).
 #[allow(clippy::too_many_arguments)]
-pub fn image_chain<R, I, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
-    problem: &Problem<'_, I, P>,
-    image: &ImageProblem<'_, L, B>,
-    init: &FitParams<KS, KC>,
-    steps: u32,
-    instance: &mut Instance<'_, KS, KC>,
-    raster: &mut TileRasterizer<TW, TH, BIN>,
-    rng: &mut R,
-) -> Result<FitResult<KS, KC>, FitError>
-where
-    R: Rng + ?Sized,
-    I: TriIndex,
-    P: Proposal,
-    L: PixelLikelihood + Copy,
-    B: BackgroundLikelihood,
-{
-    image_chain_with(problem, image, init, steps, instance, raster, rng, NoObserver)
-}
-
-/// [`image_chain`], calling `on_step(done)` with the number of finished steps before each step
-/// and once at the end: progress reports without restarting the chain (a restart re-renders
-/// its start).
-#[allow(clippy::too_many_arguments)]
-pub fn image_chain_observed<R, I, P, L, B, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
-    problem: &Problem<'_, I, P>,
-    image: &ImageProblem<'_, L, B>,
-    init: &FitParams<KS, KC>,
-    steps: u32,
-    instance: &mut Instance<'_, KS, KC>,
-    raster: &mut TileRasterizer<TW, TH, BIN>,
-    rng: &mut R,
-    on_step: impl FnMut(u32),
-) -> Result<FitResult<KS, KC>, FitError>
-where
-    R: Rng + ?Sized,
-    I: TriIndex,
-    P: Proposal,
-    L: PixelLikelihood + Copy,
-    B: BackgroundLikelihood,
-{
-    image_chain_with(problem, image, init, steps, instance, raster, rng, Progress(on_step))
-}
-
-/// [`image_chain`] with an observer that sees progress and every proposal's outcome.
-#[allow(clippy::too_many_arguments)]
-pub fn image_chain_with<R, I, P, L, B, O, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+pub fn image_chain<R, I, P, L, B, O, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
     problem: &Problem<'_, I, P>,
     image: &ImageProblem<'_, L, B>,
     init: &FitParams<KS, KC>,

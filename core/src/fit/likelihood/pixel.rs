@@ -9,11 +9,11 @@
 //! background terms of uncovered pixels cancel in every Metropolis-Hastings ratio. The standard
 //! terms are [`GaussianPixel`] (`log N(I | R, σ² I₃)`) and the histogram [`BackgroundModel`].
 
-use super::image::{to_linear, BackgroundModel, ImageEval, TargetImage};
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::likelihood::image::{to_linear, BackgroundModel, ImageEval, TargetImage};
+use crate::geometry::Vec3;
 use crate::render::frame_cache::FragmentSink;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
-use crate::Vec3;
 
 /// The foreground term: how well a rendered colour explains a target colour.
 pub trait PixelLikelihood {

@@ -6,11 +6,12 @@
 //! (m: number of samples; the ridge term pulls toward a mean light `L0`), solved by Cholesky.
 //! Visibility is a back-facing test only (self-occlusion, e.g. by the nose, is ignored).
 
-use super::image::TargetImage;
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::likelihood::image::TargetImage;
+use crate::geometry::mat_vec;
+use crate::geometry::Vec3;
 use crate::render::light::{lambert_basis, SH_COEFFS};
-use crate::render::pose::mat_vec;
-use crate::{Camera, Pose, ShLight, Vec3};
+use crate::render::{Camera, Pose, ShLight};
 
 /// How vertices are sampled and the system regularized.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -97,7 +98,7 @@ pub fn solve_light(
 
 /// A model-space vertex seen from the camera: where it is, where its normal points, and how
 /// squarely it faces the camera.
-pub(super) struct Facing {
+pub(in crate::fit) struct Facing {
     /// Camera-space position.
     pub position: Vec3,
     /// Camera-space normal.
@@ -109,7 +110,7 @@ pub(super) struct Facing {
 
 /// The vertex at `p` with normal `n` (model space) under rotation `r` and translation `t`: the one
 /// facing test of the light, colour and shape solves and of the contour landmarks.
-pub(super) fn facing(r: &[[f32; 3]; 3], t: Vec3, p: Vec3, n: Vec3) -> Facing {
+pub(in crate::fit) fn facing(r: &[[f32; 3]; 3], t: Vec3, p: Vec3, n: Vec3) -> Facing {
     let normal = mat_vec(r, n);
     let q = mat_vec(r, p);
     let position = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
@@ -122,7 +123,7 @@ pub(super) fn facing(r: &[[f32; 3]; 3], t: Vec3, p: Vec3, n: Vec3) -> Facing {
 /// `offset` that faces the camera (cosine ≥ `min_cos`) and projects into `image`; returns their
 /// number. The sample walk of the light and colour solves (visibility is a back-facing test only).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn visit_facing(
+pub(in crate::fit) fn visit_facing(
     positions: &[Vec3],
     normals: &[Vec3],
     pose: &Pose,

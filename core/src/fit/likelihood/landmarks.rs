@@ -1,10 +1,9 @@
 //! Landmark likelihood: isotropic 2-D Gaussian between target points and projected model landmarks.
 
-use super::FitError;
-use crate::{Camera, Mat3, Pose, Vec3};
-
-/// Largest number of landmarks a model may have (iBUG-68 needs 68).
-pub use crate::model::MAX_LANDMARKS;
+use crate::error::FitError;
+use crate::geometry::{Mat3, Vec3};
+use crate::model::MAX_LANDMARKS;
+use crate::render::{Camera, Pose};
 
 /// Target landmarks in pixels (x right, y down, pixel centres at +0.5), a validity mask and σ.
 #[derive(Debug, Clone, Copy)]
@@ -86,7 +85,7 @@ impl<'a> LandmarkTarget<'a> {
     }
 
     /// The same target with its first `outward.len()` landmarks measured only along the given unit
-    /// image directions (silhouette points: see [`super::contour`]).
+    /// image directions (silhouette points: see [`crate::fit::likelihood::contour`]).
     pub fn with_outward(self, outward: &'a [[f32; 2]]) -> Result<Self, FitError> {
         if outward.len() > self.points.len() {
             return Err(FitError::LengthMismatch);
@@ -196,7 +195,7 @@ pub fn evaluate_landmarks_rotated(
     let nu = target.nu;
     let nu_s2 = nu * target.sigma * target.sigma;
     for (i, ((p, tp), _)) in positions.iter().zip(target.points).zip(target.valid).enumerate().filter(|(_, (_, &v))| v) {
-        let q = crate::render::pose::mat_vec(r, *p);
+        let q = crate::geometry::mat_vec(r, *p);
         let Some(s) = camera.project([q[0] + t[0], q[1] + t[1], q[2] + t[2]]) else {
             return Ok(LandmarkEval { log_likelihood: f32::NEG_INFINITY, sq_err: f32::INFINITY, count: count + 1 });
         };

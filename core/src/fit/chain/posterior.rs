@@ -6,7 +6,7 @@
 //! walk left it. The mean over the chain's samples is the posterior's own estimate, and the
 //! standard deviation says how well each coefficient is determined.
 
-use super::observer::{ChainObserver, ChainSample};
+use crate::fit::chain::observer::{ChainObserver, ChainSample};
 
 /// Running mean and spread of one value (Welford's update).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -127,7 +127,7 @@ impl<const KS: usize, const KC: usize> ChainObserver for PosteriorMoments<KS, KC
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::{Pose, ShLight};
+    use crate::render::{Pose, ShLight};
 
     fn sample<'a>(step: u32, pose: &'a Pose, light: &'a ShLight, shape: &'a [f32], color: &'a [f32]) -> ChainSample<'a> {
         ChainSample { step, pose, light, shape, color }

@@ -1,7 +1,7 @@
 //! Dense symmetric positive-definite solves by Cholesky, in fixed memory (the light solve's 9×9
 //! systems, the shape solve's up to 70×70).
 
-use super::FitError;
+use crate::error::FitError;
 
 /// Solves `A x = b` for the leading `n × n` block of a symmetric positive-definite `A` (its lower
 /// triangle is read; it is overwritten by the Cholesky factor). Entries past `n` of the result

@@ -1,7 +1,8 @@
 //! Prior: N(0, 1) coefficients, weak Gaussian pose, focal-length and light priors.
 
-use super::params::FitParams;
-use crate::{ShLight, Vec3};
+use crate::geometry::Vec3;
+use crate::model::params::FitParams;
+use crate::render::ShLight;
 
 /// Independent Gaussian priors on every parameter (log densities up to a constant).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -78,7 +79,7 @@ impl Prior {
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
-    use crate::Pose;
+    use crate::render::Pose;
 
     #[test]
     fn prior_peaks_at_the_mean() {

@@ -9,15 +9,16 @@
 //! preconditioned) without
 //! forming the matrix (each iteration is one pass over the samples), so memory is a few
 //! coefficient vectors and one row of the basis: nothing scales with the model.
-//! Visibility is a back-facing test only, as in [`super::light_fit`].
+//! Visibility is a back-facing test only, as in [`crate::fit::solve::light`].
 
-use super::image::TargetImage;
-use super::light_fit::visit_facing;
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::likelihood::image::TargetImage;
+use crate::fit::solve::light::visit_facing;
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::model::basis::ModelError;
 use crate::model::morphable::MorphableModel;
-use crate::render::shading::TriIndex;
-use crate::{Camera, Pose, ShLight, Vec3};
+use crate::render::{Camera, Pose, ShLight};
 
 /// How vertices are sampled, weighted against the prior, and how long the solver runs.
 #[derive(Debug, Clone, Copy, PartialEq)]

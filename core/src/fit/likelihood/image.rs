@@ -1,9 +1,9 @@
 //! The target image, its colour-histogram background model and the result of one image
-//! evaluation. The likelihood itself (pixel and background terms composed into a [`crate::tile::TileSink`])
-//! is in [`super::likelihood`].
+//! evaluation. The likelihood itself (pixel and background terms composed into a [`crate::render::tile::TileSink`])
+//! is in [`crate::fit::likelihood`].
 
-use super::FitError;
-use crate::Vec3;
+use crate::error::FitError;
+use crate::geometry::Vec3;
 
 /// The foreground σ of Schönborn et al. on colours in [0, 1].
 pub const DEFAULT_PIXEL_SIGMA: f32 = 0.043;
@@ -185,7 +185,7 @@ mod tests {
         let img = TargetImage::new(&px, 3, 2).unwrap();
         assert_eq!(BackgroundModel::from_image(&img, 0.0).err(), Some(FitError::BadConfig));
         let bg = BackgroundModel::uniform();
-        assert_eq!(super::super::ImageLikelihood::new(img, &bg, f32::NAN).err(), Some(FitError::BadConfig));
+        assert_eq!(crate::fit::ImageLikelihood::new(img, &bg, f32::NAN).err(), Some(FitError::BadConfig));
         assert_eq!(img.pixel(3, 0), None);
         assert_eq!(img.sample(-0.5, 0.0), None);
     }

@@ -1,12 +1,14 @@
 //! A starting point for the chains from the target landmarks alone.
 
-use super::landmarks::{LandmarkTarget, MAX_LANDMARKS};
-use super::params::FitParams;
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::likelihood::landmarks::LandmarkTarget;
+use crate::geometry::mat_vec;
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::model::morphable::MorphableModel;
-use crate::render::pose::mat_vec;
-use crate::render::shading::TriIndex;
-use crate::{Pose, ShLight, Vec3};
+use crate::model::params::FitParams;
+use crate::model::MAX_LANDMARKS;
+use crate::render::{Pose, ShLight};
 
 /// Centroid of the mean shape's landmarks selected by the target's validity mask (all if none match).
 pub fn landmark_pivot<I: TriIndex>(model: &MorphableModel<'_, I>, target: Option<&LandmarkTarget<'_>>) -> Result<Vec3, FitError> {

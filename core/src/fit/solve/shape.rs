@@ -2,7 +2,7 @@
 //! and albedo: a step that moves the identity the way the image asks, where the image chain's
 //! random walk accepts a few shape moves in hundreds.
 //!
-//! For vertices sampled as in [`super::color_fit`] (every `stride`-th one facing the camera), the
+//! For vertices sampled as in [`crate::fit::solve::color`] (every `stride`-th one facing the camera), the
 //! residual is `r_v = I(π(R x_v + t)) − a_v ⊙ e(R n_v)`: the image (bilinear) where the vertex
 //! projects, minus its albedo times the irradiance of its normal. It depends on the shape through
 //! the position (where the vertex looks in the image: edges, the nose's side) and through the
@@ -18,16 +18,18 @@
 //! `3 (components + 1)` values a sample) and two `MAX_SHAPE_SOLVE²` matrices on the stack; it runs
 //! where the caller gives that room (the host), and refuses to run without it.
 
-use super::image::TargetImage;
-use super::landmarks::LandmarkTarget;
-use super::FitError;
+use crate::error::FitError;
+use crate::fit::likelihood::image::TargetImage;
+use crate::fit::likelihood::landmarks::LandmarkTarget;
+use crate::geometry::mat_vec;
+use crate::geometry::TriIndex;
+use crate::geometry::Vec3;
 use crate::model::instance::{Instance, SolverView};
 use crate::model::morphable::MorphableModel;
 use crate::model::morphable::MAX_LANDMARKS;
 use crate::model::params::FitParams;
-use crate::render::pose::mat_vec;
-use crate::render::shading::{vertex_normals, TriIndex};
-use crate::{Camera, Pose, ShLight, Vec3};
+use crate::render::shading::vertex_normals;
+use crate::render::{Camera, Pose, ShLight};
 
 /// Most shape components one solve moves.
 pub const MAX_SHAPE_SOLVE: usize = 64;
@@ -97,7 +99,7 @@ impl Frame<'_, '_> {
 
     /// Whether a vertex faces the camera by at least `min_cos`.
     fn faces(&self, p: Vec3, n: Vec3, min_cos: f32) -> bool {
-        super::light_fit::facing(&self.rotation, self.translation, p, n).cos >= min_cos
+        crate::fit::solve::light::facing(&self.rotation, self.translation, p, n).cos >= min_cos
     }
 }
 

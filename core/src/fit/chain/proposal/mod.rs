@@ -5,15 +5,16 @@
 //! `log q(x | x') − log q(x' | x)`; it also says which parts of the state it can move, so the
 //! chain recomputes only what changed (landmark vertices after a shape move, landmark positions
 //! after a geometric move). The chain picks a mixture component by weight, lets it propose and
-//! tells a [`super::ChainObserver`] the component's index and [`Proposal::name`] with the outcome.
+//! tells a [`crate::fit::ChainObserver`] the component's index and [`Proposal::name`] with the outcome.
 
 pub mod standard;
 
 pub use standard::{ProposalKind, Scale, StandardProposal};
 
-use super::params::FitParams;
+use crate::geometry::Vec3;
+use crate::model::params::FitParams;
 use crate::render::pose::PoseTrig;
-use crate::{ShLight, Vec3};
+use crate::render::ShLight;
 use rand_core::Rng;
 
 /// What proposals may need beyond the parameters.

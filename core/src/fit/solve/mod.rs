@@ -1,0 +1,8 @@
+//! Closed-form and least-squares solves the chains use as proposals: the SH [`light`], the
+//! [`color`] coefficients and the leading [`shape`] coefficients, each on sampled visible
+//! vertices for a fixed rest of the state.
+
+mod cholesky;
+pub mod color;
+pub mod light;
+pub mod shape;
