@@ -144,6 +144,57 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
 
 /// Runs the standard fit of `model` to `image` with target `landmarks` (working-image pixels, one
 /// per model landmark; `valid` marks the usable ones). `instance` must be built for `model`.
+///
+/// ```
+/// use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, Stage, TargetImage};
+/// use gpmm_core::model::{Basis, FactoredBasis, FitParams, Instance, InstanceBuffers, MorphableModel};
+/// use gpmm_core::render::{Pose, ProjectedVertex, ShLight, TileRasterizer};
+/// use rand_core::SeedableRng;
+///
+/// // A tetrahedron (mm), its apex toward the camera, with one shape component (the apex's
+/// // height) and no colour component; every vertex is a landmark.
+/// let shape_mean = [[-10.0, -8.0, 0.0], [10.0, -8.0, 0.0], [0.0, 12.0, 0.0], [0.0, 0.0, 10.0]];
+/// let color_mean = [[0.6, 0.5, 0.4]; 4];
+/// let (fields, directions) = ([0.0, 0.0, 0.0, 5.0], [[0.0, 0.0, 1.0]]);
+/// let shape = Basis::Factored(FactoredBasis::new(&fields, &directions, 4)?);
+/// let color = Basis::Factored(FactoredBasis::new(&[], &[], 4)?);
+/// let triangles: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]];
+/// let model = MorphableModel::new(&shape_mean, &color_mean, shape, color, &triangles, &[0, 1, 2, 3])?;
+///
+/// // The target: the landmarks of the model turned and close to a wide-angle camera (60 mm, a
+/// // perspective the start's orthographic fit misses), on a grey image.
+/// let (w, h) = (32, 32);
+/// let turned = Pose { yaw: 0.5, pitch: -0.2, ..Pose::frontal(60.0) };
+/// let truth = FitParams::<1, 1>::new(turned, 48.0, ShLight::ambient_white(), 1, 0);
+/// let mut points = [[0.0f32; 2]; 4];
+/// project_landmarks(&model, &truth, w, h, &mut points)?;
+/// let pixels = [[150u8, 125, 100]; 32 * 32];
+/// let image = TargetImage::new(&pixels, w, h)?;
+///
+/// // The per-vertex buffers, the rasterizer and a seeded generator: nothing is allocated.
+/// let (mut positions, mut albedos, mut normals) = ([[0.0; 3]; 4], [[0.0; 3]; 4], [[0.0; 3]; 4]);
+/// let mut projected = [ProjectedVertex::INVALID; 4];
+/// let bufs = InstanceBuffers { positions: &mut positions, albedos: &mut albedos, normals: &mut normals, projected: &mut projected };
+/// let mut instance = Instance::<1, 1>::new(bufs, 4)?;
+/// let mut raster = TileRasterizer::<16, 16, 64>::new();
+/// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
+///
+/// // A short fit: few steps, no start shape solve (it needs the host's scratch buffers).
+/// let settings = FitSettings::DEFAULT.with_steps(400, 40).without_shape_solve().with_ranks(1, 0);
+/// let mut progress = |_: Stage, _: u32, _: u32| {};
+/// let fit = standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut rng, &mut progress)?;
+///
+/// // The landmarks' pixel error of the start and of the fit.
+/// let error = |p: &FitParams<1, 1>| -> f32 {
+///     let mut at = [[0.0f32; 2]; 4];
+///     project_landmarks(&model, p, w, h, &mut at).map_or(f32::INFINITY, |_| {
+///         at.iter().zip(&points).map(|(a, b)| (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sum::<f32>().sqrt()
+///     })
+/// };
+/// assert!(fit.image.best_log_posterior.is_finite());
+/// assert!(error(fit.params()) <= error(&fit.init), "{} > {}", error(fit.params()), error(&fit.init));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[allow(clippy::too_many_arguments)]
 pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
     model: &MorphableModel<'_, I>,

@@ -9,6 +9,31 @@ use crate::model::basis::{Basis, FactoredBasis};
 pub const MAX_LANDMARKS: usize = 128;
 
 /// A morphable model, borrowed: means, bases, triangles and landmark vertex ids (iBUG-68 order).
+///
+/// ```
+/// use gpmm_core::model::{Basis, FactoredBasis, MorphableModel};
+///
+/// // A tetrahedron (mm) with one shape component, which lifts the apex by 10 mm per unit
+/// // coefficient, and no colour component.
+/// let shape_mean = [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [0.0, 0.0, 10.0]];
+/// let color_mean = [[0.5; 3]; 4];
+/// let (fields, directions) = ([0.0, 0.0, 0.0, 10.0], [[0.0, 0.0, 1.0]]);
+/// let shape = Basis::Factored(FactoredBasis::new(&fields, &directions, 4)?);
+/// let color = Basis::Factored(FactoredBasis::new(&[], &[], 4)?);
+/// let triangles: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]];
+/// let landmarks = [3];
+/// let model = MorphableModel::new(&shape_mean, &color_mean, shape, color, &triangles, &landmarks)?;
+/// assert_eq!((model.vertices(), model.shape_rank(), model.color_rank()), (4, 1, 0));
+///
+/// // An instance: the mean plus the coefficients times the components.
+/// let mut positions = [[0.0; 3]; 4];
+/// model.shape_instance(&[0.5], &mut positions)?;
+/// assert_eq!(positions, [shape_mean[0], shape_mean[1], shape_mean[2], [0.0, 0.0, 15.0]]);
+/// let mut apex = [[0.0; 3]; 1];
+/// model.landmark_positions(&[-1.0], &mut apex)?;
+/// assert_eq!(apex, [[0.0, 0.0, 0.0]]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Copy)]
 pub struct MorphableModel<'a, I: TriIndex = u32> {
     shape_mean: &'a [Vec3],

@@ -448,6 +448,30 @@ pub fn blend(p: [f32; 3], c: [Vec3; 3]) -> Vec3 {
 /// RAM: `size_of::<Self>()` ≈ `28 · TW · TH + 12 · BIN` bytes (colour 12, depth 4, triangle id 4 and
 /// barycentrics 8 bytes per tile pixel; 12 bytes per bin entry). Create it once (it can live in a
 /// `static`, see [`TileRasterizer::new`]) and reuse it for every frame.
+///
+/// ```
+/// use gpmm_core::render::{Cull, ProjectedVertex, Tile, TileRasterizer};
+///
+/// // One triangle in screen space (pixels, y down, 100 mm deep) over an 8 × 8 image.
+/// let vertex = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color: [1.0, 0.5, 0.25] };
+/// let vertices = [vertex(0.0, 0.0), vertex(8.5, 0.0), vertex(0.0, 8.5)];
+/// let triangles = [[0u32, 1, 2]];
+///
+/// // The sink sees each finished 4 × 4 tile (any `FnMut(&Tile)` is one); this one counts the
+/// // covered pixels.
+/// let mut covered = 0;
+/// let mut count = |tile: &Tile<4, 4>| {
+///     let (w, h) = tile.size();
+///     covered += (0..h as usize).flat_map(|y| (0..w as usize).map(move |x| (x, y))).filter(|&(x, y)| tile.is_covered(x, y)).count();
+/// };
+/// let mut raster = TileRasterizer::<4, 4, 16>::new();
+/// let stats = raster.render(&vertices, &triangles, 8, 8, Cull::None, &mut count)?;
+///
+/// // The pixels whose centre (x + 0.5, y + 0.5) lies inside, x + y + 1 < 8.5: 8 + 7 + … + 1.
+/// assert_eq!(covered, 36);
+/// assert_eq!((stats.drawn, stats.covered_pixels), (1, 36));
+/// # Ok::<(), gpmm_core::render::RasterError>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct TileRasterizer<const TW: usize, const TH: usize, const BIN: usize> {
     tile: Tile<TW, TH>,
