@@ -150,3 +150,8 @@ pub fn calibrate() -> Calibration {
     let ((), measured_2000) = measure(|| countdown(core::hint::black_box(1_000)));
     Calibration { instructions: 2 * ITERATIONS, ticks: t1.wrapping_sub(t0) as u32, measured_2000 }
 }
+
+/// Instructions since the clock started (SysTick ticks × [`INSTRUCTIONS_PER_TICK`]).
+pub(crate) fn instructions_now() -> u64 {
+    ticks() * u64::from(INSTRUCTIONS_PER_TICK)
+}

@@ -8,8 +8,8 @@
 //! on this function's stack, not in the statics: a detection and a fit never run in one boot, so
 //! the fit's static RAM and stack margin stay as they were.
 
-use crate::fit::instructions_now;
-use crate::{clock, fail, hexlog, stack, PROFILE};
+use crate::clock::{self, instructions_now};
+use crate::{fail, hexlog, stack, PROFILE};
 use gpmm_core::format::detection::{self, DetectCounts, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
 use gpmm_core::net::face::{bounded_reading, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox, InitFile};
 use gpmm_core::net::{NetError, NetScratch};

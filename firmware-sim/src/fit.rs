@@ -9,13 +9,13 @@
 //! covered pixel) out of two static arrays; the rest (parameters, chain states, background
 //! model) is stack.
 
-use crate::{clock, fail, hexlog, stack, Rasterizer, PROFILE};
+use crate::clock::instructions_now;
+use crate::{fail, hexlog, stack, Rasterizer, PROFILE};
 use gpmm_core::error::FitError;
 use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, Stage, StandardFit, TargetImage};
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::fit_input::{self, FitInput};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
-use gpmm_core::format::frame_fit;
 use gpmm_core::geometry::Vec3;
 use gpmm_core::model::{Instance, InstanceBuffers, MorphableModel, MAX_LANDMARKS};
 use gpmm_core::render::frame_cache::{CompactBuffers, FrameCache};
@@ -54,43 +54,10 @@ pub(crate) struct Buffers<'b> {
     pub cache: CompactBuffers<'b>,
 }
 
-pub(crate) fn instructions_now() -> u64 {
-    clock::ticks() * u64::from(clock::INSTRUCTIONS_PER_TICK)
-}
-
-/// Fits the blob at the start of `part` to the section after it: a fit input (`GPFI`: image and
-/// landmarks) here, a landmark-free fit job (`GPFF`: init file and camera frame follow) in
-/// `frame_fit.rs`; logs everything, fails on bad data.
-pub fn run(part: &'static [u8], bufs: Buffers<'_>) {
-    let t_start = instructions_now();
-    // The blob may be followed by more data: its header says how long it is.
-    let blob = match ModelBlob::parse(part) {
-        Ok(b) => b,
-        Err(e) => {
-            defmt::error!("data partition: not a valid model blob: {}", defmt::Display2Format(&e));
-            fail();
-        }
-    };
-    let model = match blob.morphable() {
-        Ok(m) => m,
-        Err(e) => fit_failed("model blob", e),
-    };
-    let input_at = frame_fit::next_section(blob.len());
-    let Some(rest) = part.get(input_at..) else {
-        defmt::error!("data partition: the blob fills it, no room for a fit input");
-        fail();
-    };
-    if rest.starts_with(&frame_fit::MAGIC) {
-        crate::frame_fit::run(part, &blob, &model, input_at, bufs, t_start);
-    } else {
-        landmark_fit(part, &blob, &model, rest, bufs, t_start);
-    }
-}
-
 /// The fit to a fit input's image and landmarks (its own frame: the landmark-free path's locals
 /// are not on its stack, nor its on theirs).
 #[inline(never)]
-fn landmark_fit(part: &[u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_, u16>, rest: &[u8], bufs: Buffers<'_>, t_start: u64) {
+pub(crate) fn landmark_fit(part: &[u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_, u16>, rest: &[u8], bufs: Buffers<'_>, t_start: u64) {
     let input: FitInput<'_, FitSettings> = match fit_input::parse::<FitSettings>(rest, PROFILE.image_side, MAX_LANDMARKS) {
         Ok(i) => i,
         Err(e) => {

@@ -11,8 +11,9 @@
 //! the working image (`PROFILE.frame_fit_side`² × 3 bytes) is on the stack frame that calls the
 //! fit, so it sits next to the fit's own stack (README, "The landmark-free fit").
 
-use crate::fit::{self, fit_failed, instructions_now, Buffers, Sizes};
-use crate::{clock, detect, fail, PROFILE};
+use crate::clock::{self, instructions_now};
+use crate::fit::{self, fit_failed, Buffers, Sizes};
+use crate::{detect, fail, PROFILE};
 
 use gpmm_core::fit::{FitSettings, TargetImage};
 use gpmm_core::format::blob::ModelBlob;

@@ -34,7 +34,9 @@ mod stack;
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
 use gpmm_core::checksum::FrameChecksum;
+use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
+use gpmm_core::format::frame_fit as sections;
 use gpmm_core::geometry::Vec3;
 use gpmm_core::net::face::INIT_MAGIC;
 use gpmm_core::profile::{DeviceProfile, M4F, M7};
@@ -109,7 +111,7 @@ fn main() -> ! {
         detect::run(part);
     } else if !device_mesh::is_device_mesh(part) {
         let cache = CompactBuffers { covered: CACHE_COVERED, triangles: CACHE_TRIANGLES };
-        fit::run(part, fit::Buffers { pool: NORMALS, projected: PROJECTED, raster: RASTERIZER, cache });
+        fit_blob(part, fit::Buffers { pool: NORMALS, projected: PROJECTED, raster: RASTERIZER, cache });
     } else {
         let m = match device_mesh::parse(part, MAX_PROJECTED.min(MAX_VERTICES)) {
             Ok(m) => m,
@@ -127,6 +129,35 @@ fn main() -> ! {
 
     defmt::info!("status=ok");
     semihosting::process::exit(0)
+}
+
+/// Fits the blob at the start of `part` to the section after it: a fit input (`GPFI`: image and
+/// landmarks, `fit.rs`) or a landmark-free fit job (`GPFF`: init file and camera frame follow,
+/// `frame_fit.rs`); logs everything, fails on bad data.
+fn fit_blob(part: &'static [u8], bufs: fit::Buffers<'_>) {
+    let t_start = clock::instructions_now();
+    // The blob may be followed by more data: its header says how long it is.
+    let blob = match ModelBlob::parse(part) {
+        Ok(b) => b,
+        Err(e) => {
+            defmt::error!("data partition: not a valid model blob: {}", defmt::Display2Format(&e));
+            fail();
+        }
+    };
+    let model = match blob.morphable() {
+        Ok(m) => m,
+        Err(e) => fit::fit_failed("model blob", e),
+    };
+    let input_at = sections::next_section(blob.len());
+    let Some(rest) = part.get(input_at..) else {
+        defmt::error!("data partition: the blob fills it, no room for a fit input");
+        fail();
+    };
+    if rest.starts_with(&sections::MAGIC) {
+        frame_fit::run(part, &blob, &model, input_at, bufs, t_start);
+    } else {
+        fit::landmark_fit(part, &blob, &model, rest, bufs, t_start);
+    }
 }
 
 /// 3. Renders the device mesh into a checksum and logs the frame's figures (fails on bad data).

@@ -3,9 +3,10 @@
 use crate::progress::spinner;
 use anyhow::{Context, Result};
 use clap::Args;
+use gpmm_core::profile::DeviceProfile;
 use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
 use gpmm_host::device::quantize::BlobBuf;
-use gpmm_host::fit::{FitOptions, FitSettings};
+use gpmm_host::fit::{FitFlags, FitOptions, FitSettings};
 use gpmm_host::gp::model_io;
 use std::path::PathBuf;
 
@@ -57,8 +58,8 @@ pub struct DeviceFitArgs {
     /// Seed of the chains.
     #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
-    /// Landmark-chain steps.
-    #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N")]
+    #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N",
+        help = crate::fit::landmark_steps_help(&FitSettings::DEFAULT.without_shape_solve()))]
     pub landmark_steps: u32,
     /// Image-chain steps.
     #[arg(long, default_value_t = FitSettings::DEFAULT.image.steps, value_name = "N")]
@@ -217,25 +218,53 @@ pub fn inspect(a: InspectArgs) -> Result<()> {
     result.with_context(|| format!("{} is not a valid model blob", a.blob.display()))
 }
 
-/// Runs `gpmm device-fit`: prepares the partition, runs the firmware, prints the JSON report.
+/// A device fit's model blob, read and checked, and its device profile.
+pub struct DeviceFitInputs {
+    /// The model blob.
+    pub blob: BlobBuf,
+    /// Its landmarks.
+    pub landmarks: usize,
+    /// Its shape and colour ranks.
+    pub ranks: [usize; 2],
+    /// The device profile.
+    pub profile: DeviceProfile,
+}
+
+impl DeviceFitArgs {
+    /// Reads the blob and looks up the profile.
+    pub fn inputs(&self) -> Result<DeviceFitInputs> {
+        let blob = BlobBuf::read(&self.blob).with_context(|| format!("reading the model blob {}", self.blob.display()))?;
+        let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", self.blob.display()))?;
+        let (landmarks, ranks) = (view.landmarks().len(), [view.rank_shape(), view.rank_color()]);
+        let profile = DeviceProfile::by_name(&self.profile).with_context(|| format!("unknown device profile {}", self.profile))?;
+        Ok(DeviceFitInputs { blob, landmarks, ranks, profile })
+    }
+
+    /// The fit's flags: seed, steps, the blob's ranks, and a working side of `size` pixels.
+    pub fn flags(&self, ranks: [usize; 2], size: u32) -> FitFlags {
+        FitFlags {
+            size: Some(size),
+            seed: Some(self.seed),
+            landmark_steps: Some(self.landmark_steps),
+            image_steps: Some(self.image_steps),
+            shape_rank: Some(ranks[0]),
+            color_rank: Some(ranks[1]),
+            ..FitFlags::default()
+        }
+    }
+}
+
+/// Runs `gpmm device-fit --landmarks`: prepares the partition, runs the firmware, prints the
+/// JSON report (`crate::device_frame` runs it with `--init`).
 pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
-    let blob = BlobBuf::read(&a.blob).with_context(|| format!("reading the model blob {}", a.blob.display()))?;
-    let view = blob.view().map_err(|e| anyhow::anyhow!("{}: not a valid model blob: {e}", a.blob.display()))?;
-    let profile =
-        gpmm_core::profile::DeviceProfile::by_name(&a.profile).with_context(|| format!("unknown device profile {}", a.profile))?;
-    let Some(landmarks) = a.landmarks.clone() else {
-        return crate::device_frame::device_fit_init(&a, &blob, view.landmarks().len(), view.rank_shape(), view.rank_color(), &profile);
-    };
+    let DeviceFitInputs { blob, landmarks: model_landmarks, ranks, profile } = a.inputs()?;
+    let landmarks = a.landmarks.clone().context("--landmarks is required without --init")?;
     let size = profile.image_side;
     let pts = gpmm_host::photo::pts::read_pts(&landmarks, a.pts_one_based)?;
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
-    pts.check(&landmarks, view.landmarks().len(), "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
+    pts.check(&landmarks, model_landmarks, "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
     let prepared = gpmm_host::fit::prepare(&photo, &pts.points, size)?;
-    let settings = FitOptions {
-        size,
-        seed: a.seed,
-        fit: FitSettings::DEFAULT.with_steps(a.landmark_steps, a.image_steps).with_ranks(view.rank_shape(), view.rank_color()),
-    };
+    let settings = a.flags(ranks, size).resolve()?;
     settings.validate()?;
     let device = device_settings(&settings.core(), &profile);
     if a.host_only {

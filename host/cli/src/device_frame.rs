@@ -1,24 +1,17 @@
 //! `gpmm device-fit BLOB IMAGE --init INIT`: the landmark-free fit, everything on the device.
 
-use crate::device::DeviceFitArgs;
+use crate::device::{DeviceFitArgs, DeviceFitInputs};
 use anyhow::{Context, Result};
-use gpmm_core::profile::DeviceProfile;
 use gpmm_host::device::detect::camera_frame;
 use gpmm_host::device::fit::{device_settings, run_firmware};
 use gpmm_host::device::frame_fit::{self as ff, check_landmarks, check_side, host_frame_fit, job_bytes, HostFrameFit};
-use gpmm_host::device::quantize::BlobBuf;
-use gpmm_host::fit::{FitOptions, FitSettings};
+use gpmm_host::fit::FitFlags;
 
 /// Runs `gpmm device-fit --init`: frame, job and partition, the firmware under QEMU (or the host
 /// only), the JSON report; fails with "no face found" when the finder finds none.
-pub fn device_fit_init(
-    a: &DeviceFitArgs,
-    blob: &BlobBuf,
-    model_landmarks: usize,
-    rank_shape: usize,
-    rank_color: usize,
-    profile: &DeviceProfile,
-) -> Result<()> {
+pub fn device_fit_init(a: DeviceFitArgs) -> Result<()> {
+    let DeviceFitInputs { blob, landmarks: model_landmarks, ranks, profile } = a.inputs()?;
+    let (blob, profile) = (&blob, &profile);
     let init_path = a.init.as_ref().context("--init is required without --landmarks")?;
     let init = gpmm_host::init::InitModel::load(init_path)?;
     let needed = init.file().map(|f| f.scratch_bytes()).unwrap_or(0);
@@ -38,9 +31,7 @@ pub fn device_fit_init(
     }
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
     let (frame, mapping) = camera_frame(&photo, a.width, a.height);
-    let mut fit = FitSettings::DEFAULT.with_steps(a.landmark_steps, a.image_steps).with_ranks(rank_shape, rank_color);
-    fit.landmarks = fit.landmarks.for_initializer(a.init_landmark_sigma);
-    let options = FitOptions { size: side, seed: a.seed, fit };
+    let options = FitFlags { initializer_sigma: Some(a.init_landmark_sigma), ..a.flags(ranks, side) }.resolve()?;
     options.validate()?;
     let settings = device_settings(&options.core(), profile);
     let host = |()| -> Result<HostFrameFit> { Ok(host_frame_fit(blob, &init, &frame, a.min_score, a.refine, side, &settings, a.seed)?) };

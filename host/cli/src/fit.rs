@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use gpmm_host::fit::FitJob;
+use gpmm_host::fit::{FitFlags, FitJob, FitSettings};
 use gpmm_host::gp::model_io;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -52,8 +52,8 @@ pub struct FitSettingsArgs {
     /// Working image side (pixels): the crop is resampled to SIZE x SIZE.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.size, value_parser = clap::value_parser!(u32).range(16..=1024))]
     pub size: u32,
-    /// Landmark-chain steps: 40 % on the pose, then the shape (no rendering; about 20 us each).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps, value_name = "N")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps, value_name = "N",
+        help = landmark_steps_help(&FitSettings::DEFAULT))]
     pub landmark_steps: u32,
     /// Image-chain steps (one render each).
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.image.steps, value_name = "N")]
@@ -61,19 +61,19 @@ pub struct FitSettingsArgs {
     /// Seed of the chains.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
     pub seed: u64,
-    /// Shape components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.shape, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.shape, value_name = "K",
+        help = format!("Shape components fitted (the leading ones; at most the model's rank and {})", gpmm_host::fit::KS))]
     pub shape_rank: usize,
-    /// Colour components fitted (the leading ones; at most the model's rank and 200).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K",
+        help = format!("Colour components fitted (the leading ones; at most the model's rank and {})", gpmm_host::fit::KC))]
     pub color_rank: usize,
     /// Landmark standard deviation as a fraction of the working image side.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.sigma, value_name = "FRACTION")]
     pub landmark_sigma: f32,
-    /// Factor on the landmark σ of the 17 jaw-contour points (iBUG-68) while the landmark chain
-    /// fits the pose: where a detector puts them depends on the view, so they say less about the
-    /// pose than the inner points (1 treats them like the others).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.contour_sigma_factor, value_name = "FACTOR")]
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.contour_sigma_factor, value_name = "FACTOR",
+        help = format!("Factor on the landmark σ of the {} jaw-contour points (iBUG-68) while the landmark chain fits the pose: \
+            where a detector puts them depends on the view, so they say less about the pose than the inner points (1 treats them \
+            like the others)", FitSettings::DEFAULT.landmarks.contour_landmarks))]
     pub contour_sigma: f32,
     /// Any other setting of the fit, by its path in fit.json's `settings` (repeatable), e.g.
     /// `--set landmarks.student_t=4 --set image.pixel_sigma=0.05 --set proposals.image.shape=0.3`.
@@ -82,20 +82,31 @@ pub struct FitSettingsArgs {
 }
 
 impl FitSettingsArgs {
-    /// The flags mapped into the one settings type (everything not on the command line: defaults;
-    /// `--set` overrides last), by the host library's mapping the Python package shares.
-    pub fn settings(&self) -> Result<gpmm_host::fit::FitOptions> {
-        Ok(gpmm_host::fit::FitOptions::from_flags(
-            self.size,
-            self.seed,
-            self.landmark_steps,
-            self.image_steps,
-            self.shape_rank,
-            self.color_rank,
-            self.landmark_sigma,
-            self.contour_sigma,
-            &self.overrides,
-        )?)
+    /// The flags as given (clap fills in the defaults), for the host library's one resolution.
+    pub fn flags(&self) -> FitFlags {
+        FitFlags {
+            size: Some(self.size),
+            seed: Some(self.seed),
+            landmark_steps: Some(self.landmark_steps),
+            image_steps: Some(self.image_steps),
+            shape_rank: Some(self.shape_rank),
+            color_rank: Some(self.color_rank),
+            landmark_sigma: Some(self.landmark_sigma),
+            contour_sigma: Some(self.contour_sigma),
+            initializer_sigma: None,
+            overrides: self.overrides.clone(),
+        }
+    }
+}
+
+/// The help of `--landmark-steps` under `settings`: how the landmark chain splits its steps
+/// between the pose and the shape.
+pub fn landmark_steps_help(settings: &FitSettings) -> String {
+    let pose = (settings.landmarks.pose_share * 100.0).round();
+    if pose >= 100.0 {
+        "Landmark-chain steps, all on the pose (the start's shape solve fits the shape; no rendering)".into()
+    } else {
+        format!("Landmark-chain steps: {pose} % on the pose, then the shape (no rendering)")
     }
 }
 
@@ -131,15 +142,13 @@ pub struct BenchFitArgs {
 
 /// Runs `gpmm fit`.
 pub fn fit(a: FitArgs) -> Result<()> {
-    let mut settings = a.settings.settings()?;
+    let mut flags = a.settings.flags();
+    // The initializer's landmarks get their own σ; an explicit --set still wins over it.
+    flags.initializer_sigma = a.init.is_some().then_some(a.init_landmark_sigma);
+    let settings = flags.resolve()?;
     let landmarks = match (a.landmarks, &a.init) {
         (Some(pts), _) => pts,
-        (None, Some(init)) => {
-            settings.fit.landmarks = settings.fit.landmarks.for_initializer(a.init_landmark_sigma);
-            // An explicit --set still wins over the initializer's defaults.
-            settings.fit = gpmm_host::fit::override_settings(&settings.fit, &a.settings.overrides)?;
-            crate::init::detect_to_dir(&a.image, init, &a.output)?
-        }
+        (None, Some(init)) => crate::init::detect_to_dir(&a.image, init, &a.output)?,
         (None, None) => {
             anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")
         }
@@ -205,7 +214,7 @@ fn print_per_yaw(rows: &[gpmm_host::eval::bench_fit::YawRow], off: [f64; 3]) {
 /// Runs `gpmm bench-fit`.
 pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
     let model = model_io::load(&a.model)?;
-    let settings = a.settings.settings()?;
+    let settings = a.settings.flags().resolve()?;
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let bar = ProgressBar::new(0);
     bar.set_style(

@@ -57,10 +57,10 @@ pub enum Command {
     ///
     /// The photo is cropped to a square around the landmarks (side 1.8x the landmarks' larger
     /// extent, lifted by 0.1x so the forehead fits; border pixels repeated past the image edge) and
-    /// resampled to --size. Then a landmark-only chain on the pose (default 5000 steps, the jaw
-    /// contour down-weighted; about 0.01 s), a closed-form SH light, a Gauss-Newton solve of the
+    /// resampled to --size. Then a landmark-only chain on the pose (--landmark-steps, the jaw
+    /// contour down-weighted; no rendering), a closed-form SH light, a Gauss-Newton solve of the
     /// leading shape components against the landmarks and the image, and an image chain on pose,
-    /// colour and light (default 600 steps, each renders the model; about 0.15 s at 128x128).
+    /// colour and light (--image-steps, each renders the model).
     /// Writes OUTDIR/fit.json (every field: docs/fit-json.md; the chain's best sample, and the mean
     /// and spread of its second half), overlay.png (input | fit | blend; green dots: target
     /// landmarks, red crosses: fitted) and fit.ply (the fitted shape and albedo, model space, mm).
@@ -194,6 +194,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Register(a) => register::register_mesh(a),
         Command::Quantize(a) => device::quantize(a),
         Command::Inspect(a) => device::inspect(a),
+        Command::DeviceFit(a) if a.landmarks.is_none() => device_frame::device_fit_init(a),
         Command::DeviceFit(a) => device::device_fit(a),
         Command::DeviceDetect(a) => device::device_detect(a),
         Command::ImportH5(a) => h5::import_h5(a),

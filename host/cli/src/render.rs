@@ -181,7 +181,7 @@ fn parse_ranks(s: &str) -> Result<(usize, usize), String> {
 
 /// Parses `--light`: a preset name, an inline 9x3 JSON array, or a JSON file holding one.
 pub fn parse_light(s: &str) -> Result<ShLight> {
-    gpmm_host::render::light::parse_light(s).map_err(anyhow::Error::msg)
+    Ok(gpmm_host::render::light::parse_light(s)?)
 }
 
 /// Runs `gpmm sample`.

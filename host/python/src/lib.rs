@@ -21,21 +21,10 @@ use std::path::PathBuf;
 
 pyo3::create_exception!(_gpmm, GpmmError, pyo3::exceptions::PyValueError, "An error of gpmm (the message is the gpmm program's).");
 
-/// The message of an error and its sources, as the `gpmm` program prints it (`outer: inner: …`).
-pub(crate) fn message(e: &(dyn std::error::Error + 'static)) -> String {
-    let mut s = e.to_string();
-    let mut source = e.source();
-    while let Some(inner) = source {
-        s.push_str(": ");
-        s.push_str(&inner.to_string());
-        source = inner.source();
-    }
-    s
-}
-
-/// A [`GpmmError`] from any error.
-pub(crate) fn err(e: impl std::error::Error + 'static) -> PyErr {
-    GpmmError::new_err(message(&e))
+/// A [`GpmmError`] from any error: its message, which names its cause itself (the `gpmm`
+/// program prints the same text).
+pub(crate) fn err(e: impl std::error::Error) -> PyErr {
+    GpmmError::new_err(e.to_string())
 }
 
 /// A [`GpmmError`] from a message.
@@ -129,8 +118,8 @@ fn import_h5<'py>(py: Python<'py>, path: PathBuf, scale: Option<f64>, landmarks:
     let name = path.display().to_string();
     let (model, report) = py
         .detach(move || -> Result<_, String> {
-            let landmarks = landmarks.as_deref().map(gpmm_host::mesh::io::read_landmarks_json).transpose().map_err(|e| message(&e))?;
-            statismo::import(&path, &ImportOptions { scale, landmarks }).map_err(|e| message(&e))
+            let landmarks = landmarks.as_deref().map(gpmm_host::mesh::io::read_landmarks_json).transpose().map_err(|e| e.to_string())?;
+            statismo::import(&path, &ImportOptions { scale, landmarks }).map_err(|e| e.to_string())
         })
         .map_err(err_msg)?;
     let report = json_to_py(py, &report)?;

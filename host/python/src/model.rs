@@ -5,7 +5,7 @@ use crate::arrays::{
 };
 use crate::{err, err_msg, json_to_py};
 use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
-use gpmm_host::fit::{fit_image, overlay, report, FitOptions, ReportInputs};
+use gpmm_host::fit::{fit_image, overlay, report, FitFlags, ReportInputs};
 use gpmm_host::gp::model::{GpModel, PartBasis};
 use gpmm_host::gp::{model_io, statismo};
 use gpmm_host::photo::calibration::LandmarkCalibration;
@@ -44,11 +44,11 @@ fn layout(b: &PartBasis) -> &'static str {
 /// A light from a preset name / JSON text / file, or from 9 rows of 3 numbers.
 fn light_arg(obj: &Bound<'_, PyAny>) -> PyResult<gpmm_core::render::ShLight> {
     if let Ok(s) = obj.extract::<String>() {
-        return parse_light(&s).map_err(err_msg);
+        return parse_light(&s).map_err(err);
     }
     let rows: Vec<Vec<f32>> =
         obj.extract().map_err(|_| err_msg("light must be a preset name, JSON text, a file or 9 rows of [r, g, b]"))?;
-    light_from_rows(&rows).map_err(err_msg)
+    light_from_rows(&rows).map_err(err)
 }
 
 #[pymethods]
@@ -234,13 +234,13 @@ impl Model {
     ) -> PyResult<Bound<'py, PyAny>> {
         let light = match light {
             Some(l) => light_arg(l)?,
-            None => parse_light("frontal").map_err(err_msg)?,
+            None => parse_light("frontal").map_err(err)?,
         };
         let settings = RenderSettings {
             width,
             height,
             light,
-            background: parse_background(background).map_err(err_msg)?,
+            background: parse_background(background).map_err(err)?,
             fov_deg: fov,
             ..RenderSettings::default()
         };
@@ -280,19 +280,19 @@ impl Model {
         set: Option<Vec<String>>,
         landmark_calibration: Option<PathBuf>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let d = FitOptions::DEFAULT;
-        let opts = FitOptions::from_flags(
-            size.unwrap_or(d.size),
-            seed.unwrap_or(d.seed),
-            landmark_steps.unwrap_or(d.fit.landmarks.steps),
-            image_steps.unwrap_or(d.fit.image.steps),
-            shape_rank.unwrap_or(d.fit.ranks.shape),
-            color_rank.unwrap_or(d.fit.ranks.color),
-            landmark_sigma.unwrap_or(d.fit.landmarks.sigma),
-            contour_sigma.unwrap_or(d.fit.landmarks.contour_sigma_factor),
-            &set.unwrap_or_default(),
-        )
-        .map_err(err)?;
+        let flags = FitFlags {
+            size,
+            seed,
+            landmark_steps,
+            image_steps,
+            shape_rank,
+            color_rank,
+            landmark_sigma,
+            contour_sigma,
+            initializer_sigma: None,
+            overrides: set.unwrap_or_default(),
+        };
+        let opts = flags.resolve().map_err(err)?;
         let photo = numpy_to_rgb(image)?;
         let mut points = numpy_to_points(py, landmarks)?;
         let calibration_name = landmark_calibration.as_ref().map(|p| p.display().to_string());

@@ -120,6 +120,7 @@ def test_errors_carry_the_cli_message(model, run_cli, tmp_path):
     with pytest.raises(gpmm.GpmmError) as e:
         gpmm.load(missing)
     assert str(e.value) == cli_message
+    assert str(e.value).count("os error 2") == 1, "the cause is said once"
     assert isinstance(e.value, ValueError)
     with pytest.raises(gpmm.GpmmError, match="unknown light 'dusk'"):
         model.render(light="dusk")

@@ -9,14 +9,11 @@
 //! The fit-input layout is documented in `firmware-sim/src/fit_input.rs` and its README.
 
 use crate::device::quantize::BlobBuf;
-use crate::fit::Prepared;
+use crate::fit::{FitBuffers, Prepared};
 use gpmm_core::error::FitError;
 use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, RankSettings, StandardFit, TargetImage};
 use gpmm_core::format::{fit_input, fit_record, FormatError};
-use gpmm_core::model::{Instance, InstanceBuffers};
 use gpmm_core::profile::{DeviceProfile, M4F};
-use gpmm_core::render::frame_cache::{CompactBuffers, FrameCache};
-use gpmm_core::render::ProjectedVertex;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
@@ -137,17 +134,9 @@ pub fn host_fit_pixels(
     let view = blob.view().map_err(|e| DeviceFitError::Blob(e.to_string()))?;
     let model = view.morphable().map_err(DeviceFitError::Core)?;
     let image = TargetImage::new(pixels, w, h).map_err(DeviceFitError::Core)?;
-    let n = model.vertices();
-    let (mut pos, mut alb, mut nor, mut proj) =
-        (vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n], vec![ProjectedVertex::INVALID; n]);
     // The firmware's compact frame cache, the same size (the fit is the same with or without it).
-    let (mut covered, mut ids) = (vec![0u32; (w as usize * h as usize).div_ceil(32)], vec![0u16; M4F.frame_cache_pixels]);
-    let mut inst = Instance::<DEVICE_KS, DEVICE_KC>::new(
-        InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj },
-        n,
-    )
-    .map_err(DeviceFitError::Core)?
-    .with_frame_cache(FrameCache::compact(CompactBuffers { covered: &mut covered, triangles: &mut ids }));
+    let mut buffers = FitBuffers::device(model.vertices(), w, h, M4F.frame_cache_pixels);
+    let mut inst = buffers.instance::<DEVICE_KS, DEVICE_KC>().map_err(DeviceFitError::Core)?;
     let mut raster: Box<DeviceRasterizer> = Box::new(DeviceRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let valid = vec![true; landmarks.len()];

@@ -48,12 +48,12 @@ pub enum DeviceMeshError {
     #[error("render: {0}")]
     Render(String),
     /// Reading or writing the file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: String,
         /// The I/O error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -166,12 +166,12 @@ impl DeviceMesh {
     /// Writes the file.
     pub fn write(&self, path: &Path) -> Result<(), DeviceMeshError> {
         let bytes = self.to_bytes()?;
-        std::fs::write(path, bytes).map_err(|source| DeviceMeshError::Io { path: path.display().to_string(), source })
+        std::fs::write(path, bytes).map_err(|error| DeviceMeshError::Io { path: path.display().to_string(), error })
     }
 
     /// Reads and validates a file.
     pub fn read(path: &Path) -> Result<Self, DeviceMeshError> {
-        let bytes = std::fs::read(path).map_err(|source| DeviceMeshError::Io { path: path.display().to_string(), source })?;
+        let bytes = std::fs::read(path).map_err(|error| DeviceMeshError::Io { path: path.display().to_string(), error })?;
         Self::from_bytes(&bytes)
     }
 

@@ -206,7 +206,7 @@ pub enum QuantizeError {
     Model(String),
     /// meshoptimizer could not reach the vertex budget.
     #[error("simplification failed: {0}")]
-    Simplify(String),
+    Simplify(crate::mesh::simplify::SimplifyError),
     /// The blob would exceed the budget.
     #[error("the blob would be {bytes} bytes ({:.1} KiB), over the {what} budget of {budget} bytes ({:.1} KiB); lower --vertices, --rank-shape, --rank-color or use --bits 8", *bytes as f64 / 1024.0, *budget as f64 / 1024.0)]
     OverBudget {

@@ -20,7 +20,9 @@
 //! result is a deterministic function of the inputs, the settings and the seed: `fit.json` is
 //! bit-identical across runs except for `seconds` and `timing` (omitted with `--no-timing`).
 
+mod buffers;
 mod observe;
+mod options;
 mod overrides;
 mod posterior;
 pub mod register;
@@ -29,13 +31,11 @@ use crate::gp::model::GpModel;
 use crate::photo::calibration::{CalibrationError, LandmarkCalibration};
 use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
-use crate::render::{Background, FrameMemory, HostRasterizer, ImageSink};
+use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{standard_fit, RankSettings, TargetImage, MAX_SHAPE_SOLVE};
-use gpmm_core::model::{FitParams, Instance, InstanceBuffers, MorphableModel, SolveScratch, SpareBuffers, MAX_LANDMARKS};
-use gpmm_core::render::light::SH_COEFFS;
-use gpmm_core::render::shading::{ShadingBuffers, ShadingCache};
-use gpmm_core::render::{Cull, ProjectedVertex};
+use gpmm_core::fit::{standard_fit, TargetImage};
+use gpmm_core::model::{FitParams, MorphableModel, MAX_LANDMARKS};
+use gpmm_core::render::Cull;
 use image::{RgbImage, Rgba, RgbaImage};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -43,7 +43,9 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
+pub use buffers::FitBuffers;
 pub use gpmm_core::fit::FitSettings;
+pub use options::{FitFlags, FitOptions};
 pub use overrides::override_settings;
 pub use posterior::PosteriorSummary;
 
@@ -92,78 +94,6 @@ pub enum FitRunError {
 
 fn core(stage: &'static str) -> impl Fn(FitError) -> FitRunError {
     move |error| FitRunError::Core { stage, error }
-}
-
-/// A host fit: the working image side and the seed around the core's one [`FitSettings`]
-/// (serialized flat: `size`, `seed` and the settings' fields side by side).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct FitOptions {
-    /// Working image side (pixels, 16 to 1024): the crop is resampled to `size × size`.
-    pub size: u32,
-    /// Seed of the chains' generator.
-    pub seed: u64,
-    /// The standard fit's settings (ranks beyond [`KS`] / [`KC`] are capped).
-    #[serde(flatten)]
-    pub fit: FitSettings,
-}
-
-impl FitOptions {
-    /// A 128 × 128 working image, seed 0, the core's default settings.
-    pub const DEFAULT: Self = Self { size: 128, seed: 0, fit: FitSettings::DEFAULT };
-
-    /// The core's settings for this fit (ranks capped at [`KS`] / [`KC`]).
-    pub fn core(&self) -> FitSettings {
-        FitSettings { ranks: RankSettings { shape: self.fit.ranks.shape.min(KS), color: self.fit.ranks.color.min(KC) }, ..self.fit }
-    }
-
-    /// Checks the ranges (the host's limits, then the core's own check).
-    pub fn validate(&self) -> Result<(), FitRunError> {
-        let f = &self.fit;
-        if !(f.landmarks.contour_sigma_factor > 0.0 && f.landmarks.contour_sigma_factor <= 100.0) {
-            return Err(FitRunError::Settings(format!(
-                "contour sigma factor {} is invalid: it must be in (0, 100]",
-                f.landmarks.contour_sigma_factor
-            )));
-        }
-        if !(f.landmarks.sigma > 0.0 && f.landmarks.sigma <= 0.5) {
-            return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", f.landmarks.sigma)));
-        }
-        if !(16..=1024).contains(&self.size) {
-            return Err(FitRunError::Settings(format!("working size {} is invalid: it must be 16 to 1024 pixels", self.size)));
-        }
-        f.validate().map_err(|_| {
-            FitRunError::Settings("the fit settings are out of range (a σ, share, stride or step size is not positive and finite)".into())
-        })
-    }
-}
-
-impl FitOptions {
-    /// The options `gpmm fit`'s flags give (everything else at the core's defaults), then the
-    /// `PATH=VALUE` overrides of `--set` applied last: the one mapping the CLI and the Python
-    /// package share.
-    #[allow(clippy::too_many_arguments)]
-    pub fn from_flags(
-        size: u32,
-        seed: u64,
-        landmark_steps: u32,
-        image_steps: u32,
-        shape_rank: usize,
-        color_rank: usize,
-        landmark_sigma: f32,
-        contour_sigma: f32,
-        overrides: &[String],
-    ) -> Result<Self, FitRunError> {
-        let d = FitSettings::DEFAULT.with_steps(landmark_steps, image_steps).with_ranks(shape_rank, color_rank);
-        let landmarks = gpmm_core::fit::LandmarkSettings { sigma: landmark_sigma, contour_sigma_factor: contour_sigma, ..d.landmarks };
-        let options = Self { size, seed, fit: FitSettings { landmarks, ..d } };
-        Ok(Self { fit: override_settings(&options.fit, overrides)?, ..options })
-    }
-}
-
-impl Default for FitOptions {
-    fn default() -> Self {
-        Self::DEFAULT
-    }
 }
 
 /// A photo cropped and resampled for fitting, with its landmarks in both images.
@@ -276,26 +206,8 @@ pub fn fit_prepared(
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
     let target = TargetImage::new(&pixels, w, h).map_err(core("target image"))?;
     let valid = vec![true; n_lm];
-    let nv = mm.vertices();
-    let (mut pos, mut alb, mut nor, mut proj) =
-        (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![ProjectedVertex::INVALID; nv]);
-    let (mut pos2, mut alb2, mut nor2) = (vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv], vec![[0.0f32; 3]; nv]);
-    let mut frame_memory = FrameMemory::new(w, h);
-    let (mut basis, mut irradiance) = (vec![[0.0f32; SH_COEFFS]; nv], vec![[0.0f32; 3]; nv]);
-    let shading = ShadingCache::new(ShadingBuffers { basis: &mut basis, irradiance: &mut irradiance }, nv)
-        .map_err(|e| FitRunError::Core { stage: "instance", error: e.into() })?;
-    // Room for the start's shape solve (only when it runs): sampled vertex ids and their
-    // residuals and Jacobian rows.
-    let solve_samples = if core_settings.start.shape_rounds > 0 { nv.div_ceil(core_settings.start.shape_stride.max(1)) } else { 0 };
-    let solve_row = 3 * (core_settings.start.shape_components.min(MAX_SHAPE_SOLVE) + 1);
-    let (mut solve_ids, mut solve_values) = (vec![0u32; solve_samples], vec![0.0f32; solve_samples * solve_row]);
-    let mut inst =
-        Instance::<KS, KC>::new(InstanceBuffers { positions: &mut pos, albedos: &mut alb, normals: &mut nor, projected: &mut proj }, nv)
-            .and_then(|i| i.with_spare(SpareBuffers { positions: &mut pos2, normals: &mut nor2, albedos: &mut alb2 }))
-            .map_err(core("instance"))?
-            .with_frame_cache(frame_memory.cache())
-            .with_shading_cache(shading)
-            .with_solve_scratch(SolveScratch { samples: &mut solve_ids, values: &mut solve_values });
+    let mut buffers = FitBuffers::host(mm.vertices(), w, h, &core_settings);
+    let mut inst = buffers.instance::<KS, KC>().map_err(core("instance"))?;
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);
 
@@ -730,6 +642,70 @@ pub fn check_landmarks(model: &GpModel) -> Result<(), FitRunError> {
 /// Checks in-memory landmarks (`name` stands for their source in messages) against the model and
 /// the photo as a landmark file is checked, prepares the photo and fits: what `gpmm fit` does
 /// after reading its files, for callers that hold the image and points already (the Python package).
+///
+/// # Example
+///
+/// A model built from a tiny closed mesh (no data files) fitted to its own mean face, rendered,
+/// with its four landmarks where the render puts them:
+///
+/// ```
+/// use gpmm_host::fit::{fit_image, FitFlags};
+/// use gpmm_host::gp::kernel::ModelKernel;
+/// use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
+/// use gpmm_host::gp::model::{build_model, BuildOptions};
+/// use gpmm_host::mesh::template::{Mesh, Provenance, Template};
+/// use gpmm_host::render::{render_model, RenderSettings, View};
+///
+/// // An octahedron, 120 × 160 × 100 mm, each face cut in four twice; landmarks at its corners.
+/// let mut positions = vec![[60.0, 0.0, 0.0], [-60.0, 0.0, 0.0], [0.0, 80.0, 0.0], [0.0, -80.0, 0.0], [0.0, 0.0, 50.0], [0.0, 0.0, -50.0]];
+/// let mut triangles: Vec<[u32; 3]> = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+/// for _ in 0..2 {
+///     let mut midpoints = std::collections::HashMap::new();
+///     let mut next = Vec::new();
+///     for t in &triangles {
+///         let mut mid = |a: u32, b: u32| -> u32 {
+///             *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+///                 let (p, q): ([f64; 3], [f64; 3]) = (positions[a as usize], positions[b as usize]);
+///                 positions.push([(p[0] + q[0]) / 2.0, (p[1] + q[1]) / 2.0, (p[2] + q[2]) / 2.0]);
+///                 (positions.len() - 1) as u32
+///             })
+///         };
+///         let (ab, bc, ca) = (mid(t[0], t[1]), mid(t[1], t[2]), mid(t[2], t[0]));
+///         next.extend([[t[0], ab, ca], [ab, t[1], bc], [ca, bc, t[2]], [ab, bc, ca]]);
+///     }
+///     triangles = next;
+/// }
+/// let colors = positions.iter().map(|p| [0.6 + p[0] / 300.0, 0.45, 0.35]).collect();
+/// let template = Template {
+///     mesh: Mesh { positions, colors, triangles },
+///     landmarks: vec![0, 1, 2, 3],
+///     scheme: "corners".into(),
+///     provenance: Provenance { source: "octahedron".into(), scale_mm_per_unit: 1.0, ..Default::default() },
+/// };
+/// let build = BuildOptions {
+///     kernel: ModelKernel::SymmetricFull,
+///     hyperparameters: Default::default(),
+///     rank_shape: RankSpec::Count(8),
+///     rank_color: RankSpec::Count(4),
+///     nystrom: NystromOptions { points: 60, ..Default::default() },
+/// };
+/// let model = build_model(&template, &build, |_, _, _| {});
+///
+/// // The photo: the mean face rendered at 128 × 128 (x right, y up: the top corner near the top).
+/// let settings = RenderSettings { width: 128, height: 128, ..RenderSettings::default() };
+/// let render = render_model(&model, &[], &[], View::default(), &settings)?;
+/// let photo = image::DynamicImage::ImageRgba8(render).to_rgb8();
+/// let landmarks = [[104.0, 64.0], [24.0, 64.0], [64.0, 11.0], [64.0, 117.0]];
+///
+/// // Short chains on a 64 × 64 working image: what the user gave, resolved into the options once.
+/// let flags = FitFlags { size: Some(64), landmark_steps: Some(300), image_steps: Some(20), ..FitFlags::default() };
+/// let options = flags.resolve()?;
+/// let (prepared, outcome) = fit_image(&model, &photo, &landmarks, "corners", &options, &mut |_, _, _| {})?;
+/// assert_eq!(prepared.image.dimensions(), (64, 64));
+/// assert_eq!(outcome.fitted_landmarks.len(), 4);
+/// assert!(outcome.pixel_rmse.is_finite() && outcome.landmark_rmse_px.is_finite());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn fit_image(
     model: &GpModel,
     photo: &RgbImage,

@@ -317,20 +317,20 @@ impl Default for Hyperparameters {
 #[derive(Debug, thiserror::Error)]
 pub enum HyperparameterError {
     /// The TOML could not be parsed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Toml {
         /// File name.
         path: String,
         /// Parser error.
-        source: toml::de::Error,
+        error: toml::de::Error,
     },
     /// The file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// File name.
         path: String,
         /// IO error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A value is out of its valid range.
     #[error("{0}")]
@@ -341,8 +341,8 @@ impl Hyperparameters {
     /// Reads overrides from a TOML file (missing fields keep the paper's defaults).
     pub fn from_toml_file(path: &std::path::Path) -> Result<Self, HyperparameterError> {
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| HyperparameterError::Io { path: name.clone(), source })?;
-        let hp: Self = toml::from_str(&text).map_err(|source| HyperparameterError::Toml { path: name.clone(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|error| HyperparameterError::Io { path: name.clone(), error })?;
+        let hp: Self = toml::from_str(&text).map_err(|error| HyperparameterError::Toml { path: name.clone(), error })?;
         hp.validate().map_err(|e| HyperparameterError::Invalid(format!("{name}: {e}")))?;
         Ok(hp)
     }

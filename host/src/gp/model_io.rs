@@ -16,12 +16,12 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum ModelIoError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// File name.
         path: String,
         /// IO error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is not a valid safetensors container.
     #[error("{path}: not a gpmm model file (safetensors: {message})")]
@@ -110,13 +110,13 @@ pub fn to_bytes(model: &GpModel) -> Result<Vec<u8>, String> {
 pub fn save(model: &GpModel, path: &Path) -> Result<(), ModelIoError> {
     let name = path.display().to_string();
     let bytes = to_bytes(model).map_err(|message| ModelIoError::Invalid { path: name.clone(), message })?;
-    std::fs::write(path, bytes).map_err(|source| ModelIoError::Io { path: name, source })
+    std::fs::write(path, bytes).map_err(|error| ModelIoError::Io { path: name, error })
 }
 
 /// Reads and validates a model file.
 pub fn load(path: &Path) -> Result<GpModel, ModelIoError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| ModelIoError::Io { path: name.clone(), source })?;
+    let bytes = std::fs::read(path).map_err(|error| ModelIoError::Io { path: name.clone(), error })?;
     from_bytes(&bytes, &name)
 }
 

@@ -105,7 +105,7 @@ pub struct EvalImage {
 /// The images of a directory: from its truth.json (a `gpmm synth` set), else every image with a
 /// .pts of the same stem (`NAME.pts`, or one per face: `NAME_0.pts`, `NAME_1.pts`, …).
 pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<EvalImage>, InitError> {
-    let io = |source| InitError::Io { path: dir.to_owned(), source };
+    let io = |error| InitError::Io { path: dir.to_owned(), error };
     let refdir = reference_dir.unwrap_or(dir);
     let truth = dir.join("truth.json");
     if let Ok(text) = std::fs::read_to_string(&truth) {
@@ -152,11 +152,11 @@ pub fn evaluate(
 ) -> Result<(DetectSummary, Vec<DetectImage>), InitError> {
     let mut rows = Vec::new();
     for EvalImage { image, references, yaw_deg: yaw } in images {
-        let img = image::open(image).map_err(|e| InitError::Io { path: image.clone(), source: std::io::Error::other(e) })?.to_rgb8();
+        let img = image::open(image).map_err(|e| InitError::Io { path: image.clone(), error: std::io::Error::other(e) })?.to_rgb8();
         let mut faces = Vec::new();
         for pts in references {
             let reference =
-                read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), source: std::io::Error::other(e.to_string()) })?;
+                read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), error: std::io::Error::other(e.to_string()) })?;
             faces.push(reference.points.iter().map(|p| [p[0], p[1]]).collect::<Vec<[f32; 2]>>());
         }
         let det = init.detect(&img, 0.0, reading)?;

@@ -29,20 +29,20 @@ pub use gpmm_core::fit::INIT_LANDMARK_SIGMA;
 #[derive(Debug, thiserror::Error)]
 pub enum InitError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The IO error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The bytes are not a valid init file.
-    #[error("{path}: not a valid init file: {source}")]
+    #[error("{path}: not a valid init file: {error}")]
     Invalid {
         /// The file.
         path: PathBuf,
         /// What the core's reader refused.
-        source: NetError,
+        error: NetError,
     },
     /// A run of the networks failed.
     #[error("the face networks refused the image: {0}")]
@@ -63,8 +63,8 @@ pub struct InitModel {
 impl InitModel {
     /// Reads and validates an init file.
     pub fn load(path: &Path) -> Result<Self, InitError> {
-        let bytes = std::fs::read(path).map_err(|source| InitError::Io { path: path.to_owned(), source })?;
-        Self::from_bytes(&bytes).map_err(|source| InitError::Invalid { path: path.to_owned(), source })
+        let bytes = std::fs::read(path).map_err(|error| InitError::Io { path: path.to_owned(), error })?;
+        Self::from_bytes(&bytes).map_err(|error| InitError::Invalid { path: path.to_owned(), error })
     }
 
     /// Validates init-file bytes (copied into an aligned buffer).

@@ -7,6 +7,33 @@ use meshopt::{SimplifyOptions, VertexDataAdapter};
 /// Rounds of meshoptimizer, each aiming at fewer triangles, before giving up.
 const MAX_ROUNDS: usize = 40;
 
+/// Why a mesh could not be simplified to its budget.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimplifyError {
+    /// The budget is below the vertices that must be kept.
+    #[error("cannot simplify to {target} vertices: the {locked} landmark vertices must be kept")]
+    BelowLocked {
+        /// The vertex budget.
+        target: usize,
+        /// The locked vertices.
+        locked: usize,
+    },
+    /// Colours or indices do not match the vertices.
+    #[error("inconsistent mesh: colours or indices do not match the vertices")]
+    Inconsistent,
+    /// meshoptimizer refused the vertex data.
+    #[error("meshopt: {0}")]
+    Meshopt(String),
+    /// Every round kept more vertices than the budget.
+    #[error("could not simplify {vertices} vertices to at most {target}")]
+    OverBudget {
+        /// The mesh's vertices.
+        vertices: usize,
+        /// The vertex budget.
+        target: usize,
+    },
+}
+
 /// A simplification: the kept vertex ids (ascending) and the kept triangles in source ids.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Simplified {
@@ -24,16 +51,16 @@ pub fn simplify_to(
     triangles: &[[u32; 3]],
     locked: &[u32],
     target: usize,
-) -> Result<Simplified, String> {
+) -> Result<Simplified, SimplifyError> {
     let n = positions.len();
     if n <= target {
         return Ok(Simplified { kept: (0..n as u32).collect(), triangles: triangles.to_vec() });
     }
     if target < locked.len() {
-        return Err(format!("cannot simplify to {target} vertices: the {} landmark vertices must be kept", locked.len()));
+        return Err(SimplifyError::BelowLocked { target, locked: locked.len() });
     }
     if colors.len() != n || locked.iter().chain(triangles.iter().flatten()).any(|&i| i as usize >= n) {
-        return Err("inconsistent mesh: colours or indices do not match the vertices".into());
+        return Err(SimplifyError::Inconsistent);
     }
     let attributes: Vec<f32> = colors.iter().flatten().copied().collect();
     let weights = [0.5f32; 3];
@@ -43,7 +70,8 @@ pub fn simplify_to(
     }
     let indices: Vec<u32> = triangles.iter().flatten().copied().collect();
     let stride = std::mem::size_of::<[f32; 3]>();
-    let adapter = VertexDataAdapter::new(meshopt::typed_to_bytes(positions), stride, 0).map_err(|e| format!("meshopt: {e}"))?;
+    let adapter =
+        VertexDataAdapter::new(meshopt::typed_to_bytes(positions), stride, 0).map_err(|e| SimplifyError::Meshopt(e.to_string()))?;
     let mut target_indices = ((indices.len() as f64) * target as f64 / n as f64) as usize / 3 * 3;
     for _ in 0..MAX_ROUNDS {
         let out = meshopt::simplify_with_attributes_and_locks(
@@ -75,7 +103,7 @@ pub fn simplify_to(
             break;
         }
     }
-    Err(format!("could not simplify {n} vertices to at most {target}"))
+    Err(SimplifyError::OverBudget { vertices: n, target })
 }
 
 #[cfg(test)]

@@ -131,6 +131,14 @@ pub enum TemplateError {
         /// What is wrong.
         message: String,
     },
+    /// The face crop or the simplification cannot be done as asked.
+    #[error("{}: {error}", path.display())]
+    Crop {
+        /// The mesh file.
+        path: PathBuf,
+        /// What is wrong.
+        error: CropError,
+    },
     /// An option is invalid.
     #[error("{message}")]
     Options {
@@ -179,8 +187,7 @@ pub fn load_template(mesh_path: &Path, landmarks_path: &Path, opts: &TemplateOpt
     }
     let (scheme, landmarks) = read_landmarks_json(landmarks_path)?;
     let (mesh, color_source) = read_mesh_with_info(mesh_path, opts.texture.as_deref(), opts.default_color)?;
-    let bytes =
-        std::fs::read(mesh_path).map_err(|e| MeshIoError::Io { path: mesh_path.to_path_buf(), action: "cannot read", source: e })?;
+    let bytes = std::fs::read(mesh_path).map_err(|e| MeshIoError::Io { path: mesh_path.to_path_buf(), action: "cannot read", error: e })?;
     let sha = Sha256::digest(&bytes);
     let source_sha256 = sha.iter().map(|b| format!("{b:02x}")).collect::<String>();
     let n = mesh.positions.len();
@@ -195,7 +202,7 @@ pub fn load_template(mesh_path: &Path, landmarks_path: &Path, opts: &TemplateOpt
         return Err(lm_err(format!("scheme ibug68 needs {IBUG68_COUNT} landmarks, the file has {}", landmarks.len())));
     }
 
-    let proc_err = |message: String| TemplateError::Processing { path: mesh_path.to_path_buf(), message };
+    let proc_err = |error: CropError| TemplateError::Crop { path: mesh_path.to_path_buf(), error };
     let mut mesh = mesh;
     let mut landmarks = landmarks;
     let scale = if is_ibug {
@@ -387,11 +394,33 @@ impl FaceRegion {
     }
 }
 
+/// Why the face crop or the simplification of a template cannot be done.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CropError {
+    /// The crop needs the iBUG-68 landmarks, inside the mesh.
+    #[error("the face crop needs {IBUG68_COUNT} landmark ids inside the mesh")]
+    Landmarks,
+    /// A landmark vertex would be cut away.
+    #[error("the face crop would drop landmark {index} (vertex {vertex}); check the landmarks or pass --no-crop")]
+    DropsLandmark {
+        /// The landmark's index.
+        index: usize,
+        /// Its vertex id.
+        vertex: u32,
+    },
+    /// The simplification failed.
+    #[error("{0}")]
+    Simplify(crate::mesh::simplify::SimplifyError),
+    /// The simplification left a landmark vertex on no triangle.
+    #[error("simplification left landmark {0} on no triangle; use a larger vertex budget")]
+    LandmarkOffMesh(usize),
+}
+
 /// The vertices (ascending original indices) that the default face crop of step 3 keeps of a mesh
 /// already in the normalized frame (mm, x right, y up, z toward the camera) with iBUG-68 `landmarks`.
-pub fn face_crop_indices(mesh: &Mesh, landmarks: &[u32]) -> Result<Vec<u32>, String> {
+pub fn face_crop_indices(mesh: &Mesh, landmarks: &[u32]) -> Result<Vec<u32>, CropError> {
     if landmarks.len() != IBUG68_COUNT || landmarks.iter().any(|&i| i as usize >= mesh.positions.len()) {
-        return Err(format!("the face crop needs {IBUG68_COUNT} landmark ids inside the mesh"));
+        return Err(CropError::Landmarks);
     }
     let lm: Vec<[f64; 3]> = landmarks.iter().map(|&i| mesh.positions[i as usize]).collect();
     let region = FaceRegion::new(&lm, &CropParams::default());
@@ -408,7 +437,7 @@ pub fn face_crop_indices(mesh: &Mesh, landmarks: &[u32]) -> Result<Vec<u32>, Str
 
 /// Keeps triangles with all vertices inside, then the connected components
 /// containing landmark vertices; compacts and remaps the landmarks.
-fn crop(mesh: &Mesh, landmarks: &[u32], inside: &[bool]) -> Result<(Mesh, Vec<u32>), String> {
+fn crop(mesh: &Mesh, landmarks: &[u32], inside: &[bool]) -> Result<(Mesh, Vec<u32>), CropError> {
     let kept: Vec<[u32; 3]> =
         mesh.triangles.iter().filter(|t| t.iter().all(|&i| inside.get(i as usize).copied().unwrap_or(false))).copied().collect();
     let n = mesh.positions.len();
@@ -423,7 +452,7 @@ fn crop(mesh: &Mesh, landmarks: &[u32], inside: &[bool]) -> Result<(Mesh, Vec<u3
     }
     for (k, &id) in landmarks.iter().enumerate() {
         if !used.get(id as usize).copied().unwrap_or(false) {
-            return Err(format!("the face crop would drop landmark {k} (vertex {id}); check the landmarks or pass --no-crop"));
+            return Err(CropError::DropsLandmark { index: k, vertex: id });
         }
     }
     let mut keep_root = vec![false; n];
@@ -489,10 +518,11 @@ fn compact(mesh: &Mesh, landmarks: &[u32]) -> (Mesh, Vec<u32>) {
 // ----------------------------------------------------------------- simplify
 
 /// Simplifies to at most `target` vertices ([`crate::mesh::simplify`]), landmark vertices locked.
-fn simplify(mesh: &Mesh, landmarks: &[u32], target: usize) -> Result<(Mesh, Vec<u32>), String> {
+fn simplify(mesh: &Mesh, landmarks: &[u32], target: usize) -> Result<(Mesh, Vec<u32>), CropError> {
     let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.map(|v| v as f32)).collect();
     let colors: Vec<[f32; 3]> = mesh.colors.iter().map(|c| c.map(|v| v as f32)).collect();
-    let tris = crate::mesh::simplify::simplify_to(&positions, &colors, &mesh.triangles, landmarks, target)?.triangles;
+    let tris =
+        crate::mesh::simplify::simplify_to(&positions, &colors, &mesh.triangles, landmarks, target).map_err(CropError::Simplify)?.triangles;
     let simplified = Mesh { positions: mesh.positions.clone(), colors: mesh.colors.clone(), triangles: tris };
     let (m, l) = compact(&simplified, landmarks);
     let mut lm_used = vec![false; m.positions.len()];
@@ -502,7 +532,7 @@ fn simplify(mesh: &Mesh, landmarks: &[u32], target: usize) -> Result<(Mesh, Vec<
         }
     }
     if let Some(k) = l.iter().position(|&i| !lm_used[i as usize]) {
-        return Err(format!("simplification left landmark {k} on no triangle; use a larger vertex budget"));
+        return Err(CropError::LandmarkOffMesh(k));
     }
     Ok((m, l))
 }

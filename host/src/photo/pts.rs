@@ -17,12 +17,12 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum PtsError {
     /// The file could not be read.
-    #[error("{}: cannot read the landmark file: {source}", path.display())]
+    #[error("{}: cannot read the landmark file: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The IO error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is not in the iBUG `.pts` format.
     #[error("{}: line {line}: {message}", path.display())]
@@ -144,7 +144,7 @@ pub fn parse_pts(text: &str, one_based: bool, path: &Path) -> Result<Pts, PtsErr
 
 /// Reads and parses a `.pts` file (see [`parse_pts`]).
 pub fn read_pts(path: &Path, one_based: bool) -> Result<Pts, PtsError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PtsError::Io { path: path.to_path_buf(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|error| PtsError::Io { path: path.to_path_buf(), error })?;
     parse_pts(&text, one_based, path)
 }
 

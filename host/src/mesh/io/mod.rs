@@ -50,14 +50,14 @@ use gltf_file::read_gltf;
 #[derive(Debug, thiserror::Error)]
 pub enum MeshIoError {
     /// The file could not be opened, read or written.
-    #[error("{}: {action}: {source}", path.display())]
+    #[error("{}: {action}: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// What was being done ("cannot read", "cannot write").
         action: &'static str,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file extension is not a supported mesh format.
     #[error("{}: unsupported mesh format (expected .ply, .glb or .gltf)", path.display())]
@@ -141,11 +141,11 @@ impl MeshIoError {
     fn texture(path: &Path, message: impl Into<String>) -> Self {
         MeshIoError::Texture { path: path.to_path_buf(), message: message.into() }
     }
-    fn read(path: &Path, source: std::io::Error) -> Self {
-        MeshIoError::Io { path: path.to_path_buf(), action: "cannot read", source }
+    fn read(path: &Path, error: std::io::Error) -> Self {
+        MeshIoError::Io { path: path.to_path_buf(), action: "cannot read", error }
     }
-    fn write(path: &Path, source: std::io::Error) -> Self {
-        MeshIoError::Io { path: path.to_path_buf(), action: "cannot write", source }
+    fn write(path: &Path, error: std::io::Error) -> Self {
+        MeshIoError::Io { path: path.to_path_buf(), action: "cannot write", error }
     }
 }
 
