@@ -15,6 +15,10 @@ use indicatif::ProgressBar;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 
+/// Help heading of the `gpmm train-init` options that each turn off a default of the training,
+/// to measure what that default brings.
+const COMPARISONS: &str = "Comparisons (each turns off a default)";
+
 /// Arguments of `gpmm train-init`.
 #[derive(Debug, Args)]
 pub struct TrainInitArgs {
@@ -41,8 +45,8 @@ pub struct TrainInitArgs {
     pub init_passes: Option<NonZeroUsize>,
     /// Never show the initializer a mirrored crop (by default its second pass over each chunk sees
     /// the crops flipped left-right with mirrored labels, when the model has the 68 iBUG
-    /// landmarks whose pairs say what a mirror swaps); for comparisons.
-    #[arg(long)]
+    /// landmarks whose pairs say what a mirror swaps).
+    #[arg(long, help_heading = COMPARISONS)]
     pub no_mirror: bool,
     /// Write a picture grid of training scenes (what the networks see) to this PNG.
     #[arg(long, value_name = "PNG")]
@@ -56,50 +60,15 @@ pub struct TrainInitArgs {
     #[arg(long, conflicts_with = "head")]
     pub no_head: bool,
     /// Leave the scan's shut eyes shut in every scene (by default most scenes get open eyes
-    /// painted on, with the lid landmarks on the painted lids); for comparisons.
-    #[arg(long)]
+    /// painted on, with the lid landmarks on the painted lids).
+    #[arg(long, help_heading = COMPARISONS)]
     pub shut_eyes: bool,
-    /// Open the mouth in about a third of the scenes: teeth and a dark gap drawn between the lips,
-    /// the inner lip landmarks on its rims (for faces that smile or talk; not the default: it cost
-    /// the closed-mouthed development set 0.4 % of the IOD, docs/evaluation.md, stop 32).
-    #[arg(long)]
-    pub open_mouth: bool,
-    /// Make the skin plainer in this fraction (0..1) of the scenes: the scan's colour diffused over
-    /// the mesh (4-30 steps, blended in by half to all), so the networks also learn faces whose
-    /// colour carries less detail than the scan's (off by default: it did not help the development
-    /// set, docs/evaluation.md, stop 35).
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
-    pub plain_skin: f32,
-    /// Draw each scene's shape coefficients with a standard deviation from LOW..HIGH instead of 1
-    /// (e.g. 0.6,1.5: faces further from the scan than the model's prior draws; off by default:
-    /// 0.6,1.5 did not help the development set, docs/evaluation.md, stop 35).
-    #[arg(long, value_name = "LOW,HIGH", value_delimiter = ',')]
-    pub shape_sigma: Option<Vec<f32>>,
-    /// Scale each scene's colour coefficients (drawn with standard deviation 0.8) by a factor from
-    /// LOW..HIGH (e.g. 1,2.5: skin further from the scan's; off by default: 1,2.5 did not help the
-    /// development sets on two seeds, docs/evaluation.md, stop 38).
-    #[arg(long, value_name = "LOW,HIGH", value_delimiter = ',')]
-    pub colour_spread: Option<Vec<f32>>,
     /// Leave the heads around the faces undressed: bald busts with bare shoulders, as the
     /// template is (by default most heads get fuller hair standing off the skull, some long hair
-    /// hanging behind, and clothes over the shoulders with a torso down to the frame's edge; on
-    /// photos of people the finder's box came out twice the face without them,
-    /// docs/evaluation.md, stop 36); for comparisons.
-    #[arg(long)]
+    /// hanging behind, and clothes over the shoulders with a torso down to the frame's edge;
+    /// without them the finder's box on photos of people came out about twice the face).
+    #[arg(long, help_heading = COMPARISONS)]
     pub undressed: bool,
-    /// Cast shadows in the training scenes (the directional light taken away where the nose,
-    /// brows, hair or chin stand between a vertex and the light, as a sun shadows a face) and put
-    /// 30 % of them in a hard sun (off by default: on two seeds the development sets read no
-    /// better, the yaw a little better, and one shared photo fewer was found,
-    /// docs/evaluation.md, stop 37).
-    #[arg(long)]
-    pub shadows: bool,
-    /// Cut this fraction (0..1) of the initializer's crops from a box further off the face (sizes
-    /// off by a log-spread of 0.25 instead of 0.08, centres by 0.12 face sizes instead of 0.06),
-    /// so that a reading from a poor box lands near enough for the re-centred pass (off by
-    /// default: 0.3 read every development set worse, docs/evaluation.md, stop 36).
-    #[arg(long, value_name = "FRACTION", default_value_t = 0.0)]
-    pub wide_crops: f32,
 }
 
 /// Arguments of `gpmm detect`.
@@ -144,29 +113,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         opts.mirror = false;
     }
     opts.ranges.open_eyes = !a.shut_eyes;
-    opts.ranges.open_mouth = a.open_mouth;
-    if !(0.0..=1.0).contains(&a.plain_skin) {
-        bail!("--plain-skin must be a fraction between 0 and 1, not {}", a.plain_skin);
-    }
-    opts.ranges.plain_skin.fraction = a.plain_skin;
-    if !(0.0..=1.0).contains(&a.wide_crops) {
-        bail!("--wide-crops must be a fraction between 0 and 1, not {}", a.wide_crops);
-    }
-    opts.ranges.wide_crops = a.wide_crops;
     opts.ranges.dressed = !a.undressed;
-    opts.ranges.shadows = a.shadows;
-    if let Some(r) = &a.shape_sigma {
-        match r[..] {
-            [lo, hi] if lo > 0.0 && lo <= hi && hi.is_finite() => opts.ranges.shape_sigma = (lo, hi),
-            _ => bail!("--shape-sigma takes LOW,HIGH with 0 < LOW <= HIGH, not {r:?}"),
-        }
-    }
-    if let Some(r) = &a.colour_spread {
-        match r[..] {
-            [lo, hi] if lo >= 0.0 && lo <= hi && hi.is_finite() => opts.ranges.colour_spread = (lo, hi),
-            _ => bail!("--colour-spread takes LOW,HIGH with 0 <= LOW <= HIGH, not {r:?}"),
-        }
-    }
     let head = if a.no_head {
         None
     } else {

@@ -1,6 +1,6 @@
-//! The geometry shared by the painted eyes and mouths of training scenes (`crate::init::eyes`,
-//! `crate::init::mouth`): an almond-shaped opening between two corner landmarks of the model's
-//! mean face, the face vertices and triangles around it, and the landmarks on its two rims.
+//! The geometry of the painted eyes of training scenes (`crate::init::eyes`): an almond-shaped
+//! opening between two corner landmarks of the model's mean face, the face vertices and triangles
+//! around it, and the landmarks on its two rims.
 //!
 //! Coordinates are an opening's own frame on the mean shape: `s` runs from the first corner (−1)
 //! to the second (+1) along the model's +x, `t` upwards, both in half widths. The shut line (where
@@ -138,11 +138,6 @@ impl Almond {
         let shut_t = rims.iter().map(|st| st[1] / rim(st[0]).max(0.2)).sum::<f32>() / rims.len() as f32;
         let s_of = |v: Vec<(usize, [f32; 2])>| v.into_iter().map(|(k, st)| (k, st[0])).collect();
         Some(Self { vertices, triangles, depth: depths, upper: s_of(up), lower: s_of(low), shut_t, frame })
-    }
-
-    /// A point of the model's frame (mm) as `(s, t)`.
-    pub fn local(&self, p: Vec3) -> [f32; 2] {
-        self.frame.of(p).0
     }
 
     /// The shut line's `t` at `s`.

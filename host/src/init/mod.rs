@@ -8,10 +8,7 @@ pub mod encode;
 pub mod eval;
 pub mod eyes;
 pub mod head;
-pub mod mouth;
 pub mod scene;
-pub mod shadow;
-pub mod skin;
 
 use gpmm_core::net::face::{detect, read_landmarks, write_init_file, Detection, FaceBox, InitFile, Reading};
 use gpmm_core::net::{NetError, NetScratch};

@@ -1,8 +1,7 @@
 //! Trains only the initializer, in float, with one of a few architectures and a budget of fresh
 //! scenes and passes, and reports its median landmark error / IOD and |yaw error| on 600 held-out
 //! crops (cut around the true box with the training's jitter; no finder), in float and after the
-//! training's int8 quantization run by the core: a quick way to see what limits the initializer
-//! (docs/evaluation.md, stops 34 and 35).
+//! training's int8 quantization run by the core: a quick way to see what limits the initializer.
 //! `cargo run --release -p gpmm-train --example init_probe -- MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES`
 //! (VARIANT: base, the default initializer; wide, 1.5× its channels; d256, a 256-wide hidden layer;
 //! r80, an 80 px crop; m12, a crop of 1.2 face sizes; wing, the wing loss on the landmarks;

@@ -319,14 +319,17 @@ pub fn train(
         "yaw_range_deg": opts.ranges.yaw,
         "head_vertices": head.map_or(0, HeadContext::vertices),
         "open_eyes": opts.ranges.open_eyes,
-        "open_mouth": opts.ranges.open_mouth,
-        "plain_skin": opts.ranges.plain_skin.fraction,
-        "shape_sigma": [opts.ranges.shape_sigma.0, opts.ranges.shape_sigma.1],
-        "colour_spread": [opts.ranges.colour_spread.0, opts.ranges.colour_spread.1],
         "aspects": opts.ranges.aspects,
         "dressed": opts.ranges.dressed,
-        "wide_crops": opts.ranges.wide_crops,
-        "shadows": opts.ranges.shadows,
+        // What every scene is, recorded as files have always recorded it: no open mouths, no
+        // plainer skin, the prior's spread of shapes and colours, crops jittered as the finder
+        // misses, no cast shadows.
+        "open_mouth": false,
+        "plain_skin": 0.0f32,
+        "shape_sigma": [1.0f32, 1.0],
+        "colour_spread": [1.0f32, 1.0],
+        "wide_crops": 0.0f32,
+        "shadows": false,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
