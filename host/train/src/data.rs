@@ -1,9 +1,9 @@
 //! Training samples: a rendered scene cut into the finder's letterboxed frame and the
 //! initializer's crop exactly as the core cuts them at run time, with their targets.
 
+use crate::scene::{render_scene, Scene, SceneSource};
 use gpmm_core::net::face::{landmark_box, mirror_outputs};
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
-use gpmm_host::init::scene::{render_scene, Scene, SceneSource};
 use gpmm_host::render::Renderer;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -29,7 +29,7 @@ pub struct Geometry {
 
 impl Geometry {
     /// Length of the initializer's output.
-    pub fn init_outputs(&self) -> usize {
+    pub fn initializer_outputs(&self) -> usize {
         2 * self.landmarks + 3 + self.light
     }
 }
@@ -73,14 +73,14 @@ pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rn
     let mut crop = vec![0i8; geo.crop_side * geo.crop_side * 3];
     sample_rgb(scene.frame.as_raw(), w, h, crop_window, geo.crop_side, &mut crop).ok()?;
     let half = geo.crop_side as f32 * 0.5;
-    let mut target = Vec::with_capacity(geo.init_outputs());
+    let mut target = Vec::with_capacity(geo.initializer_outputs());
     for p in scene.landmarks.iter().take(geo.landmarks) {
         let (a, b) = crop_window.from_source(p[0], p[1]);
         target.extend([a / half - 1.0, b / half - 1.0]);
     }
     target.extend(scene.angles);
     target.extend(scene.light.iter().take(geo.light));
-    (target.len() == geo.init_outputs()).then_some(Sample { frame, cell, place, crop, target })
+    (target.len() == geo.initializer_outputs()).then_some(Sample { frame, cell, place, crop, target })
 }
 
 /// Samples `start..start + count` of the stream drawn with `seed` (rendered in parallel; the
@@ -104,7 +104,7 @@ impl Sample {
     /// roll and the light's x coefficient negated). `None` unless the landmarks are the 68 iBUG
     /// points. The finder's half is kept.
     pub fn mirrored(&self, geo: &Geometry) -> Option<Sample> {
-        if self.crop.len() != geo.crop_side * geo.crop_side * 3 || self.target.len() != geo.init_outputs() {
+        if self.crop.len() != geo.crop_side * geo.crop_side * 3 || self.target.len() != geo.initializer_outputs() {
             return None;
         }
         let mut crop = self.crop.clone();
@@ -132,7 +132,7 @@ mod tests {
             cell: 0,
             place: [0.0; 3],
             crop: (0..n).map(|i| (i % 251) as i8).collect(),
-            target: (0..geo.init_outputs()).map(|i| (i as f32 * 0.37).sin()).collect(),
+            target: (0..geo.initializer_outputs()).map(|i| (i as f32 * 0.37).sin()).collect(),
         }
     }
 

@@ -6,10 +6,10 @@
 //! pushed out along its normals, with strands of varying brightness), sometimes long hair hanging
 //! behind the head, and clothes over the shoulders continued down to the frame's edge.
 
-use crate::gp::model::GpModel;
-use crate::init::head::{Hair, HeadContext, HeadedInstance};
-use crate::render::Instance;
+use crate::scene::head::{Hair, HeadContext, HeadedInstance};
 use gpmm_core::Vec3;
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::render::Instance;
 use image::{Rgb, RgbImage};
 use rand::{Rng, RngExt};
 

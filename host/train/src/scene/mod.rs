@@ -2,14 +2,22 @@
 //! a random face (shape, colour, pose, light, camera, framing) over a procedural background, with
 //! camera effects. Labels come from the model (landmark vertices, pose, light); nothing is
 //! labelled by hand. One scene is a pure function of `(seed, index)`.
+//!
+//! Around the model's face: the template's whole head ([`head`]), dressed with hair and clothes
+//! ([`dress`]), and open eyes painted over the scan's shut ones ([`eyes`]).
 
-use crate::gp::model::GpModel;
-use crate::init::eyes::OpenEyes;
-use crate::init::head::HeadContext;
-use crate::render::{Background, Instance, RenderSettings, Renderer, View};
+mod almond;
+pub mod dress;
+pub mod eyes;
+pub mod head;
+
+use eyes::OpenEyes;
 use gpmm_core::light::SH_COEFFS;
 use gpmm_core::net::face::landmark_box;
 use gpmm_core::{Cull, ShLight};
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::render::{Background, Instance, RenderSettings, Renderer, View};
+use head::HeadContext;
 use image::{Rgb, RgbImage, RgbaImage};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -35,9 +43,9 @@ pub struct SceneRanges {
     pub face_fraction: (f32, f32),
     /// Shape and colour components drawn (standard normal; the rest zero).
     pub components: usize,
-    /// Paint open eyes over the scan's shut ones in most scenes (`crate::init::eyes`).
+    /// Paint open eyes over the scan's shut ones in most scenes (`crate::scene::eyes`).
     pub open_eyes: bool,
-    /// Dress the heads (`crate::init::dress`: fuller and long hair, clothes, a torso).
+    /// Dress the heads (`crate::scene::dress`: fuller and long hair, clothes, a torso).
     pub dressed: bool,
 }
 

@@ -6,9 +6,9 @@ use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
-use gpmm_host::init::eyes::OpenEyes;
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::render::Instance;
+use gpmm_train::scene::eyes::OpenEyes;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
