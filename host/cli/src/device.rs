@@ -32,7 +32,7 @@ pub struct DeviceFitArgs {
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
     /// With --init: the landmark σ (fraction of the working side) of the initializer's landmarks.
-    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::init::INIT_LANDMARK_SIGMA, requires = "init")]
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, requires = "init")]
     pub init_landmark_sigma: f32,
     /// With --init: the camera frame's width (px).
     #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_WIDTH, requires = "init")]
@@ -46,7 +46,7 @@ pub struct DeviceFitArgs {
     #[arg(long, default_value_t = gpmm_core::net::face::DEVICE_REFINE as u32, requires = "init")]
     pub refine: u32,
     /// With --init: smallest finder score (0..1) counted as a face (below it: "no face found").
-    #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE, requires = "init")]
+    #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE, requires = "init")]
     pub min_score: f32,
     /// With --init: side (px) of the working image the device cuts around the face (default and
     /// largest: the profile's, 72 on m4f, 128 on m7; its RAM sits next to the fit's stack).
@@ -101,7 +101,7 @@ pub struct DeviceDetectArgs {
     #[arg(long, default_value_t = gpmm_core::net::face::DEVICE_REFINE as u32)]
     pub refine: u32,
     /// Smallest finder score (0..1) counted as a face.
-    #[arg(long, default_value_t = crate::init::DEFAULT_MIN_SCORE)]
+    #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE)]
     pub min_score: f32,
     /// Also run the core on the host on the same frame and report whether the outputs are bit-identical.
     #[arg(long)]
@@ -321,7 +321,7 @@ pub fn device_detect(a: DeviceDetectArgs) -> Result<()> {
     use gpmm_host::device::detect::{camera_frame, compare, frame_bytes, host_detect, partition_bytes, run_detection};
     let profile =
         gpmm_core::profile::DeviceProfile::by_name(&a.profile).with_context(|| format!("unknown device profile {}", a.profile))?;
-    let mut init = gpmm_host::init::InitModel::load(&a.init)?;
+    let mut init = gpmm_host::detect::Detector::load(&a.init)?;
     let needed = init.file().map(|f| f.scratch_bytes()).unwrap_or(0);
     if needed > profile.net_scratch {
         anyhow::bail!(

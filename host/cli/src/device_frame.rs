@@ -13,7 +13,7 @@ pub fn device_fit_init(a: DeviceFitArgs) -> Result<()> {
     let DeviceFitInputs { blob, landmarks: model_landmarks, ranks, profile } = a.inputs()?;
     let (blob, profile) = (&blob, &profile);
     let init_path = a.init.as_ref().context("--init is required without --landmarks")?;
-    let init = gpmm_host::init::InitModel::load(init_path)?;
+    let init = gpmm_host::detect::Detector::load(init_path)?;
     let needed = init.file().map(|f| f.scratch_bytes()).unwrap_or(0);
     if needed > profile.net_scratch {
         anyhow::bail!(

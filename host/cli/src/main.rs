@@ -4,16 +4,17 @@
 mod build;
 mod calibrate;
 mod demo;
+mod detect;
 mod device;
 mod device_frame;
 mod eval;
 mod fit;
 mod h5;
-mod init;
 mod progress;
 mod register;
 mod render;
 mod synth;
+mod train_init;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -148,14 +149,14 @@ pub enum Command {
     /// Train the face finder and initializer of a landmark-free fit on renders of a model.
     ///
     /// Renders random faces of the model (shape, colour, yaw ±70°, pitch and roll ±30°, SH light,
-    /// cameras of 20-70° field of view, partial framing) on the template's head, most with open
+    /// cameras of 20-70° field of view, partial framing) on the template's head dressed in hair and clothes, most with open
     /// eyes painted over the scan's shut ones, over procedural backgrounds with camera effects
     /// (blur, noise, gamma, white balance, JPEG); the labels are the model's own landmark vertices
     /// (the lid points on the painted lids), pose and light. Trains two small networks with candle
     /// on the CPU (the initializer also sees every crop once in a mirror), quantizes them to int8
     /// (per-channel weight scales) and writes an init file (docs/init-format.md). Prints
     /// the quantized networks' accuracy on held-out renders as JSON. Deterministic for a seed.
-    TrainInit(init::TrainInitArgs),
+    TrainInit(train_init::TrainInitArgs),
     /// Find the face in an image and read its 68 landmarks, pose and light with an init file.
     ///
     /// The finder sees the whole image letterboxed to 96x96 (and, if the face is small in it, a
@@ -163,7 +164,7 @@ pub enum Command {
     /// the found face, then again around its own landmarks (--refine), and that last crop once
     /// more flipped left-right, the two readings averaged (--single-read skips it). Prints JSON
     /// (box, score, angles, landmarks); -o writes a .pts that `gpmm fit --landmarks` reads.
-    Detect(init::DetectArgs),
+    Detect(detect::DetectArgs),
 }
 
 /// Runs the program and maps errors to a message and exit code 1.
@@ -199,8 +200,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::DeviceDetect(a) => device::device_detect(a),
         Command::ImportH5(a) => h5::import_h5(a),
         Command::ExportH5(a) => h5::export_h5(a),
-        Command::TrainInit(a) => init::train_init(a),
-        Command::Detect(a) => init::detect(a),
+        Command::TrainInit(a) => train_init::train_init(a),
+        Command::Detect(a) => detect::detect(a),
         Command::Render(a) => render::render(a),
         Command::Figure(a) => render::figure(a),
     }

@@ -119,7 +119,7 @@ fn fit_without_landmarks_detects_them_first() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap()
     };
     let sigma = |dir: &std::path::Path| json(dir)["settings"]["landmarks"]["sigma"].as_f64().unwrap();
-    assert!((sigma(&out) - f64::from(gpmm_host::init::INIT_LANDMARK_SIGMA)).abs() < 1e-6, "{}", sigma(&out));
+    assert!((sigma(&out) - f64::from(gpmm_host::detect::INIT_LANDMARK_SIGMA)).abs() < 1e-6, "{}", sigma(&out));
     // Short fits from the init file with σ 0.02 and `extra` arguments, written to `dir`.
     let fit_init = |dir: &std::path::Path, extra: &[&str]| {
         let args = ["fit", s(&f.model), s(&image), "--init", s(&f.init), "--init-landmark-sigma", "0.02", "-o", s(dir)];

@@ -4,8 +4,8 @@
 //! back. [`host_detect`] runs the same core code on the host; [`compare`] says whether the two
 //! agree to the bit.
 
+use crate::detect::{DetectError, Detector};
 use crate::device::fit::{figure, run_firmware, tagged_hex, DeviceFitError};
-use crate::init::{InitError, InitModel};
 use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::FormatError;
 use gpmm_core::net::face::{bounded_reading, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox};
@@ -25,7 +25,7 @@ pub const DEFAULT_FRAME_HEIGHT: u32 = 120;
 pub enum DeviceDetectError {
     /// The init file was refused.
     #[error(transparent)]
-    Init(#[from] InitError),
+    Init(#[from] DetectError),
     /// The frame could not be written.
     #[error("the detection frame could not be written: {0}")]
     Frame(FormatError),
@@ -102,20 +102,20 @@ pub fn partition_bytes(init: &[u8], frame: &[u8], profile: &DeviceProfile) -> Re
 /// reaches `min_score` (the core's `find_face` and `read_landmarks` with the device's
 /// [`bounded_reading`], as the firmware runs them).
 pub fn host_detect(
-    init: &mut InitModel,
+    init: &mut Detector,
     frame: &RgbImage,
     min_score: f32,
     refine: u32,
 ) -> Result<(FaceBox, Option<Detection>), DeviceDetectError> {
     let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let file = init.file().map_err(InitError::Run)?;
-    let mut scratch: Box<NetScratch<{ crate::init::HOST_NET_SCRATCH }>> = Box::default();
-    let face = find_face(&file, frame.as_raw(), w, h, &mut scratch).map_err(InitError::Run)?;
+    let file = init.file().map_err(DetectError::Run)?;
+    let mut scratch: Box<NetScratch<{ crate::detect::HOST_NET_SCRATCH }>> = Box::default();
+    let face = find_face(&file, frame.as_raw(), w, h, &mut scratch).map_err(DetectError::Run)?;
     if !is_face(&face, min_score) {
         return Ok((face, None));
     }
     let reading = bounded_reading(&face, refine as usize, file.landmarks);
-    let det = read_landmarks(&file, frame.as_raw(), w, h, face, reading, &mut scratch).map_err(InitError::Run)?;
+    let det = read_landmarks(&file, frame.as_raw(), w, h, face, reading, &mut scratch).map_err(DetectError::Run)?;
     Ok((face, Some(det)))
 }
 

@@ -6,10 +6,10 @@
 //! `gpmm_core::net::crop::crop_for_fit`, the core's standard fit on the blob); [`compare`] says
 //! whether the device's detection and fit records are the host's to the bit.
 
+use crate::detect::{DetectError, Detector, HOST_NET_SCRATCH};
 use crate::device::detect::{self, DeviceDetectError, DeviceDetectReport};
 use crate::device::fit::{self as dfit, host_fit_pixels, DeviceFitError, DeviceFitReport, DEVICE_KC, DEVICE_KS};
 use crate::device::quantize::BlobBuf;
-use crate::init::{InitError, InitModel, HOST_NET_SCRATCH};
 use gpmm_core::fit::{FitSettings, StandardFit};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
 use gpmm_core::format::{frame_fit, FormatError};
@@ -32,7 +32,7 @@ pub enum FrameFitError {
     Detect(#[from] DeviceDetectError),
     /// The init file was refused.
     #[error(transparent)]
-    Init(#[from] InitError),
+    Init(#[from] DetectError),
     /// The core's networks or crop refused the frame on the host.
     #[error("the host's run of the landmark-free start refused the frame: {0}")]
     Net(NetError),
@@ -137,7 +137,7 @@ pub struct HostFrameFit {
 #[allow(clippy::too_many_arguments)]
 pub fn host_frame_fit(
     blob: &BlobBuf,
-    init: &InitModel,
+    init: &Detector,
     frame: &RgbImage,
     min_score: f32,
     refine: u32,
@@ -345,7 +345,7 @@ pub fn frame_section(frame: &RgbImage, min_score: f32, refine: u32) -> Result<Ve
 }
 
 /// Checks that the init file's initializer reads as many landmarks as the model has.
-pub fn check_landmarks(init: &InitModel, model_landmarks: usize) -> Result<(), FrameFitError> {
+pub fn check_landmarks(init: &Detector, model_landmarks: usize) -> Result<(), FrameFitError> {
     let n = init.file().map_err(FrameFitError::Net)?.landmarks;
     if n == model_landmarks {
         Ok(())

@@ -1,5 +1,5 @@
 //! Small f64 3-vector helpers shared by template normalization, synthetic faces and kernels, and
-//! the even-odd point-in-polygon test of the template's outline and the training mouths.
+//! the even-odd point-in-polygon test of the template's outline.
 
 /// `a - b`.
 pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

@@ -1,8 +1,7 @@
 //! Trains only the initializer, in float, with one of a few architectures and a budget of fresh
 //! scenes and passes, and reports its median landmark error / IOD and |yaw error| on 600 held-out
 //! crops (cut around the true box with the training's jitter; no finder), in float and after the
-//! training's int8 quantization run by the core: a quick way to see what limits the initializer
-//! (docs/evaluation.md, stops 34 and 35).
+//! training's int8 quantization run by the core: a quick way to see what limits the initializer.
 //! `cargo run --release -p gpmm-train --example init_probe -- MODEL TEMPLATE_DIR VARIANT CHUNKS PASSES`
 //! (VARIANT: base, the default initializer; wide, 1.5× its channels; d256, a 256-wide hidden layer;
 //! r80, an 80 px crop; m12, a crop of 1.2 face sizes; wing, the wing loss on the landmarks;
@@ -11,12 +10,12 @@ use candle_core::Device;
 use candle_core::{Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use gpmm_core::net::{LayerKind, NetScratch, Network, Shape};
-use gpmm_host::init::encode::encode_network;
-use gpmm_host::init::eval::quantile;
-use gpmm_host::init::head::HeadContext;
-use gpmm_host::init::scene::{Openings, SceneRanges, SceneSource};
+use gpmm_host::detect::eval::quantile;
 use gpmm_train::data::{samples, Geometry, Sample};
+use gpmm_train::encode::encode_network;
 use gpmm_train::nets::{batch_tensor, initializer_specs, Net, Spec};
+use gpmm_train::scene::head::HeadContext;
+use gpmm_train::scene::{Openings, SceneRanges, SceneSource};
 use gpmm_train::train::{cosine_lr, geometry, output_loss, pass_order};
 
 const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
@@ -53,7 +52,7 @@ fn specs(variant: &str, d: usize) -> Vec<Spec> {
 /// The training's loss with the landmarks' L1 replaced by the wing loss (Feng et al. 2018:
 /// `w ln(1 + |x| / ε)` below `w`, `|x| − C` above; `w`, `ε` in crop units).
 fn wing_loss(out: Tensor, batch: &[&Sample], geo: &Geometry, device: &Device, w: f64, eps: f64) -> candle_core::Result<Tensor> {
-    let d = geo.init_outputs();
+    let d = geo.initializer_outputs();
     let l2 = 2 * geo.landmarks;
     let target = Tensor::from_vec(batch.iter().flat_map(|s| s.target.iter().copied()).collect::<Vec<f32>>(), (batch.len(), d), device)?;
     let a = (out - target)?.abs()?;
@@ -205,7 +204,7 @@ fn main() -> Res<()> {
         "m12" => geo.crop_margin = 1.2,
         _ => {}
     }
-    let d = geo.init_outputs();
+    let d = geo.initializer_outputs();
     let device = Device::Cpu;
     let model = match Heat::new(variant, l, d - 2 * l, &device)? {
         Some(h) => Model::Heat(h),

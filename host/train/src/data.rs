@@ -1,9 +1,9 @@
 //! Training samples: a rendered scene cut into the finder's letterboxed frame and the
 //! initializer's crop exactly as the core cuts them at run time, with their targets.
 
+use crate::scene::{render_scene, Scene, SceneSource};
 use gpmm_core::net::face::{landmark_box, mirror_outputs};
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
-use gpmm_host::init::scene::{render_scene, Scene, SceneSource};
 use gpmm_host::render::Renderer;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -29,7 +29,7 @@ pub struct Geometry {
 
 impl Geometry {
     /// Length of the initializer's output.
-    pub fn init_outputs(&self) -> usize {
+    pub fn initializer_outputs(&self) -> usize {
         2 * self.landmarks + 3 + self.light
     }
 }
@@ -49,9 +49,8 @@ pub struct Sample {
     pub target: Vec<f32>,
 }
 
-/// Cuts a scene into a sample; `jitter` draws the crop's error around the true face box (in a
-/// fraction `wide_crops` of the samples a wider error, [`gpmm_host::init::scene::SceneRanges::wide_crops`]).
-pub fn sample_of_scene(scene: &Scene, geo: &Geometry, wide_crops: f32, jitter: &mut impl rand::Rng) -> Option<Sample> {
+/// Cuts a scene into a sample; `jitter` draws the crop's error around the true face box.
+pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rng) -> Option<Sample> {
     let (w, h) = (scene.frame.width() as usize, scene.frame.height() as usize);
     let window = Window::letterbox(w, h, geo.frame_side);
     let mut frame = vec![0i8; geo.frame_side * geo.frame_side * 3];
@@ -65,22 +64,23 @@ pub fn sample_of_scene(scene: &Scene, geo: &Geometry, wide_crops: f32, jitter: &
     }
     let place = [u / cell_px - gx, v / cell_px - gy, (size / window.step / geo.frame_side as f32).ln()];
     let cell = gy as usize * geo.grid + gx as usize;
-    // The crop the initializer sees at run time comes from an imperfect box: jitter it.
+    // The crop the initializer sees at run time comes from an imperfect box: jitter it (standard
+    // deviations: the centre by 0.06 face sizes, the size by 0.08 in log).
     let n = Normal::new(0.0f32, 1.0).ok()?;
-    let (shift, spread) = if wide_crops > 0.0 && jitter.random_bool(f64::from(wide_crops.min(1.0))) { (0.12, 0.25) } else { (0.06, 0.08) };
+    let (shift, spread) = (0.06, 0.08);
     let (jx, jy, js) = (n.sample(jitter) * shift * size, n.sample(jitter) * shift * size, (n.sample(jitter) * spread).exp());
     let crop_window = Window::square(cx + jx, cy + jy, size * js * geo.crop_margin, geo.crop_side);
     let mut crop = vec![0i8; geo.crop_side * geo.crop_side * 3];
     sample_rgb(scene.frame.as_raw(), w, h, crop_window, geo.crop_side, &mut crop).ok()?;
     let half = geo.crop_side as f32 * 0.5;
-    let mut target = Vec::with_capacity(geo.init_outputs());
+    let mut target = Vec::with_capacity(geo.initializer_outputs());
     for p in scene.landmarks.iter().take(geo.landmarks) {
         let (a, b) = crop_window.from_source(p[0], p[1]);
         target.extend([a / half - 1.0, b / half - 1.0]);
     }
     target.extend(scene.angles);
     target.extend(scene.light.iter().take(geo.light));
-    (target.len() == geo.init_outputs()).then_some(Sample { frame, cell, place, crop, target })
+    (target.len() == geo.initializer_outputs()).then_some(Sample { frame, cell, place, crop, target })
 }
 
 /// Samples `start..start + count` of the stream drawn with `seed` (rendered in parallel; the
@@ -92,7 +92,7 @@ pub fn samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, c
             let scene = render_scene(source, seed, i, renderer)?;
             let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(0x5EED) ^ i.wrapping_mul(0xA24B_AED4_963E_E407));
             let _: u32 = rng.random();
-            sample_of_scene(&scene, geo, source.ranges.wide_crops, &mut rng)
+            sample_of_scene(&scene, geo, &mut rng)
         })
         .filter_map(|s| s)
         .collect()
@@ -104,7 +104,7 @@ impl Sample {
     /// roll and the light's x coefficient negated). `None` unless the landmarks are the 68 iBUG
     /// points. The finder's half is kept.
     pub fn mirrored(&self, geo: &Geometry) -> Option<Sample> {
-        if self.crop.len() != geo.crop_side * geo.crop_side * 3 || self.target.len() != geo.init_outputs() {
+        if self.crop.len() != geo.crop_side * geo.crop_side * 3 || self.target.len() != geo.initializer_outputs() {
             return None;
         }
         let mut crop = self.crop.clone();
@@ -132,7 +132,7 @@ mod tests {
             cell: 0,
             place: [0.0; 3],
             crop: (0..n).map(|i| (i % 251) as i8).collect(),
-            target: (0..geo.init_outputs()).map(|i| (i as f32 * 0.37).sin()).collect(),
+            target: (0..geo.initializer_outputs()).map(|i| (i as f32 * 0.37).sin()).collect(),
         }
     }
 

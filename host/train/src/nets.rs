@@ -1,10 +1,10 @@
 //! The two networks as candle graphs with their own seeded initialization, and their export to
-//! the host's float description (`gpmm_host::init::encode::FloatNet`).
+//! the float description the encoder quantizes ([`crate::encode::FloatNet`]).
 
+use crate::encode::{FloatLayer, FloatNet};
 use crate::patches::Patches;
 use candle_core::{DType, Device, Result, Tensor, Var, D};
 use gpmm_core::net::{LayerKind, Shape};
-use gpmm_host::init::encode::{FloatLayer, FloatNet};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rand_xoshiro::Xoshiro256PlusPlus;

@@ -1,6 +1,6 @@
 //! A picture grid of training scenes with their landmarks: what the networks learn from.
 
-use gpmm_host::init::scene::{render_scene, SceneSource};
+use crate::scene::{render_scene, SceneSource};
 use gpmm_host::render::Renderer;
 use image::{imageops, Rgb, RgbImage};
 

@@ -2,15 +2,16 @@
 //! calibration, quantization and a check of the quantized networks through the core's detector.
 
 use crate::data::{samples, Geometry, Sample};
+use crate::encode::init_file_bytes;
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
+use crate::scene::head::HeadContext;
+use crate::scene::{render_scene, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
 use candle_core::{Device, Tensor, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use gpmm_core::net::Shape;
+use gpmm_host::detect::eval::{quantile, score_detection};
+use gpmm_host::detect::Detector;
 use gpmm_host::gp::model::GpModel;
-use gpmm_host::init::eval::{quantile, score_detection};
-use gpmm_host::init::head::HeadContext;
-use gpmm_host::init::scene::{render_scene, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
-use gpmm_host::init::{init_file_bytes, InitModel};
 use gpmm_host::render::Renderer;
 use serde::Serialize;
 
@@ -197,7 +198,7 @@ pub fn initializer_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &D
 
 /// The initializer's loss of outputs `out` (`[batch, outputs]`): weighted L1 against the targets.
 pub fn output_loss(out: Tensor, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
-    let d = geo.init_outputs();
+    let d = geo.initializer_outputs();
     let target = Tensor::from_vec(batch.iter().flat_map(|s| s.target.iter().copied()).collect::<Vec<f32>>(), (batch.len(), d), device)?;
     let weights: Vec<f32> = (0..d)
         .map(|i| {
@@ -234,11 +235,12 @@ pub fn train(
     let device = Device::Cpu;
     let geo = geometry(landmarks);
     let finder = Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device).map_err(err)?;
-    let init = Net::new(Shape { h: geo.crop_side, w: geo.crop_side, c: 3 }, initializer_specs(geo.init_outputs()), opts.seed ^ 1, &device)
-        .map_err(err)?;
+    let initializer =
+        Net::new(Shape { h: geo.crop_side, w: geo.crop_side, c: 3 }, initializer_specs(geo.initializer_outputs()), opts.seed ^ 1, &device)
+            .map_err(err)?;
     let params = |lr| ParamsAdamW { lr, weight_decay: 1e-4, ..Default::default() };
     let mut opt_f = AdamW::new(finder.vars(), params(opts.lr)).map_err(err)?;
-    let mut opt_i = AdamW::new(init.vars(), params(opts.lr)).map_err(err)?;
+    let mut opt_i = AdamW::new(initializer.vars(), params(opts.lr)).map_err(err)?;
     let total = opts.steps();
     let net_total = opts.net_steps();
     let (mut done, mut net_done) = (0, [0usize; 2]);
@@ -275,9 +277,9 @@ pub fn train(
                     opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
                     let li = if opts.mirror && pass % 2 == 1 {
                         let seen: Vec<Sample> = batch.iter().filter_map(|s| s.mirrored(&geo)).collect();
-                        initializer_loss(&init, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(err)?
+                        initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(err)?
                     } else {
-                        initializer_loss(&init, &batch, &geo, &device).map_err(err)?
+                        initializer_loss(&initializer, &batch, &geo, &device).map_err(err)?
                     };
                     opt_i.backward_step(&li).map_err(err)?;
                     i = li.to_scalar::<f32>().map_err(err)?;
@@ -306,7 +308,7 @@ pub fn train(
     let fx = batch_tensor(calib.iter().map(|s| s.frame.as_slice()), geo.frame_side, &device).map_err(err)?;
     let ix = batch_tensor(calib.iter().map(|s| s.crop.as_slice()), geo.crop_side, &device).map_err(err)?;
     let f_float = finder.to_float(&finder.calibrate(&fx).map_err(err)?).map_err(err)?;
-    let i_float = init.to_float(&init.calibrate(&ix).map_err(err)?).map_err(err)?;
+    let i_float = initializer.to_float(&initializer.calibrate(&ix).map_err(err)?).map_err(err)?;
     let metadata = serde_json::json!({
         "format": "gpmm-init",
         "trained_on": model.metadata.kernel,
@@ -319,19 +321,22 @@ pub fn train(
         "yaw_range_deg": opts.ranges.yaw,
         "head_vertices": head.map_or(0, HeadContext::vertices),
         "open_eyes": opts.ranges.open_eyes,
-        "open_mouth": opts.ranges.open_mouth,
-        "plain_skin": opts.ranges.plain_skin.fraction,
-        "shape_sigma": [opts.ranges.shape_sigma.0, opts.ranges.shape_sigma.1],
-        "colour_spread": [opts.ranges.colour_spread.0, opts.ranges.colour_spread.1],
         "aspects": opts.ranges.aspects,
         "dressed": opts.ranges.dressed,
-        "wide_crops": opts.ranges.wide_crops,
-        "shadows": opts.ranges.shadows,
+        // What every scene is, recorded as files have always recorded it: no open mouths, no
+        // plainer skin, the prior's spread of shapes and colours, crops jittered as the finder
+        // misses, no cast shadows.
+        "open_mouth": false,
+        "plain_skin": 0.0f32,
+        "shape_sigma": [1.0f32, 1.0],
+        "colour_spread": [1.0f32, 1.0],
+        "wide_crops": 0.0f32,
+        "shadows": false,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
     let bytes = init_file_bytes(&f_float, &i_float, geo.crop_margin, landmarks as u16, geo.light as u16, &metadata).map_err(err)?;
-    let mut detector = InitModel::from_bytes(&bytes).map_err(err)?;
+    let mut detector = Detector::from_bytes(&bytes).map_err(err)?;
     let v = validate(source, opts.seed.wrapping_add(0x0DD5_EED5), opts.validation, &mut detector)?;
     let file = detector.file().map_err(err)?;
     let report = TrainReport {
@@ -364,7 +369,7 @@ pub struct Validation {
 }
 
 /// Runs the detector on `count` scenes of the stream `seed`.
-pub fn validate(source: SceneSource<'_>, seed: u64, count: usize, detector: &mut InitModel) -> Result<Validation, String> {
+pub fn validate(source: SceneSource<'_>, seed: u64, count: usize, detector: &mut Detector) -> Result<Validation, String> {
     let mut renderer = Renderer::new();
     let (mut found, mut errors, mut yaws, mut scenes) = (0usize, Vec::new(), Vec::new(), 0usize);
     for i in 0..count as u64 {

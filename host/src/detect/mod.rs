@@ -1,19 +1,10 @@
-//! Landmark-free fitting on the host: training scenes rendered from the model ([`scene`]), the
-//! trained networks quantized into an init file ([`encode`]), and the core's finder and
-//! initializer run on an image ([`InitModel`]). Training itself (candle) lives in `gpmm-train`.
+//! The face finder and the initializer read from an init file and run on an image through the
+//! core ([`Detector`]), and measured on images with reference landmarks ([`eval`]). Training
+//! them and writing init files is the `gpmm-train` crate's job.
 
-pub mod almond;
-pub mod dress;
-pub mod encode;
 pub mod eval;
-pub mod eyes;
-pub mod head;
-pub mod mouth;
-pub mod scene;
-pub mod shadow;
-pub mod skin;
 
-use gpmm_core::net::face::{detect, read_landmarks, write_init_file, Detection, FaceBox, InitFile, Reading};
+use gpmm_core::net::face::{detect, read_landmarks, Detection, FaceBox, InitFile, Reading};
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
@@ -25,9 +16,9 @@ pub const HOST_NET_SCRATCH: usize = 64 * 1024;
 /// core's one definition, which `gpmm fit --init` and `gpmm device-fit --init` both default to.
 pub use gpmm_core::fit::INIT_LANDMARK_SIGMA;
 
-/// Why an init file could not be used.
+/// Why an init file could not be read or its networks run.
 #[derive(Debug, thiserror::Error)]
-pub enum InitError {
+pub enum DetectError {
     /// The file could not be read or written.
     #[error("{path}: {error}")]
     Io {
@@ -47,24 +38,22 @@ pub enum InitError {
     /// A run of the networks failed.
     #[error("the face networks refused the image: {0}")]
     Run(NetError),
-    /// The networks could not be encoded.
-    #[error(transparent)]
-    Encode(#[from] encode::EncodeError),
 }
 
-/// An init file loaded into a 4-aligned buffer, with scratch for its networks.
+/// The finder and the initializer of an init file, loaded into a 4-aligned buffer with scratch
+/// for their runs.
 #[derive(Debug)]
-pub struct InitModel {
+pub struct Detector {
     words: Vec<u32>,
     len: usize,
     scratch: Box<NetScratch<HOST_NET_SCRATCH>>,
 }
 
-impl InitModel {
+impl Detector {
     /// Reads and validates an init file.
-    pub fn load(path: &Path) -> Result<Self, InitError> {
-        let bytes = std::fs::read(path).map_err(|error| InitError::Io { path: path.to_owned(), error })?;
-        Self::from_bytes(&bytes).map_err(|error| InitError::Invalid { path: path.to_owned(), error })
+    pub fn load(path: &Path) -> Result<Self, DetectError> {
+        let bytes = std::fs::read(path).map_err(|error| DetectError::Io { path: path.to_owned(), error })?;
+        Self::from_bytes(&bytes).map_err(|error| DetectError::Invalid { path: path.to_owned(), error })
     }
 
     /// Validates init-file bytes (copied into an aligned buffer).
@@ -91,41 +80,22 @@ impl InitModel {
 
     /// Finds and reads the face in `image` as `reading` says; `None` if the finder's score is
     /// below `min_score`.
-    pub fn detect(&mut self, image: &RgbImage, min_score: f32, reading: Reading) -> Result<Option<Detection>, InitError> {
+    pub fn detect(&mut self, image: &RgbImage, min_score: f32, reading: Reading) -> Result<Option<Detection>, DetectError> {
         let (file, scratch) = self.parts()?;
         let (w, h) = image.dimensions();
-        detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(InitError::Run)
+        detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(DetectError::Run)
     }
 
     /// Reads the face in a given box (no finder run), as `reading` says.
-    pub fn read_at(&mut self, image: &RgbImage, face: FaceBox, reading: Reading) -> Result<Detection, InitError> {
+    pub fn read_at(&mut self, image: &RgbImage, face: FaceBox, reading: Reading) -> Result<Detection, DetectError> {
         let (file, scratch) = self.parts()?;
         let (w, h) = image.dimensions();
-        read_landmarks(&file, image.as_raw(), w as usize, h as usize, face, reading, scratch).map_err(InitError::Run)
+        read_landmarks(&file, image.as_raw(), w as usize, h as usize, face, reading, scratch).map_err(DetectError::Run)
     }
 
     /// The parsed file and the scratch its networks run in.
-    fn parts(&mut self) -> Result<(InitFile<'_>, &mut NetScratch<HOST_NET_SCRATCH>), InitError> {
+    fn parts(&mut self) -> Result<(InitFile<'_>, &mut NetScratch<HOST_NET_SCRATCH>), DetectError> {
         let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
-        Ok((InitFile::parse(bytes).map_err(InitError::Run)?, &mut self.scratch))
+        Ok((InitFile::parse(bytes).map_err(DetectError::Run)?, &mut self.scratch))
     }
-}
-
-/// Encodes a finder and an initializer into init-file bytes.
-pub fn init_file_bytes(
-    finder: &encode::FloatNet,
-    initializer: &encode::FloatNet,
-    crop_margin: f32,
-    landmarks: u16,
-    light: u16,
-    metadata: &str,
-) -> Result<Vec<u8>, InitError> {
-    let f = encode::encode_network(finder)?;
-    let i = encode::encode_network(initializer)?;
-    let mut out = vec![0u8; 64 + f.len() + i.len() + metadata.len() + 16];
-    let len =
-        write_init_file(&mut out, &f, &i, crop_margin, landmarks, light, metadata).map_err(|e| InitError::Run(NetError::Format(e)))?;
-    out.truncate(len);
-    InitModel::from_bytes(&out).map_err(InitError::Run)?;
-    Ok(out)
 }

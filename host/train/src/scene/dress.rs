@@ -1,15 +1,15 @@
 //! Clothes and fuller hair for the heads of training scenes. The template is a bald bust with
 //! bare shoulders; people in photos wear clothes, and their hair stands off the skull and often
-//! falls past the ears. On the shared photos the finder's box came out about twice the face
-//! (docs/evaluation.md, stop 36): a head with hair and a body below it is not what it was shown.
+//! falls past the ears. Without them the finder's box on the shared photos came out about twice
+//! the face: a head with hair and a body below it is not what it was shown.
 //! A dressed scene gets, from a random stream of its own: hair with volume (the covered scalp
 //! pushed out along its normals, with strands of varying brightness), sometimes long hair hanging
 //! behind the head, and clothes over the shoulders continued down to the frame's edge.
 
-use crate::gp::model::GpModel;
-use crate::init::head::{Hair, HeadContext, HeadedInstance};
-use crate::render::Instance;
+use crate::scene::head::{Hair, HeadContext, HeadedInstance};
 use gpmm_core::geometry::Vec3;
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::render::Instance;
 use image::{Rgb, RgbImage};
 use rand::{Rng, RngExt};
 

@@ -5,8 +5,9 @@ use gpmm_core::format::FormatError;
 use gpmm_core::model::ibug::ibug68_partner;
 use gpmm_core::net::face::{read_landmarks, FaceBox, Reading, FINDER_CHANNELS, INIT_MAGIC};
 use gpmm_core::net::{LayerKind, NetError, NetScratch, Network, Shape};
-use gpmm_host::init::encode::{encode_network, FloatLayer, FloatNet};
-use gpmm_host::init::{init_file_bytes, InitModel};
+use gpmm_host::detect::Detector;
+use gpmm_train::encode::init_file_bytes;
+use gpmm_train::encode::{encode_network, FloatLayer, FloatNet};
 use image::RgbImage;
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -187,32 +188,32 @@ fn init_bytes(seed: u64) -> Vec<u8> {
 fn init_file_reads_back_and_detects_on_any_image() {
     let bytes = init_bytes(5);
     assert_eq!(&bytes[..4], &INIT_MAGIC);
-    let mut init = InitModel::from_bytes(&bytes).unwrap();
-    let file = init.file().unwrap();
+    let mut detector = Detector::from_bytes(&bytes).unwrap();
+    let file = detector.file().unwrap();
     assert_eq!((file.landmarks, file.light), (68, 12));
-    assert_eq!(file.metadata, "{\"format\":\"gpmm-init\"}");
+    assert_eq!(file.metadata, "{\"format\":\"gpmm-detector\"}");
     // Any image, any aspect: a detection with finite landmarks (random weights: no meaning).
     for (w, h) in [(40u32, 30u32), (17, 50), (1, 1)] {
         let img = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7) as u8, (y * 5) as u8, 100]));
-        let det = init.detect(&img, 0.0, Reading { refine: 2, mirror: true }).unwrap().expect("min score 0 always finds");
+        let det = detector.detect(&img, 0.0, Reading { refine: 2, mirror: true }).unwrap().expect("min score 0 always finds");
         assert_eq!(det.landmarks.len(), 68);
         assert!(det.landmarks.iter().flatten().chain(&det.angles).all(|v| v.is_finite()));
         assert!((0.0..=1.0).contains(&det.face.score));
     }
     // A finder score threshold above 1 finds nothing.
     let img = RgbImage::new(20, 20);
-    assert!(init.detect(&img, 1.5, Reading::passes(0)).unwrap().is_none());
+    assert!(detector.detect(&img, 1.5, Reading::passes(0)).unwrap().is_none());
     // The same bytes always give the same detection.
-    let a = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, Reading::DEFAULT).unwrap();
-    let b = InitModel::from_bytes(&bytes).unwrap().detect(&img, 0.0, Reading::DEFAULT).unwrap();
+    let a = Detector::from_bytes(&bytes).unwrap().detect(&img, 0.0, Reading::DEFAULT).unwrap();
+    let b = Detector::from_bytes(&bytes).unwrap().detect(&img, 0.0, Reading::DEFAULT).unwrap();
     assert_eq!(a, b);
 }
 
 #[test]
 fn the_mirrored_reading_reads_a_mirror_image_as_the_mirror_of_the_face() {
     let bytes = init_bytes(7);
-    let init = InitModel::from_bytes(&bytes).unwrap();
-    let file = init.file().unwrap();
+    let detector = Detector::from_bytes(&bytes).unwrap();
+    let file = detector.file().unwrap();
     let (w, h) = (48u32, 40u32);
     // A smooth, asymmetric image and its mirror image.
     let img = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 5) as u8, (y * 6 + x) as u8, (200 - 3 * x) as u8]));
@@ -249,18 +250,18 @@ fn corrupted_or_truncated_init_files_are_refused() {
     for at in [20, 40, bytes.len() / 2, bytes.len() - 8] {
         let mut bad = bytes.clone();
         bad[at] ^= 0x10;
-        assert!(matches!(InitModel::from_bytes(&bad), Err(NetError::Format(FormatError::Crc { .. }))), "flip at {at}");
+        assert!(matches!(Detector::from_bytes(&bad), Err(NetError::Format(FormatError::Crc { .. }))), "flip at {at}");
     }
     for len in [0, 3, 12, 31, bytes.len() - 1] {
-        assert!(InitModel::from_bytes(&bytes[..len]).is_err(), "truncated to {len}");
+        assert!(Detector::from_bytes(&bytes[..len]).is_err(), "truncated to {len}");
     }
     let mut other = bytes.clone();
     other[0] = b'X';
-    assert!(matches!(InitModel::from_bytes(&other), Err(NetError::Format(FormatError::BadMagic { .. }))));
+    assert!(matches!(Detector::from_bytes(&other), Err(NetError::Format(FormatError::BadMagic { .. }))));
     let mut version = bytes.clone();
     version[4] = 2;
-    assert!(matches!(InitModel::from_bytes(&version), Err(NetError::Format(FormatError::BadVersion { .. }))));
+    assert!(matches!(Detector::from_bytes(&version), Err(NetError::Format(FormatError::BadVersion { .. }))));
     // A missing file names the path.
-    let err = InitModel::load(std::path::Path::new("/nonexistent/x.init")).unwrap_err().to_string();
+    let err = Detector::load(std::path::Path::new("/nonexistent/x.init")).unwrap_err().to_string();
     assert!(err.contains("/nonexistent/x.init"), "{err}");
 }

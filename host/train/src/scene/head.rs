@@ -4,13 +4,13 @@
 //! a little beneath the face (the face wins the depth test, the head fills any seam), and
 //! sometimes given hair. The finder then learns heads, not floating masks.
 
-use crate::gp::model::GpModel;
-use crate::mesh::closest::{closest_on_triangle, Grid};
-use crate::mesh::geometry::dist2;
-use crate::mesh::template::{face_crop_indices, load_template, Template, TemplateError, TemplateOptions};
-use crate::render::Instance;
 use gpmm_core::geometry::Vec3;
 use gpmm_core::render::vertex_normals;
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::mesh::closest::{closest_on_triangle, Grid};
+use gpmm_host::mesh::geometry::dist2;
+use gpmm_host::mesh::template::{face_crop_indices, load_template, Template, TemplateError, TemplateOptions};
+use gpmm_host::render::Instance;
 use rand::{Rng, RngExt};
 use std::path::Path;
 

@@ -7,9 +7,9 @@
 //! and the lid landmarks follow the painted lids, so the labels still say where the lids are.
 //! Each eye is an [`Almond`] between its corners (`s`, `t` in half eye widths).
 
-use crate::gp::model::GpModel;
-use crate::init::almond::{rim, Almond, Opening};
+use crate::scene::almond::{rim, Almond, Opening};
 use gpmm_core::geometry::Vec3;
+use gpmm_host::gp::model::GpModel;
 use rand::{Rng, RngExt};
 
 /// Each eye's corners (iBUG), upper lid points and lower lid points.

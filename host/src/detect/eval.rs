@@ -2,7 +2,7 @@
 //! an independent renderer's set, or photos with .pts files): found rate, landmark error over
 //! the inter-ocular distance, yaw error per |yaw| where a truth.json gives the yaw.
 
-use super::{InitError, InitModel};
+use super::{DetectError, Detector};
 use crate::photo::pts::read_pts;
 use gpmm_core::net::face::{landmark_box, Detection};
 use serde::Serialize;
@@ -104,8 +104,8 @@ pub struct EvalImage {
 
 /// The images of a directory: from its truth.json (a `gpmm synth` set), else every image with a
 /// .pts of the same stem (`NAME.pts`, or one per face: `NAME_0.pts`, `NAME_1.pts`, …).
-pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<EvalImage>, InitError> {
-    let io = |error| InitError::Io { path: dir.to_owned(), error };
+pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<EvalImage>, DetectError> {
+    let io = |error| DetectError::Io { path: dir.to_owned(), error };
     let refdir = reference_dir.unwrap_or(dir);
     let truth = dir.join("truth.json");
     if let Ok(text) = std::fs::read_to_string(&truth) {
@@ -145,21 +145,21 @@ pub fn list_images(dir: &Path, reference_dir: Option<&Path>) -> Result<Vec<EvalI
 /// Detects every listed image and compares with its reference (with several, the face whose
 /// landmarks' box centre is nearest the finder's box: a photo of two people counts the one found).
 pub fn evaluate(
-    init: &mut InitModel,
+    detector: &mut Detector,
     images: &[EvalImage],
     one_based: bool,
     reading: gpmm_core::net::face::Reading,
-) -> Result<(DetectSummary, Vec<DetectImage>), InitError> {
+) -> Result<(DetectSummary, Vec<DetectImage>), DetectError> {
     let mut rows = Vec::new();
     for EvalImage { image, references, yaw_deg: yaw } in images {
-        let img = image::open(image).map_err(|e| InitError::Io { path: image.clone(), error: std::io::Error::other(e) })?.to_rgb8();
+        let img = image::open(image).map_err(|e| DetectError::Io { path: image.clone(), error: std::io::Error::other(e) })?.to_rgb8();
         let mut faces = Vec::new();
         for pts in references {
             let reference =
-                read_pts(pts, one_based).map_err(|e| InitError::Io { path: pts.clone(), error: std::io::Error::other(e.to_string()) })?;
+                read_pts(pts, one_based).map_err(|e| DetectError::Io { path: pts.clone(), error: std::io::Error::other(e.to_string()) })?;
             faces.push(reference.points.iter().map(|p| [p[0], p[1]]).collect::<Vec<[f32; 2]>>());
         }
-        let det = init.detect(&img, 0.0, reading)?;
+        let det = detector.detect(&img, 0.0, reading)?;
         let refs = nearest_face(&faces, det.as_ref().map(|d| (d.face.cx, d.face.cy)));
         let name = image.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let Some(det) = det else {

@@ -2,17 +2,22 @@
 //! a random face (shape, colour, pose, light, camera, framing) over a procedural background, with
 //! camera effects. Labels come from the model (landmark vertices, pose, light); nothing is
 //! labelled by hand. One scene is a pure function of `(seed, index)`.
+//!
+//! Around the model's face: the template's whole head ([`head`]), dressed with hair and clothes
+//! ([`dress`]), and open eyes painted over the scan's shut ones ([`eyes`]).
 
-use crate::gp::model::GpModel;
-use crate::init::eyes::OpenEyes;
-use crate::init::head::HeadContext;
-use crate::init::mouth::OpenMouth;
-use crate::init::shadow::{cast_shadows, SceneLight};
-use crate::init::skin::PlainSkin;
-use crate::render::{Background, Instance, RenderSettings, Renderer, View};
+mod almond;
+pub mod dress;
+pub mod eyes;
+pub mod head;
+
+use eyes::OpenEyes;
 use gpmm_core::net::face::landmark_box;
 use gpmm_core::render::light::SH_COEFFS;
-use gpmm_core::render::Cull;
+use gpmm_core::render::{Cull, ShLight};
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::render::{Background, Instance, RenderSettings, Renderer, View};
+use head::HeadContext;
 use image::{Rgb, RgbImage, RgbaImage};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -38,31 +43,10 @@ pub struct SceneRanges {
     pub face_fraction: (f32, f32),
     /// Shape and colour components drawn (standard normal; the rest zero).
     pub components: usize,
-    /// Range of the standard deviation each scene's shape coefficients are drawn with (a range
-    /// wider than 1 shows faces further from the scan; `(1, 1)`: standard normal, the default).
-    pub shape_sigma: (f32, f32),
-    /// Range of the factor each scene's colour coefficients (drawn with standard deviation 0.8)
-    /// are scaled by (wider than 1: skin further from the scan's; `(1, 1)`, the default, keeps them).
-    pub colour_spread: (f32, f32),
-    /// Paint open eyes over the scan's shut ones in most scenes (`crate::init::eyes`).
+    /// Paint open eyes over the scan's shut ones in most scenes (`crate::scene::eyes`).
     pub open_eyes: bool,
-    /// Draw an open mouth (teeth, dark gap) over the scan's closed one in some scenes
-    /// (`crate::init::mouth`); off by default (docs/evaluation.md, stop 32).
-    pub open_mouth: bool,
-    /// Make the skin plainer in some scenes (`crate::init::skin`); off by default.
-    pub plain_skin: PlainSkin,
-    /// Dress the heads (`crate::init::dress`: fuller and long hair, clothes, a torso); the
-    /// default (docs/evaluation.md, stop 36).
+    /// Dress the heads (`crate::scene::dress`: fuller and long hair, clothes, a torso).
     pub dressed: bool,
-    /// Fraction of the initializer's crops cut from a box further off the face (scale spread
-    /// 0.25 instead of 0.08 in log, shift 0.12 instead of 0.06 face sizes), so that a reading can
-    /// recover from a poor box by re-centring.
-    pub wide_crops: f32,
-    /// Cast shadows of the directional light (`crate::init::shadow`): the nose, brows, hair and
-    /// chin shadow the face as a sun does; and [`SUNLIT_SHARE`] of the scenes in a hard sun. Off
-    /// by default: on two seeds no better on the development sets, and the shared photos' found
-    /// faces 7 → 6 of 7 (docs/evaluation.md, stop 37).
-    pub shadows: bool,
 }
 
 impl Default for SceneRanges {
@@ -73,20 +57,14 @@ impl Default for SceneRanges {
             roll: 30.0,
             fov: (20.0, 70.0),
             frame_side: (128, 256),
-            // Portrait 9:16 and 1:2 since stop 36: on frames twice as tall as wide the finder
-            // found 71-79 % of the development faces; with them 75 and 88 % on two seeds
-            // (docs/evaluation.md).
+            // Portrait 9:16 and 1:2 too: without them the finder found 71-79 % of the
+            // development faces on frames twice as tall as wide, with them 75 and 88 % on two
+            // seeds.
             aspects: vec![1.0, 4.0 / 3.0, 3.0 / 4.0, 16.0 / 9.0, 9.0 / 16.0, 0.5],
             face_fraction: (0.15, 0.8),
             components: 60,
-            shape_sigma: (1.0, 1.0),
-            colour_spread: (1.0, 1.0),
             open_eyes: true,
-            open_mouth: false,
-            plain_skin: PlainSkin::default(),
             dressed: true,
-            wide_crops: 0.0,
-            shadows: false,
         }
     }
 }
@@ -104,15 +82,12 @@ pub struct Scene {
     pub light: Vec<f32>,
 }
 
-/// Share of the scenes lit by a hard sun when [`SceneRanges::shadows`] is on.
-pub const SUNLIT_SHARE: f32 = 0.3;
-
 /// Number of light values a scene labels (SH bands 0 and 1, RGB).
 pub const LIGHT_LABELS: usize = 12;
 
-/// The scene's light as drawn, and the small band-2 coefficients real light has (one per
-/// coefficient, the same in R, G and B).
-fn random_light(rng: &mut impl Rng) -> (SceneLight, [f32; SH_COEFFS - 4]) {
+/// The scene's light as drawn (a tinted ambient part and one directional light), and the small
+/// band-2 coefficients real light has (one per coefficient, the same in R, G and B).
+fn random_light(rng: &mut impl Rng) -> (ShLight, [f32; SH_COEFFS - 4]) {
     // Indoor to outdoor: a tinted ambient part and one directional light from anywhere in front.
     let level = rng.random_range(0.35f32..1.1);
     let tint = [rng.random_range(0.8f32..1.2), 1.0, rng.random_range(0.8f32..1.2)];
@@ -121,7 +96,7 @@ fn random_light(rng: &mut impl Rng) -> (SceneLight, [f32; SH_COEFFS - 4]) {
     let diffuse = tint.map(|t| t * strength);
     let dir = [rng.random_range(-1.0f32..1.0), rng.random_range(-1.0f32..1.0), rng.random_range(0.0f32..1.0)];
     let band2 = std::array::from_fn(|_| rng.random_range(-0.08f32..0.08));
-    (SceneLight { ambient, diffuse, direction: dir }, band2)
+    (ShLight::from_ambient_diffuse(ambient, diffuse, dir), band2)
 }
 
 /// A procedural background: a gradient, value noise at a random scale, and a few shapes.
@@ -207,20 +182,16 @@ fn camera_effects(render: &RgbaImage, back: &RgbImage, rng: &mut impl Rng) -> Rg
     out
 }
 
-/// The eyes and mouth a model's scenes may open, found once on its mean shape.
+/// The eyes a model's scenes may open, found once on its mean shape.
 #[derive(Debug, Clone, Default)]
 pub struct Openings {
     eyes: Option<OpenEyes>,
-    mouth: Option<OpenMouth>,
 }
 
 impl Openings {
-    /// Those of `model` that `ranges` opens (`open_eyes`, `open_mouth`).
+    /// Those of `model` that `ranges` opens (`open_eyes`).
     pub fn of_model(model: &GpModel, ranges: &SceneRanges) -> Self {
-        Self {
-            eyes: if ranges.open_eyes { OpenEyes::of_model(model) } else { None },
-            mouth: if ranges.open_mouth { OpenMouth::of_model(model) } else { None },
-        }
+        Self { eyes: if ranges.open_eyes { OpenEyes::of_model(model) } else { None } }
     }
 }
 
@@ -243,21 +214,8 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
-    let mut shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
-    // Each spread from a stream of its own: the rest of the scene is the same as with standard
-    // draws (and multiplying by 1 changes no coefficient).
-    let spread = |(lo, hi): (f32, f32), stream: (u64, u64)| {
-        if hi > lo {
-            Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(stream.0) ^ stream.1).random_range(lo..=hi)
-        } else {
-            lo
-        }
-    };
-    let shape_spread = spread(ranges.shape_sigma, (0xE703_7ED1_A0B4_28DB, 0x54A));
-    shape.iter_mut().for_each(|c| *c *= shape_spread);
-    let mut color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
-    let colour_spread = spread(ranges.colour_spread, (0xB5AD_4ECE_DA1C_E2A9, 0xC01));
-    color.iter_mut().for_each(|c| *c *= colour_spread);
+    let shape: Vec<f32> = (0..model.shape.rank().min(k)).map(|_| normal.sample(&mut rng)).collect();
+    let color: Vec<f32> = (0..model.color.rank().min(k)).map(|_| normal.sample(&mut rng) * 0.8).collect();
     let mut instance = Instance::of_model(model, &shape, &color).ok()?;
     let view = View {
         yaw: rng.random_range(-ranges.yaw..=ranges.yaw),
@@ -270,18 +228,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let fov_h = rng.random_range(ranges.fov.0..=ranges.fov.1);
     // The settings' field of view is across the shorter side.
     let fov_short = 2.0 * ((fov_h.to_radians() * 0.5).tan() * w.min(h) as f32 / w as f32).atan().to_degrees();
-    let (mut drawn_light, band2) = random_light(&mut rng);
-    if ranges.shadows {
-        // A share of the scenes in a hard sun (a strong directional light, less ambient), from a
-        // stream of its own so that the rest of the scene is drawn as without shadows.
-        let mut sun_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x94D0_49BB_1331_11EB) ^ 0x5C4);
-        if sun_rng.random_bool(f64::from(SUNLIT_SHARE)) {
-            let (more, less) = (sun_rng.random_range(1.5f32..2.5), sun_rng.random_range(0.5f32..0.8));
-            drawn_light.diffuse = drawn_light.diffuse.map(|c| c.max(0.25) * more);
-            drawn_light.ambient = drawn_light.ambient.map(|c| c * less);
-        }
-    }
-    let mut light = drawn_light.sh();
+    let (mut light, band2) = random_light(&mut rng);
     light.coeffs.iter_mut().skip(4).zip(band2).for_each(|(c, b)| *c = [b; 3]);
     let settings = RenderSettings {
         width: w,
@@ -319,17 +266,10 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
         Some(h) => (Some(h.around(model, &instance, &mut rng)), None),
         None => (None, None),
     };
-    // Plainer skin, open eyes and mouths (the scan's are shut), each from a stream of its own so
-    // the rest of the scene is the same with or without them.
+    // Open eyes (the scan's are shut) from a stream of their own, so the rest of the scene is the
+    // same with or without them.
     let mut eye_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ 0xE7E5);
-    let mut mouth_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x8CB9_2BA7_2F3D_8DD7) ^ 0x3047);
-    let mut skin_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xA076_1D64_78BD_642F) ^ 0x5C1);
-    match &mut headed {
-        Some(h) => ranges.plain_skin.apply(&mut h.instance.albedos, &h.triangles, &mut skin_rng),
-        None => ranges.plain_skin.apply(&mut instance.albedos, &model.triangles, &mut skin_rng),
-    };
-    let (eyes, mouth) = (openings.eyes.as_ref(), openings.mouth.as_ref());
-    let mouth_look = mouth.and_then(|m| m.draw(&mut mouth_rng).map(|look| (m, look)));
+    let eyes = openings.eyes.as_ref();
     let opening = eyes.and_then(|e| {
         let albedos = match &mut headed {
             Some(h) => &mut h.instance.albedos[..instance.positions.len()],
@@ -337,13 +277,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
         };
         e.paint(albedos, &mut eye_rng)
     });
-    if ranges.shadows {
-        match &mut headed {
-            Some(h) => cast_shadows(&mut h.instance, &h.triangles, &pose, &drawn_light),
-            None => cast_shadows(&mut instance, &model.triangles, &pose, &drawn_light),
-        };
-    }
-    let (mut render, _) = match &headed {
+    let (render, _) = match &headed {
         Some(h) => renderer.render(&h.instance, &h.triangles, &pose, &settings).ok()?,
         None => renderer.render(&instance, &model.triangles, &pose, &settings).ok()?,
     };
@@ -351,11 +285,6 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let mut landmarks: Vec<[f32; 2]> = model.landmarks.iter().filter_map(|&i| projected(i)).collect();
     if let (Some(eyes), Some(opening)) = (eyes, opening) {
         eyes.relabel_lids(opening, projected, &mut landmarks);
-    }
-    if let Some((mouth, look)) = &mouth_look {
-        let albedos = headed.as_ref().map_or(&instance.albedos, |h| &h.instance.albedos);
-        let light = mouth.irradiance(|v| Some((renderer.projected().get(v as usize)?.color, *albedos.get(v as usize)?)));
-        mouth.paint(look, light, projected, &mut render, &mut landmarks);
     }
     if landmarks.len() != model.landmarks.len() || landmarks.iter().flatten().any(|v| !v.is_finite()) {
         return None;

@@ -1,8 +1,12 @@
 //! Float networks (as trained) quantized into the core's int8 network encoding
-//! (`docs/init-format.md`): per-output-channel weight scales, one activation scale per tensor.
+//! (`docs/init-format.md`): per-output-channel weight scales, one activation scale per tensor;
+//! a finder and an initializer so encoded make an init file.
 
 use gpmm_core::format::bytes::Writer;
+use gpmm_core::format::FormatError;
+use gpmm_core::net::face::write_init_file;
 use gpmm_core::net::{LayerKind, Network, Shape};
+use gpmm_host::detect::Detector;
 
 /// One trained layer in `f32`.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,6 +60,9 @@ pub enum EncodeError {
     /// The encoder's own output did not read back (a bug).
     #[error("the encoded network does not read back: {0}")]
     Readback(gpmm_core::net::NetError),
+    /// The init file around the networks could not be written.
+    #[error("the init file cannot be written: {0}")]
+    File(FormatError),
 }
 
 /// Quantizes and encodes `net`.
@@ -104,5 +111,23 @@ pub fn encode_network(net: &FloatNet) -> Result<Vec<u8>, EncodeError> {
         in_scale = out_scale;
     }
     Network::parse(&out).map_err(EncodeError::Readback)?;
+    Ok(out)
+}
+
+/// Encodes a finder and an initializer into init-file bytes (read back before they are returned).
+pub fn init_file_bytes(
+    finder: &FloatNet,
+    initializer: &FloatNet,
+    crop_margin: f32,
+    landmarks: u16,
+    light: u16,
+    metadata: &str,
+) -> Result<Vec<u8>, EncodeError> {
+    let f = encode_network(finder)?;
+    let i = encode_network(initializer)?;
+    let mut out = vec![0u8; 64 + f.len() + i.len() + metadata.len() + 16];
+    let len = write_init_file(&mut out, &f, &i, crop_margin, landmarks, light, metadata).map_err(EncodeError::File)?;
+    out.truncate(len);
+    Detector::from_bytes(&out).map_err(EncodeError::Readback)?;
     Ok(out)
 }

@@ -1,13 +1,13 @@
-//! The geometry shared by the painted eyes and mouths of training scenes (`crate::init::eyes`,
-//! `crate::init::mouth`): an almond-shaped opening between two corner landmarks of the model's
-//! mean face, the face vertices and triangles around it, and the landmarks on its two rims.
+//! The geometry of the painted eyes of training scenes (`crate::scene::eyes`): an almond-shaped
+//! opening between two corner landmarks of the model's mean face, the face vertices and triangles
+//! around it, and the landmarks on its two rims.
 //!
 //! Coordinates are an opening's own frame on the mean shape: `s` runs from the first corner (−1)
 //! to the second (+1) along the model's +x, `t` upwards, both in half widths. The shut line (where
 //! the scan's rims meet) curves like `1 − s²`, and so do the rims of an opening.
 
-use crate::gp::model::GpModel;
 use gpmm_core::geometry::Vec3;
+use gpmm_host::gp::model::GpModel;
 
 /// Vertices farther than this from the opening's plane (mm) are not part of it.
 const PLANE_MM: f32 = 10.0;
@@ -36,12 +36,10 @@ pub struct Almond {
     lower: Vec<(usize, f32)>,
     /// `t` of the shut line at `s = 0`.
     shut_t: f32,
-    /// The opening's frame on the mean shape.
-    frame: Frame,
 }
 
 /// An opening's frame: origin (mm), the `s`, `t` and out-of-plane directions, half width (mm).
-/// In `f32`, as the measured trainings were made (`crate::mesh::geometry`'s `f64` helpers would
+/// In `f32`, as the measured trainings were made (`gpmm_host::mesh::geometry`'s `f64` helpers would
 /// move borderline vertices and change the trained networks).
 #[derive(Debug, Clone, Copy)]
 struct Frame {
@@ -137,12 +135,7 @@ impl Almond {
         }
         let shut_t = rims.iter().map(|st| st[1] / rim(st[0]).max(0.2)).sum::<f32>() / rims.len() as f32;
         let s_of = |v: Vec<(usize, [f32; 2])>| v.into_iter().map(|(k, st)| (k, st[0])).collect();
-        Some(Self { vertices, triangles, depth: depths, upper: s_of(up), lower: s_of(low), shut_t, frame })
-    }
-
-    /// A point of the model's frame (mm) as `(s, t)`.
-    pub fn local(&self, p: Vec3) -> [f32; 2] {
-        self.frame.of(p).0
+        Some(Self { vertices, triangles, depth: depths, upper: s_of(up), lower: s_of(low), shut_t })
     }
 
     /// The shut line's `t` at `s`.

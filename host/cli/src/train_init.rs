@@ -1,0 +1,136 @@
+//! `gpmm train-init`: the face finder and initializer trained on renders of a model.
+
+use crate::progress::{bar_style, note};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use gpmm_core::model::ibug::IBUG68_POINTS;
+use gpmm_host::gp::model_io;
+use gpmm_train::scene::head::HeadContext;
+use gpmm_train::scene::{Openings, SceneSource};
+use indicatif::ProgressBar;
+use std::num::NonZeroUsize;
+use std::path::{Path, PathBuf};
+
+/// Help heading of the `gpmm train-init` options that each turn off a default of the training,
+/// to measure what that default brings.
+const COMPARISONS: &str = "Comparisons (each turns off a default)";
+
+/// Arguments of `gpmm train-init`.
+#[derive(Debug, Args)]
+pub struct TrainInitArgs {
+    /// Model file (.gpmm) whose renders the networks learn from (its landmark vertices are the labels).
+    pub model: PathBuf,
+    /// Output init file.
+    #[arg(short, long, value_name = "INIT")]
+    pub output: PathBuf,
+    /// Seed of the scenes, the weights and the order (the same seed gives the same file).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// A few seconds of training on a few dozen scenes (for tests: the networks learn little).
+    #[arg(long)]
+    pub quick: bool,
+    /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 30 minutes on 2 cores).
+    #[arg(long, value_name = "N")]
+    pub chunks: Option<NonZeroUsize>,
+    /// The finder's passes over each chunk (each pass shows every scene of the chunk once more,
+    /// in a new order; default 3).
+    #[arg(long, value_name = "N")]
+    pub passes: Option<NonZeroUsize>,
+    /// The initializer's passes over each chunk (default: as many as the finder's).
+    #[arg(long, value_name = "N")]
+    pub init_passes: Option<NonZeroUsize>,
+    /// Never show the initializer a mirrored crop (by default its second pass over each chunk sees
+    /// the crops flipped left-right with mirrored labels, when the model has the 68 iBUG
+    /// landmarks whose pairs say what a mirror swaps).
+    #[arg(long, help_heading = COMPARISONS)]
+    pub no_mirror: bool,
+    /// Write a picture grid of training scenes (what the networks see) to this PNG.
+    #[arg(long, value_name = "PNG")]
+    pub preview: Option<PathBuf>,
+    /// Template directory (one .ply and landmarks_ibug68.json) whose whole head, neck and ears are
+    /// put around the model's faces; it must be the scan the model was built from. Default: the
+    /// data directory's template ($GPMM_DATA or ../shared/data).
+    #[arg(long, value_name = "DIR")]
+    pub head: Option<PathBuf>,
+    /// Render the model's faces alone on the backgrounds, with no head around them.
+    #[arg(long, conflicts_with = "head")]
+    pub no_head: bool,
+    /// Leave the scan's shut eyes shut in every scene (by default most scenes get open eyes
+    /// painted on, with the lid landmarks on the painted lids).
+    #[arg(long, help_heading = COMPARISONS)]
+    pub shut_eyes: bool,
+    /// Leave the heads around the faces undressed: bald busts with bare shoulders, as the
+    /// template is (by default most heads get fuller hair standing off the skull, some long hair
+    /// hanging behind, and clothes over the shoulders with a torso down to the frame's edge;
+    /// without them the finder's box on photos of people came out about twice the face).
+    #[arg(long, help_heading = COMPARISONS)]
+    pub undressed: bool,
+}
+
+/// Runs `gpmm train-init`.
+pub fn train_init(a: TrainInitArgs) -> Result<()> {
+    let model = model_io::load(&a.model)?;
+    let mut opts = if a.quick { gpmm_train::TrainOptions::quick(a.seed) } else { gpmm_train::TrainOptions::full(a.seed) };
+    // Zero chunks or passes are refused by the argument parser (`NonZeroUsize`).
+    opts.chunks = a.chunks.map_or(opts.chunks, NonZeroUsize::get);
+    opts.passes = a.passes.map_or(opts.passes, NonZeroUsize::get);
+    opts.init_passes = a.init_passes.or(a.passes).map_or(opts.init_passes, NonZeroUsize::get);
+    if a.no_mirror {
+        opts.mirror = false;
+    } else if opts.mirror && model.landmarks.len() != IBUG68_POINTS {
+        eprintln!("{}: {} landmarks, not the 68 iBUG ones: no mirrored crops", a.model.display(), model.landmarks.len());
+        opts.mirror = false;
+    }
+    opts.ranges.open_eyes = !a.shut_eyes;
+    opts.ranges.dressed = !a.undressed;
+    let head = if a.no_head {
+        None
+    } else {
+        let dir = a.head.clone().unwrap_or_else(|| gpmm_host::data::template_dir(&gpmm_host::data::default_data_dir()));
+        let (mesh, landmarks) = template_files(&dir).with_context(|| {
+            format!("the head around the faces comes from a template directory: pass --head DIR or --no-head ({})", dir.display())
+        })?;
+        let head = HeadContext::load(&model, &mesh, &landmarks)?;
+        eprintln!("head: {} vertices from {}", head.vertices(), mesh.display());
+        Some(head)
+    };
+    let openings = Openings::of_model(&model, &opts.ranges);
+    let source = SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges, openings: &openings };
+    if let Some(path) = &a.preview {
+        let grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
+        gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    let bar = ProgressBar::new(opts.steps() as u64);
+    bar.set_style(bar_style("{bar:30} {pos}/{len} steps ({msg}) [{elapsed} / ~{duration}]"));
+    let (bytes, report) = gpmm_train::train(&model, head.as_ref(), &opts, |p| match p {
+        gpmm_train::train::Progress::Rendering { chunk } => bar.set_message(format!("rendering chunk {}/{}", chunk + 1, opts.chunks)),
+        gpmm_train::train::Progress::Step { done, finder, initializer, .. } => {
+            bar.set_position(done as u64);
+            bar.set_message(format!("loss {finder:.3} / {initializer:.3}"));
+        }
+        gpmm_train::train::Progress::Validating => bar.set_message("quantizing and validating".to_string()),
+    })
+    .map_err(|e| anyhow::anyhow!("cannot train on {}: {e}", a.model.display()))?;
+    bar.finish_and_clear();
+    std::fs::write(&a.output, &bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
+    note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));
+    println!("{}", serde_json::to_string_pretty(&report)?);
+    Ok(())
+}
+
+/// The mesh (the directory's only .ply) and `landmarks_ibug68.json` of a template directory.
+fn template_files(dir: &Path) -> Result<(PathBuf, PathBuf)> {
+    let entries = std::fs::read_dir(dir).with_context(|| format!("cannot read the directory {}", dir.display()))?;
+    let plys: Vec<PathBuf> =
+        entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("ply"))).collect();
+    let [mesh] = plys.as_slice() else {
+        bail!("{} holds {} .ply files; a template directory holds exactly one", dir.display(), plys.len());
+    };
+    let landmarks = dir.join("landmarks_ibug68.json");
+    if !landmarks.is_file() {
+        bail!("{} is missing", landmarks.display());
+    }
+    Ok((mesh.clone(), landmarks))
+}
