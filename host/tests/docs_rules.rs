@@ -187,7 +187,10 @@ fn anchors(text: &str) -> Vec<String> {
                 _ => None,
             })
             .collect();
-        let repeats = out.iter().filter(|a| **a == slug || a.strip_prefix(&slug).is_some_and(|r| r.starts_with('-') && r[1..].parse::<u32>().is_ok())).count();
+        let repeats = out
+            .iter()
+            .filter(|a| **a == slug || a.strip_prefix(&slug).is_some_and(|r| r.starts_with('-') && r[1..].parse::<u32>().is_ok()))
+            .count();
         out.push(if repeats == 0 { slug } else { format!("{slug}-{repeats}") });
     }
     out
