@@ -1,5 +1,5 @@
 //! Model-building benchmark: symmetric-full from the cropped full-resolution template,
-//! rank 200/200, 2000 Nyström points (issue 14's target: ≤ 2 s, ≤ 1 GiB on 2 cores).
+//! rank 200/200, 2000 Nyström points (the build's budget: ≤ 2 s, ≤ 1 GiB on 2 cores).
 //!
 //! `cargo bench -p gpmm-host --bench build_model` (data from `$GPMM_DATA` or `../shared/data`).
 

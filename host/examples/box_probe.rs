@@ -1,6 +1,6 @@
 //! The initializer alone on photos, from the reference landmarks' box scaled by each of K (no
 //! finder): how far a box too large or too small throws the reading, and how many re-centring
-//! passes bring it back (docs/evaluation.md, stop 36).
+//! passes bring it back (docs/evaluation.md, "Landmark-free start").
 //!
 //! `cargo run --release -p gpmm-host --example box_probe -- INIT REFINE K1,K2,.. IMAGE PTS [IMAGE PTS ..]`
 //! prints, per image, the mean landmark error over the outer-eye-corner distance at each K

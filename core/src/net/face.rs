@@ -188,7 +188,7 @@ pub const SECOND_LOOK_BELOW: f32 = 0.9;
 /// Runs the finder on an RGB frame (`w × h`); the best cell's box, whatever its score.
 ///
 /// The finder first sees the whole frame letterboxed. A face small in that view (a few cells) has
-/// its size read poorly (up to 1.7× too large at 12 px of 96; docs/evaluation.md, stop 33), so
+/// its size read poorly (up to 1.7× too large at 12 px of 96; docs/evaluation.md, "Landmark-free start"), so
 /// when the face is small the finder looks again at a square [`SECOND_LOOK_ZOOM`] face sizes wide
 /// around it, where the face fills a third of its view. That look's box is the result when its
 /// centre lies within the first box (half its size from the first centre); a second look that
@@ -351,7 +351,7 @@ pub fn is_face(face: &FaceBox, min_score: f32) -> bool {
 /// second look of the finder takes one pass's place, and the last pass left is spent on the
 /// mirrored reading of the same crop instead of a re-centred one when the initializer reads the
 /// 68 iBUG points (`landmarks`, [`InitFile::landmarks`]; same runs, points as good or better:
-/// docs/evaluation.md, stop 35). The firmware runs this (its instruction bound,
+/// docs/evaluation.md, "Landmark-free start"). The firmware runs this (its instruction bound,
 /// docs/init-format.md); the host's `gpmm detect` runs all `refine` passes and the mirrored
 /// reading.
 pub fn bounded_reading(face: &FaceBox, refine: usize, landmarks: usize) -> Reading {
@@ -376,7 +376,7 @@ pub struct Reading {
 
 impl Reading {
     /// The host commands' reading: [`DEFAULT_REFINE`] refinement passes and the mirrored second
-    /// reading (stop 35).
+    /// reading.
     pub const DEFAULT: Self = Self { refine: DEFAULT_REFINE, mirror: true };
 
     /// `refine` passes and no mirrored reading (the device's bounded runs).
@@ -433,12 +433,12 @@ pub fn read_landmarks<const A: usize>(
 }
 
 /// How far re-centring may take the crop's size from the finder's box, either way (a factor: the
-/// finder's box was up to 2.6× the face on the shared photos, docs/evaluation.md, stop 36).
+/// finder's box was up to 2.6× the face on the shared photos, docs/evaluation.md, "Landmark-free start").
 pub const MAX_RECENTRE_SCALE: f32 = 3.0;
 
 /// Refinement passes the host's commands use unless told otherwise (three: a crop cut from a box
 /// too large for the face, as photos of people give, needs more than one re-centring to close in;
-/// no change where the box is good; development sets, docs/evaluation.md, stop 36).
+/// no change where the box is good; development sets, docs/evaluation.md, "Landmark-free start").
 pub const DEFAULT_REFINE: usize = 3;
 
 /// Refinement passes the device commands ask the firmware for unless told otherwise: one, which
