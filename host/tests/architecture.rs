@@ -219,18 +219,26 @@ fn crate_references_are_found() {
 
 #[test]
 fn the_core_depends_one_way() {
-    // format, model and render must not import the fit (the fit imports them).
+    // format, model and render must not import the fit (the fit imports them), render not the
+    // model (the model imports it), and geometry, the ground floor, nothing of the crate.
     let src = repo().join("core/src");
-    for (folder, forbidden) in [("format", "fit"), ("model", "fit"), ("render", "fit"), ("render", "format"), ("model", "format")] {
+    let code_of = |f: &Path| {
+        let text = std::fs::read_to_string(f).expect("read source");
+        let code = text.split("#[cfg(test)]").next().unwrap_or("").to_string();
+        code.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n")
+    };
+    let rules = [("format", "fit"), ("model", "fit"), ("render", "fit"), ("render", "format"), ("model", "format"), ("render", "model")];
+    for (folder, forbidden) in rules {
         let mut files = Vec::new();
         rust_files(&src.join(folder), &mut files);
         assert!(!files.is_empty(), "core/src/{folder} has no sources");
         for f in &files {
-            let text = std::fs::read_to_string(f).expect("read source");
-            let code = text.split("#[cfg(test)]").next().unwrap_or("");
-            let code: Vec<&str> = code.lines().filter(|l| !l.trim_start().starts_with("//")).collect();
-            let refs = crate_refs(&code.join("\n"));
+            let refs = crate_refs(&code_of(f));
             assert!(!refs.contains(forbidden), "{} (core {folder}) imports crate::{forbidden}", f.display());
         }
     }
+    let geometry = src.join("geometry.rs");
+    let code = code_of(&geometry);
+    let refs = crate_refs(&code);
+    assert!(refs.is_empty() && !code.contains("super::"), "{} (core geometry) imports {refs:?} of the crate", geometry.display());
 }
