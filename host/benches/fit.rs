@@ -5,12 +5,12 @@
 //! is the cropped template at full resolution, symmetric-full, ranks 200/50 (the ranks a default fit uses).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use gpmm_host::eval::synth::{synthesize, SynthOptions};
 use gpmm_host::fit::{fit_prepared, prepare, FitOptions};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::synth::{synthesize, SynthOptions};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -4,11 +4,11 @@
 //! Modules by concern: meshes, templates and their geometry ([`mesh`]); the paper's
 //! Gaussian-process kernels, their low-rank Nyström/Mercer approximation and the model file
 //! ([`gp`]); rendering through the core's tile rasterizer and figures ([`render`]); photos and
-//! landmark files ([`photo`]); the face finder and initializer of an init file run on
-//! an image ([`detect`]); fitting a model to a photo or a mesh ([`fit`]); the device side:
-//! quantization, the model blob and the firmware run ([`device`]); the paper's evaluation and the
-//! synthetic faces it runs on ([`eval`]); where the data lives ([`data`]); this process's memory
-//! use ([`process`]).
+//! landmark files ([`photo`]); the face finder and initializer of an init file run on an image
+//! ([`detect`]); fitting a model to a photo or a mesh ([`fit`]); the device side: quantization,
+//! the model blob and the firmware run ([`device`]); synthetic faces with known truth
+//! ([`synth`]); the paper's evaluation on them ([`eval`]); where the data lives ([`data`]); this
+//! process's memory use ([`process`]).
 #![deny(missing_docs)]
 
 pub mod data;
@@ -21,3 +21,4 @@ pub mod mesh;
 pub mod photo;
 pub mod process;
 pub mod render;
+pub mod synth;

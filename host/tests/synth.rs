@@ -1,8 +1,8 @@
-//! Synthetic faces with known truth (`gpmm_host::eval::synth`): files, plausibility, determinism, bad input.
+//! Synthetic faces with known truth (`gpmm_host::synth`): files, plausibility, determinism, bad input.
 
 use std::path::{Path, PathBuf};
 
-use gpmm_host::eval::synth::{read_truth, synthesize, write_synth_dir, SynthError, SynthOptions, SynthWorld};
+use gpmm_host::synth::{read_truth, synthesize, write_synth_dir, SynthError, SynthOptions, SynthWorld};
 
 fn data_dir() -> Option<PathBuf> {
     gpmm_host::data::data_dir_for_tests()
@@ -36,7 +36,7 @@ fn synth_writes_files_with_plausible_faces_and_landmarks() {
     assert_eq!(truth.seed, 7);
     assert_eq!(truth.images.len(), 4);
     assert_eq!(truth.identities.len(), 2);
-    assert_eq!(truth.ict.holes.iter().filter(|h| matches!(h, gpmm_host::eval::synth::HoleKind::Eye)).count(), 2, "both eye holes closed");
+    assert_eq!(truth.ict.holes.iter().filter(|h| matches!(h, gpmm_host::synth::HoleKind::Eye)).count(), 2, "both eye holes closed");
     let names: Vec<&str> = truth.images.iter().map(|t| t.image.as_str()).collect();
     assert_eq!(names, ["0000_yaw00.png", "0000_yaw30.png", "0001_yaw00.png", "0001_yaw30.png"]);
 
@@ -220,7 +220,7 @@ fn synth_contact_sheet() {
     let Some(data) = data_dir() else { return };
     let opts = SynthOptions { count: 4, seed: 1, yaws_deg: vec![0.0, 45.0], ..SynthOptions::with_data_dir(&data) };
     let faces = synthesize(&opts, |_, _| {}).unwrap();
-    let sheet = gpmm_host::eval::synth::contact_sheet(&faces, 4);
+    let sheet = gpmm_host::synth::contact_sheet(&faces, 4);
     let out = std::env::var_os("GPMM_SYNTH_SHEET")
         .map(PathBuf::from)
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/images/synth.png"));

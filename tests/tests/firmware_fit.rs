@@ -2,7 +2,7 @@
 //!
 //! A symmetric-full model is built from the template (simplified to 1,000 vertices, 50 + 50
 //! components), quantized for the `m4f` profile into a blob, and fitted to synthetic ICT faces
-//! (`gpmm_host::eval::synth`, known truth):
+//! (`gpmm_host::synth`, known truth):
 //! 1. the same blob, image, landmarks and seed on the host core and in the Cortex-M4F firmware
 //!    under QEMU (the default fit: 5000 landmark + 600 image steps): fitted landmarks within
 //!    0.5 px, best image log-likelihood within 1 %; the firmware's flash, RAM and instruction
@@ -22,12 +22,12 @@ use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
 use gpmm_host::device::quantize::{quantize, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
-use gpmm_host::eval::synth::{synthesize, SynthFace, SynthOptions};
 use gpmm_host::fit::{fit_prepared, prepare, rmse, FitOptions, Prepared};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::synth::{synthesize, SynthFace, SynthOptions};
 use std::path::Path;
 use std::sync::OnceLock;
 

@@ -28,12 +28,12 @@ use gpmm_host::device::frame_fit::{
     compare, frame_section, host_frame_fit, job_bytes, parse_report, partition_bytes, DeviceFrameFitReport, FrameFitParity,
 };
 use gpmm_host::device::quantize::{quantize, Bits, BlobBuf, Profile, QuantizeOptions};
-use gpmm_host::eval::synth::{synthesize, SynthOptions};
 use gpmm_host::fit::FitOptions;
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::synth::{synthesize, SynthOptions};
 use gpmm_train::scene::head::HeadContext;
 use image::RgbImage;
 use std::path::PathBuf;

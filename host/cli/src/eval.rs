@@ -3,7 +3,7 @@
 use crate::progress::{bar_style, note, spinner};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use gpmm_host::eval::recognition::Coefficients;
+use gpmm_host::eval::recognition::fits::Coefficients;
 use gpmm_host::gp::kernel::ModelKernel;
 use indicatif::ProgressBar;
 use std::path::{Path, PathBuf};
@@ -230,7 +230,7 @@ pub fn command_line() -> String {
     std::env::args().map(|a| if a.contains(' ') { format!("'{a}'") } else { a }).collect::<Vec<_>>().join(" ")
 }
 
-fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::eval::synth::SynthOptions) -> gpmm_host::eval::models::ModelFactory {
+fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::synth::SynthOptions) -> gpmm_host::eval::models::ModelFactory {
     use gpmm_host::eval::models::{GpBuild, ModelFactory};
     let q = m.quick;
     let build = GpBuild {
@@ -267,19 +267,15 @@ fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSel
     })
 }
 
-fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> gpmm_host::eval::synth::SynthOptions {
+fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> gpmm_host::synth::SynthOptions {
     let data = data.map(Path::to_path_buf).unwrap_or_else(gpmm_host::data::default_data_dir);
-    gpmm_host::eval::synth::SynthOptions {
-        seed,
-        identity_scale: scale,
-        modes,
-        ..gpmm_host::eval::synth::SynthOptions::with_data_dir(&data)
-    }
+    gpmm_host::synth::SynthOptions { seed, identity_scale: scale, modes, ..gpmm_host::synth::SynthOptions::with_data_dir(&data) }
 }
 
 /// Runs `gpmm eval recognition`.
 pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
-    use gpmm_host::eval::recognition::{evaluate, write_report, FitPlan, Progress, RecognitionReport, SynthSet};
+    use gpmm_host::eval::recognition::report::{markdown, write_report, RecognitionReport};
+    use gpmm_host::eval::recognition::{evaluate, FitPlan, Progress, SynthSet};
     let t0 = Instant::now();
     let q = a.models.quick;
     if !a.synth.is_dir() {
@@ -370,13 +366,13 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         };
         write_report(&report, &out)?;
         if seeds.len() == 1 {
-            println!("{}", gpmm_host::eval::recognition::markdown(&report));
+            println!("{}", markdown(&report));
         }
         eprintln!("wrote recognition.md, .csv, .json and .png to {}", out.display());
         reports.push(report);
     }
     if seeds.len() > 1 {
-        use gpmm_host::eval::recognition_seeds::{markdown, summarize, write_summary};
+        use gpmm_host::eval::recognition::seeds::{markdown, summarize, write_summary};
         let summary = summarize(&seeds, &reports, command_line())?;
         write_summary(&summary, &a.output)?;
         println!("{}", markdown(&summary));

@@ -3,7 +3,7 @@
 use crate::progress::counter;
 use anyhow::{Context, Result};
 use clap::Args;
-use gpmm_host::eval::synth::{contact_sheet, synthesize, write_synth_dir, SynthOptions};
+use gpmm_host::synth::{contact_sheet, synthesize, write_synth_dir, SynthOptions};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -55,7 +55,7 @@ pub fn synth(a: SynthArgs) -> Result<()> {
     opts.yaws_deg = a.yaws;
     opts.size = a.size;
     if a.detector_noise {
-        opts.detector_noise = Some(gpmm_host::eval::synth::detector::DetectorNoise::DEFAULT);
+        opts.detector_noise = Some(gpmm_host::synth::detector::DetectorNoise::DEFAULT);
     }
     opts.validate()?;
     let t0 = Instant::now();

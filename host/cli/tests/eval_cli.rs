@@ -358,8 +358,8 @@ fn eval_and_register_have_help() {
 /// identity's shape lies (up to its own rigid frame) in the span of the upper bound's shape basis.
 #[test]
 fn world_models_match_the_world() {
-    use gpmm_host::eval::synth::{SynthOptions, SynthWorld};
-    use gpmm_host::eval::world::EvalWorld;
+    use gpmm_host::eval::models::scans::EvalWorld;
+    use gpmm_host::synth::{SynthOptions, SynthWorld};
     let Some(f) = fixture() else { return };
     let opts = SynthOptions { seed: 5, ..SynthOptions::with_data_dir(&f.data) };
     let world = EvalWorld::load(&opts).unwrap();

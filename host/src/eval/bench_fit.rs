@@ -19,10 +19,10 @@
 //! (negative: the fit turns the face toward frontal), beside the median pitch and roll errors.
 
 use crate::eval::model_frame::{ModelFrame, ALIGNED_LANDMARKS};
-use crate::eval::synth::{read_truth, ImageTruth};
-use crate::eval::LandmarkSource;
+use crate::eval::{ImageFitError, LandmarkSource};
 use crate::fit::{fit_prepared, load_photo, FitOptions};
 use crate::gp::model::GpModel;
+use crate::synth::{read_truth, ImageTruth};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -243,7 +243,7 @@ pub struct FrameErrors {
 pub enum BenchError {
     /// `truth.json` could not be read.
     #[error(transparent)]
-    Truth(#[from] crate::eval::synth::SynthError),
+    Truth(#[from] crate::synth::SynthError),
     /// The directory holds no images.
     #[error("{0}: truth.json lists no images")]
     Empty(String),
@@ -289,16 +289,16 @@ pub fn bench_one(
     settings: &FitOptions,
     landmarks: &LandmarkSource,
     frame: Option<&ModelFrame>,
-) -> Result<BenchImage, String> {
+) -> Result<BenchImage, ImageFitError> {
     let t0 = Instant::now();
     let pts = landmarks.file(dir, &truth.landmarks_file);
     let prepared = load_photo(model, &dir.join(&truth.image), &pts, false, settings.size, landmarks.calibration())
-        .map_err(|e| format!("{}: {e}", truth.image))?;
-    let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(|e| format!("{}: {e}", truth.image))?;
+        .map_err(ImageFitError::naming(&truth.image))?;
+    let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(ImageFitError::naming(&truth.image))?;
     let seconds = t0.elapsed().as_secs_f64();
     let size = settings.size;
     let fitted: Vec<[f32; 2]> = o.fitted_landmarks.iter().map(|p| prepared.crop.to_original(*p, size)).collect();
-    let shape_only = crate::fit::project_landmarks_of(model, &o.landmark_params, size).map_err(|e| e.to_string())?;
+    let shape_only = crate::fit::project_landmarks_of(model, &o.landmark_params, size).map_err(ImageFitError::naming(&truth.image))?;
     let lm_only: Vec<[f32; 2]> = shape_only.iter().map(|p| prepared.crop.to_original(*p, size)).collect();
     let p = &o.params.pose;
     let in_photo = |angles: [f32; 3]| {
@@ -392,7 +392,7 @@ pub fn bench(
     let total = images.len();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let t0 = Instant::now();
-    let results: Vec<Result<BenchImage, String>> = pool.install(|| {
+    let results: Vec<Result<BenchImage, ImageFitError>> = pool.install(|| {
         images
             .par_iter()
             .map(|t| {
@@ -409,7 +409,7 @@ pub fn bench(
     for r in results {
         match r {
             Ok(b) => ok.push(b),
-            Err(e) => errors.push(e),
+            Err(e) => errors.push(e.to_string()),
         }
     }
     if ok.is_empty() {
@@ -435,7 +435,7 @@ pub fn bench(
         image_chain_lowered_rmse_fraction: lowered,
         per_yaw: per_yaw(&ok),
         model_frame: frame.as_ref().ok().and_then(|_| model_frame_summary(&ok)),
-        model_frame_error: frame.err(),
+        model_frame_error: frame.err().map(|e| e.to_string()),
         face_frame: face_frame_summary(&ok),
         landmarks: landmarks.describe(),
         median_posterior_angles_sd_deg: [0, 1, 2].map(|k| stat(&col(&|b| f64::from(b.posterior_angles_sd_deg[k]))).median),

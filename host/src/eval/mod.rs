@@ -1,24 +1,20 @@
-//! The paper's evaluation on synthetic faces: recognition across yaw ([`recognition`]), the
-//! multi-scan KDE mixture ([`kde`]), the 10-scan PCA baseline ([`pca`]), the generating world as an
-//! upper-bound model ([`world`]), and specificity / generalization / compactness ([`specgen`]),
-//! with line plots ([`plot`]), and fits scored against a synthetic set's truth ([`bench_fit`]).
+//! The paper's evaluation on synthetic faces: recognition across yaw ([`recognition`]) and
+//! specificity / generalization / compactness ([`specgen`]) of the models it compares
+//! ([`models`]: the template kernels, the multi-scan KDE, the PCA baseline and the generating world
+//! as an upper bound), with line plots ([`plot`]), and fits scored against a synthetic set's truth
+//! ([`bench_fit`]).
 //!
 //! Multi-PIE (the paper's recognition data) is not available, so the protocol runs on images
-//! rendered by `gpmm synth` from the ICT-FaceKit identity model: a real face model made by
-//! others, which none of the evaluated models is built from (except the upper bound, on purpose).
+//! rendered by `gpmm synth` ([`crate::synth`]) from the ICT-FaceKit identity model: a real face
+//! model made by others, which none of the evaluated models is built from (except the upper bound,
+//! on purpose).
 
 pub mod bench_fit;
-pub mod kde;
 pub mod model_frame;
 pub mod models;
-pub mod npy;
-pub mod pca;
 pub mod plot;
 pub mod recognition;
-pub mod recognition_seeds;
 pub mod specgen;
-pub mod synth;
-pub mod world;
 
 use std::path::{Path, PathBuf};
 
@@ -40,7 +36,7 @@ pub enum EvalError {
     ModelFile(#[from] crate::gp::model_io::ModelIoError),
     /// The synthetic world or a `gpmm synth` directory could not be read.
     #[error(transparent)]
-    Synth(#[from] crate::eval::synth::SynthError),
+    Synth(#[from] crate::synth::SynthError),
     /// A template or scan could not be imported.
     #[error(transparent)]
     Template(#[from] crate::mesh::template::TemplateError),
@@ -50,9 +46,82 @@ pub enum EvalError {
     /// A registration failed.
     #[error(transparent)]
     Register(#[from] crate::fit::register::RegisterError),
+    /// A chart could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] plot::PlotError),
+    /// A PNG figure could not be written.
+    #[error("{}: cannot write: {error}", path.display())]
+    Png {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        error: image::ImageError,
+    },
+    /// A detector calibration file could not be read (the error names the file).
+    #[error(transparent)]
+    Calibration(#[from] crate::photo::calibration::CalibrationError),
+    /// The fit settings are out of range.
+    #[error(transparent)]
+    Settings(#[from] crate::fit::FitRunError),
+    /// A kernel name is not one of the nine.
+    #[error(transparent)]
+    Kernel(#[from] crate::gp::kernel::UnknownKernel),
+    /// Something could not be written as JSON.
+    #[error("{what}: {error}")]
+    Json {
+        /// What was written.
+        what: &'static str,
+        /// Why it failed.
+        error: serde_json::Error,
+    },
+    /// A directory is not a `gpmm synth` directory.
+    #[error("{} not found: is {} a `gpmm synth` directory?", dir.join("truth.json").display(), dir.display())]
+    NotASynthDir {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// A synth directory has no yaw-0 images to make the gallery of.
+    #[error("{}: no yaw-0 images, so no gallery (render with --yaws 0,...)", .0.display())]
+    NoGallery(PathBuf),
+    /// A synth directory has only yaw-0 images, so no probes.
+    #[error("{}: only yaw-0 images, so no probes", .0.display())]
+    NoProbes(PathBuf),
+    /// A model file lacks the 68 iBUG landmarks an evaluation needs.
+    #[error("{}: the model has {count} landmarks; recognition needs the 68 iBUG landmarks", path.display())]
+    ModelLandmarks {
+        /// The model file.
+        path: PathBuf,
+        /// Its landmark count.
+        count: usize,
+    },
+    /// The worker threads could not be started.
+    #[error("cannot start {jobs} threads: {error}")]
+    Threads {
+        /// The threads asked for.
+        jobs: usize,
+        /// Why.
+        error: rayon::ThreadPoolBuildError,
+    },
     /// The input does not allow the evaluation (e.g. no gallery images, a model without landmarks).
     #[error("{0}")]
     Invalid(String),
+}
+
+/// Why one image of a synthetic set could not be fitted: the image, then the fit's error.
+#[derive(Debug, thiserror::Error)]
+#[error("{image}: {error}")]
+pub struct ImageFitError {
+    /// The image's file name.
+    pub image: String,
+    /// Why its fit failed.
+    pub error: crate::fit::FitRunError,
+}
+
+impl ImageFitError {
+    /// A map from the fit's error to this one, naming `image`.
+    pub(crate) fn naming(image: &str) -> impl FnOnce(crate::fit::FitRunError) -> Self + '_ {
+        move |error| Self { image: image.to_string(), error }
+    }
 }
 
 /// `EvalError::Io` for `path`.
@@ -72,7 +141,7 @@ pub(crate) fn create_dir(path: &Path) -> Result<(), EvalError> {
 
 /// Writes a PNG figure, naming the file on failure.
 pub(crate) fn save_png(image: &image::RgbaImage, path: &Path) -> Result<(), EvalError> {
-    crate::render::figure::save_png(image, path).map_err(|e| EvalError::Invalid(format!("{}: cannot write: {e}", path.display())))
+    crate::render::figure::save_png(image, path).map_err(|error| EvalError::Png { path: path.to_path_buf(), error })
 }
 
 /// The Wilson score interval of `successes` out of `trials` at the normal quantile `z` (1.96 for 95 %).
@@ -123,10 +192,7 @@ impl LandmarkSource {
     /// Landmarks from `dir` (or the set's), corrected with the calibration file `calibration` if given.
     pub fn new(dir: Option<PathBuf>, calibration: Option<&Path>) -> Result<Self, EvalError> {
         let calibration = match calibration {
-            Some(p) => Some((
-                p.to_path_buf(),
-                crate::photo::calibration::LandmarkCalibration::read(p).map_err(|e| EvalError::Invalid(e.to_string()))?,
-            )),
+            Some(p) => Some((p.to_path_buf(), crate::photo::calibration::LandmarkCalibration::read(p)?)),
             None => None,
         };
         Ok(Self { dir, calibration })

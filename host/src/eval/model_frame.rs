@@ -12,12 +12,46 @@
 //! each identity instead was measured too: it moves the truth by identity-dependent amounts the
 //! fit does not follow, widening the pitch spread on the test set from 1.5–1.8° to 1.8–2.1°.)
 
-use crate::eval::synth::{SynthOptions, SynthWorld};
+use crate::fit::FitRunError;
 use crate::gp::model::GpModel;
 use crate::mesh::align::Similarity;
+use crate::synth::{SynthError, SynthOptions, SynthWorld};
 
 /// The iBUG-68 points used for the alignment: all but the jaw contour (0–16).
 pub const ALIGNED_LANDMARKS: std::ops::Range<usize> = 17..68;
+
+/// Why a pose could not be put into a model's or a face's frame.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    /// The model does not have the 68 iBUG landmarks.
+    #[error("the model has {0} landmarks, not the 68 of iBUG-68")]
+    Landmarks(usize),
+    /// A landmark refers to a vertex past its mesh.
+    #[error("{mesh} landmark {landmark} is vertex {vertex}, past the mesh")]
+    PastMesh {
+        /// Which mesh: "model" or "world".
+        mesh: &'static str,
+        /// The landmark number.
+        landmark: usize,
+        /// Its vertex.
+        vertex: usize,
+    },
+    /// The world of the set's options could not be loaded (the error names the file).
+    #[error(transparent)]
+    World(#[from] SynthError),
+    /// The two mean faces' landmarks admit no similarity transform.
+    #[error("the mean faces' landmarks cannot be aligned")]
+    Alignment,
+    /// The landmarks define no face frame.
+    #[error("{0}")]
+    Frame(&'static str),
+    /// The model cannot be fitted.
+    #[error(transparent)]
+    Model(#[from] FitRunError),
+    /// The core refused the fitted shape's coefficients.
+    #[error("{0}")]
+    Shape(gpmm_core::error::FitError),
+}
 
 /// The rotation `R₀` (rows) with `p_world_mean ≈ s R₀ p_model_mean + t` on the inner landmarks.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,26 +62,26 @@ pub struct ModelFrame {
 impl ModelFrame {
     /// Aligns `model`'s mean to the mean face of the world of `options` (the set's `truth.json`
     /// options: the ICT data must be where they say). Errors name what is missing.
-    pub fn new(model: &GpModel, options: &SynthOptions) -> Result<Self, String> {
+    pub fn new(model: &GpModel, options: &SynthOptions) -> Result<Self, FrameError> {
         if model.landmarks.len() != 68 {
-            return Err(format!("the model has {} landmarks, not the 68 of iBUG-68", model.landmarks.len()));
+            return Err(FrameError::Landmarks(model.landmarks.len()));
         }
         let mean = &model.shape.mean;
         let src: Vec<[f64; 3]> = ALIGNED_LANDMARKS
             .map(|k| {
                 let v = model.landmarks[k] as usize;
-                mean.get(v).map(|p| p.map(f64::from)).ok_or_else(|| format!("model landmark {k} is vertex {v}, past the mesh"))
+                mean.get(v).map(|p| p.map(f64::from)).ok_or(FrameError::PastMesh { mesh: "model", landmark: k, vertex: v })
             })
             .collect::<Result<_, _>>()?;
-        let world = SynthWorld::load(options).map_err(|e| e.to_string())?;
+        let world = SynthWorld::load(options)?;
         let (positions, _) = world.mean_face();
         let dst: Vec<[f64; 3]> = ALIGNED_LANDMARKS
             .map(|k| {
                 let v = world.landmarks()[k] as usize;
-                positions.get(v).map(|p| p.map(f64::from)).ok_or_else(|| format!("world landmark {k} is vertex {v}, past the mesh"))
+                positions.get(v).map(|p| p.map(f64::from)).ok_or(FrameError::PastMesh { mesh: "world", landmark: k, vertex: v })
             })
             .collect::<Result<_, _>>()?;
-        let s = Similarity::fit(&src, &dst).ok_or("the mean faces' landmarks cannot be aligned")?;
+        let s = Similarity::fit(&src, &dst).ok_or(FrameError::Alignment)?;
         Ok(Self { rotation: s.rot })
     }
 
@@ -60,21 +94,21 @@ impl ModelFrame {
 /// The fit's yaw, pitch, roll (radians) turned to the fitted face's own iBUG frame
 /// ([`crate::mesh::template::ibug_frame`] of the fitted shape's 68 landmarks, the rule `gpmm
 /// synth` defines its truth by; see [`pose_of_face_frame`]).
-pub fn fit_in_face_frame(model: &GpModel, shape_coeffs: &[f32], fit_rad: [f32; 3]) -> Result<[f32; 3], String> {
+pub fn fit_in_face_frame(model: &GpModel, shape_coeffs: &[f32], fit_rad: [f32; 3]) -> Result<[f32; 3], FrameError> {
     if model.landmarks.len() != 68 {
-        return Err(format!("the model has {} landmarks, not the 68 of iBUG-68", model.landmarks.len()));
+        return Err(FrameError::Landmarks(model.landmarks.len()));
     }
     // The fitted shape's landmark vertices only, as the fitter computes them.
     let mut lm = [[0.0f32; 3]; 68];
-    crate::fit::morphable(model).map_err(|e| e.to_string())?.landmark_positions(shape_coeffs, &mut lm).map_err(|e| e.to_string())?;
+    crate::fit::morphable(model)?.landmark_positions(shape_coeffs, &mut lm).map_err(FrameError::Shape)?;
     pose_of_face_frame(&lm.map(|p| p.map(f64::from)), fit_rad)
 }
 
 /// The yaw, pitch, roll (radians) of the iBUG frame of landmarks `lm` (model coordinates) when
 /// the model is turned by `pose_rad`: `R · Aᵀ`, with `A` the frame's axes (rows) in model
 /// coordinates.
-pub fn pose_of_face_frame(lm: &[[f64; 3]], pose_rad: [f32; 3]) -> Result<[f32; 3], String> {
-    let axes = crate::mesh::template::ibug_frame(lm)?.axes;
+pub fn pose_of_face_frame(lm: &[[f64; 3]], pose_rad: [f32; 3]) -> Result<[f32; 3], FrameError> {
+    let axes = crate::mesh::template::ibug_frame(lm).map_err(FrameError::Frame)?.axes;
     let transposed = [0, 1, 2].map(|i| [axes[0][i], axes[1][i], axes[2][i]]);
     Ok(compose_deg(pose_rad.map(f32::to_degrees), &transposed).map(f32::to_radians))
 }

@@ -29,9 +29,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::fit::register::{basis_instance, basis_matrix, register, PreparedTarget, RegisterOptions, Registration};
 
-use super::plot::{line_chart, side_by_side, Chart, Series};
-use super::world::Scan;
-use super::{create_dir, write_text, EvalError};
+use crate::eval::models::scans::Scan;
+use crate::eval::plot::{line_chart, side_by_side, Chart, PlotError, Series};
+use crate::eval::{create_dir, save_png, write_text, EvalError};
 
 /// Settings of [`evaluate_model`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -261,7 +261,7 @@ pub fn csv(report: &SpecGenReport) -> String {
 }
 
 /// Three panels (specificity, generalization, compactness) for shape or colour.
-pub fn figure(report: &SpecGenReport, shape: bool) -> image::RgbaImage {
+pub fn figure(report: &SpecGenReport, shape: bool) -> Result<image::RgbaImage, PlotError> {
     type Pick = fn(&SpecGenPoint) -> f64;
     let (what, unit, picks): (&str, &str, [Pick; 3]) = if shape {
         ("shape", "mm", [|p| p.specificity_mm, |p| p.generalization_mm, |p| p.compactness_shape])
@@ -282,13 +282,17 @@ pub fn figure(report: &SpecGenReport, shape: bool) -> image::RgbaImage {
                 series: report
                     .models
                     .iter()
-                    .map(|m| Series { label: m.label.clone(), points: m.points.iter().map(|p| (p.k as f64, pick(p))).collect() })
+                    .map(|m| Series {
+                        label: m.label.clone(),
+                        points: m.points.iter().map(|p| (p.k as f64, pick(p))).collect(),
+                        intervals: Vec::new(),
+                    })
                     .collect(),
             };
             line_chart(&chart, 520, 380)
         })
-        .collect();
-    side_by_side(&panels)
+        .collect::<Result<_, _>>()?;
+    Ok(side_by_side(&panels))
 }
 
 /// Writes `specgen.md`, `specgen.csv`, `specgen.json`, `specgen-shape.png` and `specgen-color.png` into `out`.
@@ -296,10 +300,10 @@ pub fn write_report(report: &SpecGenReport, out: &Path) -> Result<(), EvalError>
     create_dir(out)?;
     write_text(&out.join("specgen.md"), &markdown(report))?;
     write_text(&out.join("specgen.csv"), &csv(report))?;
-    let json = serde_json::to_string_pretty(report).map_err(|e| EvalError::Invalid(format!("report: {e}")))?;
+    let json = serde_json::to_string_pretty(report).map_err(|error| EvalError::Json { what: "report", error })?;
     write_text(&out.join("specgen.json"), &(json + "\n"))?;
-    super::save_png(&figure(report, true), &out.join("specgen-shape.png"))?;
-    super::save_png(&figure(report, false), &out.join("specgen-color.png"))?;
+    save_png(&figure(report, true)?, &out.join("specgen-shape.png"))?;
+    save_png(&figure(report, false)?, &out.join("specgen-color.png"))?;
     Ok(())
 }
 

@@ -7,24 +7,19 @@ pub(super) fn mean3(colors: impl Iterator<Item = Vec3>) -> Vec3 {
     s.map(|v| v / n.max(1) as f32)
 }
 
-/// The template's face frame from iBUG-68 landmarks (the same frame `template.rs` normalizes to).
-pub(super) fn face_frame(lm: &[[f64; 3]]) -> Result<([[f64; 3]; 3], [f64; 3]), String> {
-    if lm.len() != IBUG68_COUNT {
-        return Err(format!("need {IBUG68_COUNT} landmarks, got {}", lm.len()));
+/// Maps `points` into the face frame of their iBUG-68 landmarks `ids` (the frame `template.rs`
+/// normalizes to; no scaling). The error says why the landmarks define no frame.
+pub(super) fn to_face_frame(points: &[[f64; 3]], ids: &[u32]) -> Result<Vec<[f64; 3]>, &'static str> {
+    if ids.len() != IBUG68_COUNT {
+        return Err("the face frame needs the 68 iBUG landmarks");
     }
-    let frame = crate::mesh::template::ibug_frame(lm)?;
-    Ok((frame.axes, frame.center))
-}
-
-/// Maps `points` into the face frame of their landmarks `ids` (no scaling).
-pub(super) fn to_face_frame(points: &[[f64; 3]], ids: &[u32]) -> Result<Vec<[f64; 3]>, String> {
     let lm: Vec<[f64; 3]> = ids.iter().map(|&i| points[i as usize]).collect();
-    let (axes, center) = face_frame(&lm)?;
+    let frame = crate::mesh::template::ibug_frame(&lm)?;
     Ok(points
         .iter()
         .map(|p| {
-            let d = sub(*p, center);
-            [dot(axes[0], d), dot(axes[1], d), dot(axes[2], d)]
+            let d = sub(*p, frame.center);
+            [dot(frame.axes[0], d), dot(frame.axes[1], d), dot(frame.axes[2], d)]
         })
         .collect())
 }

@@ -7,7 +7,7 @@
 //! probe is identified as the gallery identity of the highest score. A plain model is the special
 //! case of one component, so [`score`] serves every row of the recognition table.
 
-use super::cosine;
+use crate::eval::cosine;
 
 /// `max_c cos(probe[c], gallery[c])` over the components where both fits exist (`None` if none does).
 pub fn score(probe: &[Option<&[f32]>], gallery: &[Option<&[f32]>]) -> Option<f64> {

@@ -15,14 +15,14 @@
 //!   linear (brightness × tint × exp(bumps)), so its model is the PCA of many sampled albedos.
 //! - **PCA baseline** ([`EvalWorld::pca_model`]): PCA of a few cropped training scans.
 
-use crate::eval::synth::{SynthOptions, SynthWorld};
 use crate::gp::model::GpModel;
 use crate::mesh::geometry::{centroid, dot, sub};
 use crate::mesh::template::{face_crop_indices, ibug_frame};
 use crate::mesh::Mesh;
+use crate::synth::{SynthOptions, SynthWorld};
 
-use super::pca::{covariance_basis, dense_part, learned_metadata, pca_model};
-use super::EvalError;
+use crate::eval::models::pca::{covariance_basis, dense_part, learned_metadata, pca_model};
+use crate::eval::EvalError;
 
 /// First identity number of the training identities (scans for PCA and KDE, colour samples of the upper bound).
 pub const TRAIN_ID_BASE: usize = 1 << 20;
@@ -66,7 +66,7 @@ impl EvalWorld {
         let world = SynthWorld::load(options)?;
         let n_ict = world.summary().vertices;
         let path = options.ict_dir.join("neutral.npy");
-        let (_, raw) = crate::eval::npy::read_f32(&path).map_err(crate::eval::synth::SynthError::from)?;
+        let (_, raw) = crate::synth::npy::read_f32(&path).map_err(crate::synth::SynthError::from)?;
         let raw: Vec<[f64; 3]> = raw.chunks_exact(3).map(|c| [0, 1, 2].map(|k| 10.0 * f64::from(c[k]))).collect();
         if raw.len() != n_ict {
             return Err(EvalError::Invalid(format!("{}: {} vertices, the world has {n_ict}", path.display(), raw.len())));
@@ -171,7 +171,7 @@ impl EvalWorld {
     /// The generating world as a model: exact ICT shape covariance, albedo PCA of `color_samples` identities (rank ≤ `color_rank`).
     pub fn upper_bound_model(&self, color_samples: usize, color_rank: usize) -> Result<GpModel, EvalError> {
         let path = self.options.ict_dir.join("identity_modes.npy");
-        let (shape, modes) = crate::eval::npy::read_f32(&path).map_err(crate::eval::synth::SynthError::from)?;
+        let (shape, modes) = crate::synth::npy::read_f32(&path).map_err(crate::synth::SynthError::from)?;
         let n_ict = self.neutral.len() - self.fans.len();
         let used = self.world.summary().modes;
         if shape.len() != 3 || shape[1] != n_ict || shape[2] != 3 || shape[0] < used {

@@ -5,19 +5,27 @@
 //! through exactly what `gpmm build` does ([`load_template`] + [`build_model`]); the KDE
 //! components are built the same way from scans written as coloured PLY files (`DIR/scans/`),
 //! imported at scale 1 (they already are in millimetres) and face-cropped like the template.
+//!
+//! Besides the template kernels: the multi-scan KDE ([`kde`]), the PCA baseline ([`pca`]) and the
+//! generating world as an upper-bound model, both learned from the world's scans ([`scans`]).
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::eval::synth::SynthOptions;
 use crate::gp::kernel::{Hyperparameters, ModelKernel};
 use crate::gp::lowrank::{NystromOptions, RankSpec};
 use crate::gp::model::{build_model, BuildOptions, GpModel};
 use crate::mesh::template::{load_template, TemplateOptions};
+use crate::synth::SynthOptions;
 
-use super::world::{EvalWorld, TRAIN_ID_BASE};
-use super::{create_dir, io_err, write_text, EvalError};
+pub mod kde;
+pub mod pca;
+pub mod scans;
+
+use crate::eval::recognition::Row;
+use crate::eval::{create_dir, file_sha256, io_err, write_text, EvalError};
+use scans::{EvalWorld, Scan, ICT_ATTRIBUTION, TRAIN_ID_BASE};
 
 /// How GP models are built from a scan (the `gpmm build` options that matter here).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -146,7 +154,7 @@ impl ModelFactory {
         if !ply.is_file() {
             return Err(EvalError::Invalid(format!("template {} not found: pass --data DIR (the shared data directory)", ply.display())));
         }
-        Ok(ModelRecipe::Template { kernel: kernel.name().into(), template_sha256: super::file_sha256(&ply)?, build: self.build })
+        Ok(ModelRecipe::Template { kernel: kernel.name().into(), template_sha256: file_sha256(&ply)?, build: self.build })
     }
 
     /// The recipe of KDE component `index`: simplified to the vertex count of the template models (same budget).
@@ -195,7 +203,7 @@ impl ModelFactory {
         };
         let path = self.dir.join(format!("{stem}.gpmm"));
         let key_path = self.dir.join(format!("{stem}.recipe.json"));
-        let key = serde_json::to_string_pretty(recipe).map_err(|e| EvalError::Invalid(format!("recipe: {e}")))?;
+        let key = serde_json::to_string_pretty(recipe).map_err(|error| EvalError::Json { what: "recipe", error })?;
         if path.is_file() && std::fs::read_to_string(&key_path).is_ok_and(|k| k == key) {
             return Ok((path, false));
         }
@@ -218,8 +226,7 @@ impl ModelFactory {
     fn build(&mut self, recipe: &ModelRecipe) -> Result<GpModel, EvalError> {
         match recipe {
             ModelRecipe::Template { kernel, .. } => {
-                let kernel: ModelKernel =
-                    kernel.parse().map_err(|e: crate::gp::kernel::UnknownKernel| EvalError::Invalid(e.to_string()))?;
+                let kernel: ModelKernel = kernel.parse()?;
                 let (ply, lm) = self.template_paths();
                 let topts = TemplateOptions { vertices: self.build.vertices, ..Default::default() };
                 let template = load_template(&ply, &lm, &topts)?;
@@ -230,18 +237,17 @@ impl ModelFactory {
                 let topts = TemplateOptions { vertices: Some(*vertices), scale: Some(1.0), ..Default::default() };
                 let template = load_template(&ply, &lm, &topts)?;
                 let mut model = build_model(&template, &self.gp_options(ModelKernel::SymmetricFull), |_, _, _| {});
-                model.metadata.template.attribution = Some(super::world::ICT_ATTRIBUTION.into());
+                model.metadata.template.attribution = Some(ICT_ATTRIBUTION.into());
                 Ok(model)
             }
             ModelRecipe::MeanFace { kernel, vertices, .. } => {
-                let kernel: ModelKernel =
-                    kernel.parse().map_err(|e: crate::gp::kernel::UnknownKernel| EvalError::Invalid(e.to_string()))?;
+                let kernel: ModelKernel = kernel.parse()?;
                 let scan = self.world()?.mean_scan();
                 let (ply, lm) = self.write_scan_files(&scan, "mean-face")?;
                 let topts = TemplateOptions { vertices: Some(*vertices), scale: Some(1.0), ..Default::default() };
                 let template = load_template(&ply, &lm, &topts)?;
                 let mut model = build_model(&template, &self.gp_options(kernel), |_, _, _| {});
-                model.metadata.template.attribution = Some(super::world::ICT_ATTRIBUTION.into());
+                model.metadata.template.attribution = Some(ICT_ATTRIBUTION.into());
                 Ok(model)
             }
             ModelRecipe::Pca { count, .. } => self.world()?.pca_model(*count),
@@ -257,17 +263,12 @@ impl ModelFactory {
     }
 
     /// Writes `scan` as `DIR/scans/STEM.ply` with its landmark file `STEM.landmarks.json`.
-    fn write_scan_files(&self, scan: &super::world::Scan, stem: &str) -> Result<(PathBuf, PathBuf), EvalError> {
+    fn write_scan_files(&self, scan: &Scan, stem: &str) -> Result<(PathBuf, PathBuf), EvalError> {
         let scans = self.dir.join("scans");
         create_dir(&scans)?;
         let ply = scans.join(format!("{stem}.ply"));
         let lm = scans.join(format!("{stem}.landmarks.json"));
-        crate::mesh::io::write_ply_with(
-            &ply,
-            &scan.mesh,
-            crate::mesh::io::PlyEncoding::BinaryLittleEndian,
-            &[super::world::ICT_ATTRIBUTION],
-        )?;
+        crate::mesh::io::write_ply_with(&ply, &scan.mesh, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &[ICT_ATTRIBUTION])?;
         let json = serde_json::json!({ "scheme": "ibug68", "vertex_ids": scan.landmarks });
         std::fs::write(&lm, json.to_string()).map_err(io_err(&lm, "cannot write"))?;
         Ok((ply, lm))
@@ -309,8 +310,7 @@ pub type BuildProgress<'a> = dyn FnMut(&str, bool) + 'a;
 impl ModelFactory {
     /// The selected models as table rows (building or reusing their files), in the order
     /// files, kernels, mean-face kernels, upper bound, PCA, KDE. `progress(label, built)` after each model file.
-    pub fn rows(&mut self, sel: &ModelSelection, progress: &mut BuildProgress<'_>) -> Result<Vec<super::recognition::Row>, EvalError> {
-        use super::recognition::Row;
+    pub fn rows(&mut self, sel: &ModelSelection, progress: &mut BuildProgress<'_>) -> Result<Vec<Row>, EvalError> {
         let mut rows: Vec<Row> = Vec::new();
         let mut taken = std::collections::BTreeSet::new();
         for f in &sel.files {

@@ -11,7 +11,7 @@ use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSI
 use crate::mesh::template::Provenance;
 use crate::mesh::Mesh;
 
-use super::EvalError;
+use crate::eval::EvalError;
 
 /// Eigenvalues (descending) and the scaled dense basis (`rank × values`, row-major) of `f Σ d_j d_jᵀ`.
 ///

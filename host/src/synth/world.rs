@@ -57,7 +57,7 @@ impl SynthWorld {
         }
 
         // The neutral in its face frame (the albedo is transferred there; bump centres live there).
-        let neutral_face = to_face_frame(&neutral, &landmarks).map_err(|m| data_err(&lm_path, m))?;
+        let neutral_face = to_face_frame(&neutral, &landmarks).map_err(|m| data_err(&lm_path, m.to_string()))?;
         // Winding: counter-clockwise seen from outside means the summed normal points toward +z (the camera).
         let mut nz = 0.0;
         for t in &triangles {

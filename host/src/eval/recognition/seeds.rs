@@ -2,8 +2,8 @@
 //! seed's pooled accuracy moves by several points with the chains' random path, so a decision
 //! between two settings reads the mean and the spread of a few seeds.
 
-use super::recognition::RecognitionReport;
-use super::{create_dir, write_text, EvalError};
+use super::report::RecognitionReport;
+use crate::eval::{create_dir, write_text, EvalError};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -94,7 +94,7 @@ pub fn markdown(s: &SeedSummary) -> String {
 pub fn write_summary(s: &SeedSummary, out: &Path) -> Result<(), EvalError> {
     create_dir(out)?;
     write_text(&out.join("seeds.md"), &markdown(s))?;
-    let json = serde_json::to_string_pretty(s).map_err(|e| EvalError::Invalid(format!("seed summary: {e}")))?;
+    let json = serde_json::to_string_pretty(s).map_err(|error| EvalError::Json { what: "seed summary", error })?;
     write_text(&out.join("seeds.json"), &(json + "\n"))
 }
 

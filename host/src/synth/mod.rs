@@ -80,6 +80,7 @@ use serde::{Deserialize, Serialize};
 
 mod albedo;
 pub mod detector;
+pub mod npy;
 mod render;
 mod shape;
 mod world;
@@ -93,10 +94,10 @@ use albedo::*;
 use render::*;
 use shape::*;
 
-use crate::eval::npy::{self, NpyError};
 use crate::mesh::geometry::{add, centroid, cross, dot, mul, norm, sub};
 use crate::mesh::io::read_landmarks_json;
 use crate::mesh::template::{load_template, TemplateError, TemplateOptions, IBUG68_COUNT};
+use npy::NpyError;
 
 /// Number of random Gaussian bumps of the per-identity albedo variation.
 pub const ALBEDO_BUMPS: usize = 5;
