@@ -57,7 +57,14 @@ pub(crate) struct Buffers<'b> {
 /// The fit to a fit input's image and landmarks (its own frame: the landmark-free path's locals
 /// are not on its stack, nor its on theirs).
 #[inline(never)]
-pub(crate) fn landmark_fit(part: &[u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_, u16>, rest: &[u8], bufs: Buffers<'_>, t_start: u64) {
+pub(crate) fn landmark_fit(
+    part: &[u8],
+    blob: &ModelBlob<'_>,
+    model: &MorphableModel<'_, u16>,
+    rest: &[u8],
+    bufs: Buffers<'_>,
+    t_start: u64,
+) {
     let input: FitInput<'_, FitSettings> = match fit_input::parse::<FitSettings>(rest, PROFILE.image_side, MAX_LANDMARKS) {
         Ok(i) => i,
         Err(e) => {
