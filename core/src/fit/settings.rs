@@ -71,7 +71,7 @@ pub struct LandmarkSettings {
     /// (cosine between its normal and the direction to the camera below this) are left out of
     /// the shape solve and the image chain: a detector puts them on the visible outline. −1 or
     /// less keeps all. 0 (the default) removed the 30–45° frontal pull with exact and detector
-    /// landmarks on the development set (docs/evaluation.md "Turned-away contour points").
+    /// landmarks on the development set (docs/evaluation.md, "Fitting accuracy", "What did not help").
     pub hidden_contour_min_cos: f32,
 }
 
@@ -154,7 +154,7 @@ pub struct StartSettings {
     pub shape_min_cos: f32,
     /// Pixels a sampled vertex stands for in the shape solve's data term (> 0). Small (0.003):
     /// the landmark term leads the solve and the image refines it (chosen on the development set,
-    /// docs/evaluation.md "The solve's weight").
+    /// docs/evaluation.md, "Fitting accuracy", "What did not help").
     pub shape_weight: f32,
     /// Whether the shape solve's objective has the landmark term (Gaussian, the chain's σ).
     pub shape_landmarks: bool,
@@ -422,7 +422,7 @@ impl MixtureShares {
 
     /// The image chain after the start's shape solve ([`ProposalSettings::DEFAULT`]): no shape
     /// moves (the solve fits the shape; the chain's random shape moves added no identity and made
-    /// it depend on the seed, docs/evaluation.md "The shape from the solve alone"); the other
+    /// it depend on the seed, docs/evaluation.md, "Fitting accuracy"); the other
     /// shares of [`Self::IMAGE`].
     pub const IMAGE_AFTER_SOLVE: Self = Self { shape: 0.0, ..Self::IMAGE };
 
