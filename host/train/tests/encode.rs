@@ -191,7 +191,7 @@ fn init_file_reads_back_and_detects_on_any_image() {
     let mut detector = Detector::from_bytes(&bytes).unwrap();
     let file = detector.file().unwrap();
     assert_eq!((file.landmarks, file.light), (68, 12));
-    assert_eq!(file.metadata, "{\"format\":\"gpmm-detector\"}");
+    assert_eq!(file.metadata, "{\"format\":\"gpmm-init\"}");
     // Any image, any aspect: a detection with finite landmarks (random weights: no meaning).
     for (w, h) in [(40u32, 30u32), (17, 50), (1, 1)] {
         let img = RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7) as u8, (y * 5) as u8, 100]));
