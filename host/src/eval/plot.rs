@@ -96,9 +96,12 @@ fn ensure_font() -> Result<(), PlotError> {
         .map_err(PlotError::Font)
 }
 
+/// A point and its error bar (low, high), if any.
+type Marked = ((f64, f64), Option<(f64, f64)>);
+
 /// The points of `s` that can be drawn (finite, and positive x on a logarithmic axis), with their
 /// error bars if it has them.
-fn drawable(s: &Series, log_x: bool) -> Vec<((f64, f64), Option<(f64, f64)>)> {
+fn drawable(s: &Series, log_x: bool) -> Vec<Marked> {
     s.points
         .iter()
         .enumerate()
@@ -110,7 +113,7 @@ fn drawable(s: &Series, log_x: bool) -> Vec<((f64, f64), Option<(f64, f64)>)> {
 /// The x and y ranges of the chart: the data's x range and `y_range` or the data's (from 0 when
 /// every value is positive, error bars included).
 fn ranges(chart: &Chart) -> ((f64, f64), (f64, f64)) {
-    let pts: Vec<((f64, f64), Option<(f64, f64)>)> = chart.series.iter().flat_map(|s| drawable(s, chart.log_x)).collect();
+    let pts: Vec<Marked> = chart.series.iter().flat_map(|s| drawable(s, chart.log_x)).collect();
     let (mut xlo, mut xhi) = pts.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, _)| (a.min(p.0), b.max(p.0)));
     if !(xlo.is_finite() && xhi.is_finite()) {
         (xlo, xhi) = (1.0, 2.0);

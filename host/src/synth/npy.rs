@@ -80,10 +80,13 @@ pub fn read_u32(path: &Path) -> Result<(Vec<usize>, Vec<u32>), NpyError> {
     parse_u32(&bytes).map_err(|problem| NpyError::Format { path: path.to_path_buf(), problem })
 }
 
+/// A plain array's element kind and size in bytes.
+type Element = (TypeChar, u64);
+
 /// The shape, element kind and element size of a plain (non-record) array whose data can fit in
 /// `file_len` bytes (so that a header claiming more elements than the file holds is refused before
 /// any memory is reserved for them).
-fn layout(file: &NpyFile<&[u8]>, file_len: usize) -> Result<(Vec<usize>, Option<(TypeChar, u64)>), NpyProblem> {
+fn layout(file: &NpyFile<&[u8]>, file_len: usize) -> Result<(Vec<usize>, Option<Element>), NpyProblem> {
     let too_large = || NpyProblem::Shape(file.shape().to_vec());
     let shape: Vec<usize> = file.shape().iter().map(|&d| usize::try_from(d).map_err(|_| too_large())).collect::<Result<_, _>>()?;
     let count = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).ok_or_else(too_large)?;
