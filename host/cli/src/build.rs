@@ -79,7 +79,7 @@ pub use gpmm_host::render::light::parse_rgb;
 
 /// The rank of one part from `--rank-*` or `--captured-*` (200 components if neither is given).
 pub fn rank_spec(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<RankSpec> {
-    RankSpec::from_flags(count, captured, what).map_err(anyhow::Error::msg)
+    Ok(RankSpec::from_flags(count, captured, what)?)
 }
 
 /// Runs `gpmm build`.

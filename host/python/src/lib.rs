@@ -93,8 +93,8 @@ fn build(
     let opts = BuildOptions {
         kernel,
         hyperparameters,
-        rank_shape: RankSpec::from_flags(rank_shape, captured_shape, "shape").map_err(err_msg)?,
-        rank_color: RankSpec::from_flags(rank_color, captured_color, "color").map_err(err_msg)?,
+        rank_shape: RankSpec::from_flags(rank_shape, captured_shape, "shape").map_err(err)?,
+        rank_color: RankSpec::from_flags(rank_color, captured_color, "color").map_err(err)?,
         nystrom: NystromOptions {
             points: nystrom_points.max(1),
             seed: seed.unwrap_or(NystromOptions::default().seed),

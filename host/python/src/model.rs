@@ -74,7 +74,7 @@ impl Model {
     /// The model file's bytes.
     fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
         let m = self.inner.clone();
-        let bytes = py.detach(move || model_io::to_bytes(&m)).map_err(err_msg)?;
+        let bytes = py.detach(move || model_io::to_bytes(&m)).map_err(err)?;
         Ok(PyBytes::new(py, &bytes))
     }
 

@@ -333,8 +333,40 @@ pub enum HyperparameterError {
         error: std::io::Error,
     },
     /// A value is out of its valid range.
-    #[error("{0}")]
-    Invalid(String),
+    #[error("{path}: {error}")]
+    Invalid {
+        /// File name.
+        path: String,
+        /// Which value and its range.
+        error: InvalidHyperparameter,
+    },
+}
+
+/// A hyperparameter outside the range where the kernels it defines are positive semi-definite.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InvalidHyperparameter {
+    /// A kernel term's weight is negative or not finite.
+    #[error("kernel weight {0} must be finite and non-negative")]
+    Weight(f64),
+    /// A kernel term's length scale is not positive or not finite.
+    #[error("kernel scale {0} must be finite and positive")]
+    Scale(f64),
+    /// A symmetry weight outside `[-1, 1]`.
+    #[error("{name} = {value} must lie in [-1, 1] for a valid kernel")]
+    Symmetry {
+        /// `shape_alpha` or `albedo_alpha`.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// A channel correlation outside `[-0.5, 1]`.
+    #[error("{name} = {value} must lie in [-0.5, 1] (M_x is positive semi-definite only there)")]
+    Correlation {
+        /// `beta` or `gamma`.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
 }
 
 impl Hyperparameters {
@@ -343,29 +375,29 @@ impl Hyperparameters {
         let name = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|error| HyperparameterError::Io { path: name.clone(), error })?;
         let hp: Self = toml::from_str(&text).map_err(|error| HyperparameterError::Toml { path: name.clone(), error })?;
-        hp.validate().map_err(|e| HyperparameterError::Invalid(format!("{name}: {e}")))?;
+        hp.validate().map_err(|error| HyperparameterError::Invalid { path: name, error })?;
         Ok(hp)
     }
 
     /// Checks that the kernels these values define are positive semi-definite.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidHyperparameter> {
         let all = self.shape_terms.iter().chain(&self.albedo_xyz_terms).chain(&self.albedo_rgb_terms);
         for t in all {
             if !(t.weight.is_finite() && t.weight >= 0.0) {
-                return Err(format!("kernel weight {} must be finite and non-negative", t.weight));
+                return Err(InvalidHyperparameter::Weight(t.weight));
             }
             if !(t.scale.is_finite() && t.scale > 0.0) {
-                return Err(format!("kernel scale {} must be finite and positive", t.scale));
+                return Err(InvalidHyperparameter::Scale(t.scale));
             }
         }
         for (name, a) in [("shape_alpha", self.shape_alpha), ("albedo_alpha", self.albedo_alpha)] {
             if !(a.is_finite() && (-1.0..=1.0).contains(&a)) {
-                return Err(format!("{name} = {a} must lie in [-1, 1] for a valid kernel"));
+                return Err(InvalidHyperparameter::Symmetry { name, value: a });
             }
         }
         for (name, x) in [("beta", self.beta), ("gamma", self.gamma)] {
             if !(x.is_finite() && (-0.5..=1.0).contains(&x)) {
-                return Err(format!("{name} = {x} must lie in [-0.5, 1] (M_x is positive semi-definite only there)"));
+                return Err(InvalidHyperparameter::Correlation { name, value: x });
             }
         }
         Ok(())

@@ -33,15 +33,34 @@ pub enum RankSpec {
     Captured(f64),
 }
 
+/// A rank flag out of its range; `part` names the model part (`shape`, `color`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RankFlagError {
+    /// A count of zero components.
+    #[error("--rank-{part} 0: a model needs at least one {part} component")]
+    NoComponents {
+        /// The model part.
+        part: String,
+    },
+    /// A captured fraction outside `(0, 1]`.
+    #[error("--captured-{part} {fraction} must be in (0, 1]")]
+    Captured {
+        /// The model part.
+        part: String,
+        /// The fraction given.
+        fraction: f64,
+    },
+}
+
 impl RankSpec {
     /// The rank of one part from a count or a captured fraction (200 components if neither is
     /// given), as `gpmm build --rank-WHAT / --captured-WHAT` and the Python package take them.
-    pub fn from_flags(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<Self, String> {
+    pub fn from_flags(count: Option<usize>, captured: Option<f64>, what: &str) -> Result<Self, RankFlagError> {
         match (count, captured) {
-            (Some(0), _) => Err(format!("--rank-{what} 0: a model needs at least one {what} component")),
+            (Some(0), _) => Err(RankFlagError::NoComponents { part: what.to_string() }),
             (Some(k), _) => Ok(Self::Count(k)),
             (None, Some(f)) if f > 0.0 && f <= 1.0 => Ok(Self::Captured(f)),
-            (None, Some(f)) => Err(format!("--captured-{what} {f} must be in (0, 1]")),
+            (None, Some(fraction)) => Err(RankFlagError::Captured { part: what.to_string(), fraction }),
             (None, None) => Ok(Self::Count(200)),
         }
     }

@@ -41,6 +41,14 @@ pub enum ModelIoError {
         /// Version this program reads.
         expected: u32,
     },
+    /// The model could not be serialized.
+    #[error("{path}: {error}")]
+    Encode {
+        /// File name.
+        path: String,
+        /// What the serializer refused.
+        error: EncodeError,
+    },
     /// A tensor or metadata entry is missing or inconsistent.
     #[error("{path}: {message}")]
     Invalid {
@@ -49,6 +57,17 @@ pub enum ModelIoError {
         /// What is wrong.
         message: String,
     },
+}
+
+/// Why a model could not be serialized.
+#[derive(Debug, thiserror::Error)]
+pub enum EncodeError {
+    /// safetensors refused a tensor or the container.
+    #[error("{0}")]
+    Tensors(safetensors::SafeTensorError),
+    /// The metadata could not be written as JSON.
+    #[error("{0}")]
+    Metadata(serde_json::Error),
 }
 
 fn f32_bytes(v: impl IntoIterator<Item = f32>) -> Vec<u8> {
@@ -88,7 +107,7 @@ fn part_tensors(prefix: &str, part: &ModelPart, out: &mut Vec<(String, Owned)>) 
 }
 
 /// Serializes a model to bytes.
-pub fn to_bytes(model: &GpModel) -> Result<Vec<u8>, String> {
+pub fn to_bytes(model: &GpModel) -> Result<Vec<u8>, EncodeError> {
     let mut tensors = Vec::new();
     part_tensors("shape", &model.shape, &mut tensors);
     part_tensors("color", &model.color, &mut tensors);
@@ -100,16 +119,16 @@ pub fn to_bytes(model: &GpModel) -> Result<Vec<u8>, String> {
         .iter()
         .map(|(name, t)| TensorView::new(t.dtype, t.shape.clone(), &t.data).map(|v| (name.clone(), v)))
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| e.to_string())?;
-    let meta = serde_json::to_string(&model.metadata).map_err(|e| e.to_string())?;
+        .map_err(EncodeError::Tensors)?;
+    let meta = serde_json::to_string(&model.metadata).map_err(EncodeError::Metadata)?;
     let info = HashMap::from([("gpmm".to_string(), meta)]);
-    safetensors::serialize(views, Some(info)).map_err(|e| e.to_string())
+    safetensors::serialize(views, Some(info)).map_err(EncodeError::Tensors)
 }
 
 /// Writes a model file.
 pub fn save(model: &GpModel, path: &Path) -> Result<(), ModelIoError> {
     let name = path.display().to_string();
-    let bytes = to_bytes(model).map_err(|message| ModelIoError::Invalid { path: name.clone(), message })?;
+    let bytes = to_bytes(model).map_err(|error| ModelIoError::Encode { path: name.clone(), error })?;
     std::fs::write(path, bytes).map_err(|error| ModelIoError::Io { path: name, error })
 }
 

@@ -30,6 +30,14 @@ pub enum StatismoError {
         /// What went wrong.
         message: String,
     },
+    /// The model could not be written as a statismo file.
+    #[error("{path}: {error}")]
+    Export {
+        /// File name.
+        path: String,
+        /// What the writer refused.
+        error: ExportError,
+    },
     /// A dataset is missing or malformed.
     #[error("{path}: dataset '{dataset}': {message}")]
     Dataset {
@@ -302,12 +310,40 @@ fn check_points(r: &Reader<'_>, part: &str, n: usize) -> Result<(), StatismoErro
     Ok(())
 }
 
+/// Why a statismo file's landmarks cannot be used (the import goes on without landmarks).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum UnusableLandmarks {
+    /// `metadata/landmarks/json` is absent.
+    #[error("the file has no landmarks")]
+    Missing,
+    /// The ids are not `<scheme>.<i>`.
+    #[error("the file's {count} landmarks (e.g. '{example}') are not numbered vertex landmarks of a scheme such as ibug68")]
+    NotNumbered {
+        /// Landmarks in the file.
+        count: usize,
+        /// The first id.
+        example: String,
+    },
+    /// The ids are not `<scheme>.0` to `<scheme>.<L-1>`, each once.
+    #[error("the file's landmark ids are not {scheme}.0 to {scheme}.{last} once each")]
+    NotOnceEach {
+        /// The first id's scheme.
+        scheme: String,
+        /// `L - 1`.
+        last: usize,
+    },
+}
+
 /// Landmarks from `metadata/landmarks/json` when they are `<scheme>.<i>` for `i = 0..L`: each
-/// mapped to the nearest mean vertex. `Ok(None)` with a reason when there are none usable.
-fn read_landmarks(r: &Reader<'_>, mean_mm: &[[f32; 3]], scale: f64) -> Result<Result<(String, Vec<u32>), String>, StatismoError> {
+/// mapped to the nearest mean vertex. `Ok(Err(why))` when there are none usable.
+fn read_landmarks(
+    r: &Reader<'_>,
+    mean_mm: &[[f32; 3]],
+    scale: f64,
+) -> Result<Result<(String, Vec<u32>), UnusableLandmarks>, StatismoError> {
     let name = "metadata/landmarks/json";
     if !r.exists(name) {
-        return Ok(Err("the file has no landmarks".into()));
+        return Ok(Err(UnusableLandmarks::Missing));
     }
     let text = r.string(name)?;
     let list: Vec<ScalismoLandmark> =
@@ -317,15 +353,12 @@ fn read_landmarks(r: &Reader<'_>, mean_mm: &[[f32; 3]], scale: f64) -> Result<Re
     let scheme = parsed.as_ref().and_then(|p| p.first()).map(|(s, _)| s.clone());
     let (Some(parsed), Some(scheme)) = (parsed, scheme) else {
         let example = list.first().map(|l| l.id.clone()).unwrap_or_default();
-        return Ok(Err(format!(
-            "the file's {} landmarks (e.g. '{example}') are not numbered vertex landmarks of a scheme such as ibug68",
-            list.len()
-        )));
+        return Ok(Err(UnusableLandmarks::NotNumbered { count: list.len(), example }));
     };
     let mut ids = vec![u32::MAX; list.len()];
     for ((s, i), l) in parsed.iter().zip(&list) {
         if *s != scheme || *i >= ids.len() || ids[*i] != u32::MAX {
-            return Ok(Err(format!("the file's landmark ids are not {scheme}.0 to {scheme}.{} once each", list.len() - 1)));
+            return Ok(Err(UnusableLandmarks::NotOnceEach { scheme, last: list.len() - 1 }));
         }
         let q = l.coordinates.map(|c| c * scale);
         let nearest = mean_mm
@@ -511,14 +544,28 @@ fn write_part(b: &mut FileBuilder, name: &str, part: &ModelPart, points: &[f32],
     b.add_group(g.finish());
 }
 
+/// Why a model could not be written as a statismo file.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// More vertices than statismo's int32 cells can index.
+    #[error("too many vertices for int32 cells")]
+    TooManyVertices,
+    /// The landmarks or gpmm's metadata could not be written as JSON.
+    #[error("{0}")]
+    Json(serde_json::Error),
+    /// The HDF5 writer refused the file.
+    #[error("{0}")]
+    Hdf5(hdf5_pure::Error),
+}
+
 /// The statismo file of a model as bytes (version 0.9: unscaled orthonormal bases).
-pub fn export_bytes(model: &GpModel) -> Result<Vec<u8>, String> {
+pub fn export_bytes(model: &GpModel) -> Result<Vec<u8>, ExportError> {
     let n = model.vertices();
     let m = model.triangles.len();
     let points: Vec<f32> = (0..3).flat_map(|d| model.shape.mean.iter().map(move |p| p[d])).collect();
     let cells: Vec<i32> = (0..3).flat_map(|d| model.triangles.iter().map(move |t| t[d] as i32)).collect();
     if n > i32::MAX as usize {
-        return Err("too many vertices for int32 cells".into());
+        return Err(ExportError::TooManyVertices);
     }
     let mut b = FileBuilder::new();
     write_part(&mut b, "shape", &model.shape, &points, &cells, m, "POLYGON_MESH");
@@ -535,18 +582,18 @@ pub fn export_bytes(model: &GpModel) -> Result<Vec<u8>, String> {
     let extra = GpmmExtra { metadata: model.metadata.clone(), landmark_vertex_ids: model.landmarks.clone() };
     let mut meta = b.create_group("metadata");
     let mut lm = meta.create_group("landmarks");
-    let lm_json = serde_json::to_string(&landmarks).map_err(|e| e.to_string())?;
+    let lm_json = serde_json::to_string(&landmarks).map_err(ExportError::Json)?;
     lm.create_dataset("json").with_vlen_strings(&[lm_json.as_str()]).with_shape(&[]);
     meta.add_group(lm.finish());
-    let extra_json = serde_json::to_string(&extra).map_err(|e| e.to_string())?;
+    let extra_json = serde_json::to_string(&extra).map_err(ExportError::Json)?;
     meta.create_dataset("gpmm").with_vlen_strings(&[extra_json.as_str()]).with_shape(&[]);
     b.add_group(meta.finish());
-    b.finish().map_err(|e| e.to_string())
+    b.finish().map_err(ExportError::Hdf5)
 }
 
 /// Writes a model as a statismo file.
 pub fn export(model: &GpModel, path: &Path) -> Result<(), StatismoError> {
     let name = path.display().to_string();
-    let bytes = export_bytes(model).map_err(|message| StatismoError::File { path: name.clone(), message })?;
+    let bytes = export_bytes(model).map_err(|error| StatismoError::Export { path: name.clone(), error })?;
     std::fs::write(path, bytes).map_err(|e| StatismoError::File { path: name, message: e.to_string() })
 }

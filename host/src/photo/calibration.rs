@@ -46,16 +46,49 @@ pub enum CalibrationError {
         message: String,
     },
     /// The file is not a valid calibration.
-    #[error("{}: not a landmark calibration: {message}", path.display())]
+    #[error("{}: not a landmark calibration: {error}", path.display())]
     Invalid {
         /// The file.
         path: PathBuf,
         /// What is wrong.
-        message: String,
+        error: InvalidCalibration,
     },
     /// The landmarks cannot be corrected or learned from.
     #[error("{0}")]
     Landmarks(String),
+}
+
+/// What makes a file not a valid calibration.
+#[derive(Debug, thiserror::Error)]
+pub enum InvalidCalibration {
+    /// The JSON does not parse as a calibration.
+    #[error("{0}")]
+    Json(serde_json::Error),
+    /// Another format name.
+    #[error("format is {0:?}, expected {CALIBRATION_FORMAT:?}")]
+    Format(String),
+    /// Another format version.
+    #[error("version {0} (this build reads version {CALIBRATION_VERSION})")]
+    Version(u32),
+    /// The polynomial degree is above [`MAX_DEGREE`].
+    #[error("degree {0} is above the maximum {MAX_DEGREE}")]
+    Degree(usize),
+    /// Offsets for another number of landmarks than iBUG-68's.
+    #[error("{0} landmarks' offsets; iBUG-68 has 68")]
+    Landmarks(usize),
+    /// A landmark's coefficient count does not match the degree.
+    #[error("landmark {landmark} has {count} coefficients, degree {degree} needs {}", degree + 1)]
+    Coefficients {
+        /// The landmark.
+        landmark: usize,
+        /// Its coefficients.
+        count: usize,
+        /// The calibration's degree.
+        degree: usize,
+    },
+    /// A number is not finite or the turn range is empty.
+    #[error("a coefficient or the turn range is not finite, or the range is empty")]
+    NotFinite,
 }
 
 /// The true and the detected points of one image (pixels).
@@ -270,30 +303,25 @@ impl LandmarkCalibration {
     }
 
     /// Checks the fields a file could get wrong (format, version, shapes, finite numbers).
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), InvalidCalibration> {
         if self.format != CALIBRATION_FORMAT {
-            return Err(format!("format is {:?}, expected {CALIBRATION_FORMAT:?}", self.format));
+            return Err(InvalidCalibration::Format(self.format.clone()));
         }
         if self.version != CALIBRATION_VERSION {
-            return Err(format!("version {} (this build reads version {CALIBRATION_VERSION})", self.version));
+            return Err(InvalidCalibration::Version(self.version));
         }
         if self.degree > MAX_DEGREE {
-            return Err(format!("degree {} is above the maximum {MAX_DEGREE}", self.degree));
+            return Err(InvalidCalibration::Degree(self.degree));
         }
         if self.offsets.len() != IBUG68 {
-            return Err(format!("{} landmarks' offsets; iBUG-68 has 68", self.offsets.len()));
+            return Err(InvalidCalibration::Landmarks(self.offsets.len()));
         }
-        if let Some(l) = self.offsets.iter().position(|c| c.len() != self.degree + 1) {
-            return Err(format!(
-                "landmark {l} has {} coefficients, degree {} needs {}",
-                self.offsets[l].len(),
-                self.degree,
-                self.degree + 1
-            ));
+        if let Some(landmark) = self.offsets.iter().position(|c| c.len() != self.degree + 1) {
+            return Err(InvalidCalibration::Coefficients { landmark, count: self.offsets[landmark].len(), degree: self.degree });
         }
         let finite = self.offsets.iter().flatten().flatten().chain(&self.turn_range).all(|v| v.is_finite());
         if !finite || self.turn_range[0] > self.turn_range[1] {
-            return Err("a coefficient or the turn range is not finite, or the range is empty".into());
+            return Err(InvalidCalibration::NotFinite);
         }
         Ok(())
     }
@@ -302,9 +330,9 @@ impl LandmarkCalibration {
     pub fn read(path: &Path) -> Result<Self, CalibrationError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| CalibrationError::File { path: path.to_path_buf(), message: format!("cannot read: {e}") })?;
-        let cal: Self =
-            serde_json::from_str(&text).map_err(|e| CalibrationError::Invalid { path: path.to_path_buf(), message: e.to_string() })?;
-        cal.validate().map_err(|message| CalibrationError::Invalid { path: path.to_path_buf(), message })?;
+        let cal: Self = serde_json::from_str(&text)
+            .map_err(|e| CalibrationError::Invalid { path: path.to_path_buf(), error: InvalidCalibration::Json(e) })?;
+        cal.validate().map_err(|error| CalibrationError::Invalid { path: path.to_path_buf(), error })?;
         Ok(cal)
     }
 

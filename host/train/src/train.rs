@@ -2,15 +2,15 @@
 //! calibration, quantization and a check of the quantized networks through the core's detector.
 
 use crate::data::{samples, Geometry, Sample};
-use crate::encode::init_file_bytes;
+use crate::encode::{init_file_bytes, EncodeError};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
 use crate::scene::head::HeadContext;
 use crate::scene::{render_scene, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
 use candle_core::{Device, Tensor, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
-use gpmm_core::net::Shape;
+use gpmm_core::net::{NetError, Shape};
 use gpmm_host::detect::eval::{quantile, score_detection};
-use gpmm_host::detect::Detector;
+use gpmm_host::detect::{DetectError, Detector};
 use gpmm_host::gp::model::GpModel;
 use gpmm_host::render::Renderer;
 use serde::Serialize;
@@ -140,8 +140,40 @@ pub fn geometry(landmarks: usize) -> Geometry {
     Geometry { frame_side: 96, grid: 6, crop_side: 64, crop_margin: 1.4, landmarks, light: LIGHT_LABELS }
 }
 
-fn err(e: impl std::fmt::Display) -> String {
-    e.to_string()
+/// Why training or its validation stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// The initializer cannot read this many landmarks.
+    #[error("the model has {0} landmarks; the initializer reads 1 to 68")]
+    Landmarks(usize),
+    /// Mirroring crops needs the symmetric iBUG-68 scheme.
+    #[error("mirrored crops need the 68 iBUG landmarks; the model has {0}")]
+    MirrorNeedsIbug68(usize),
+    /// A chunk of scenes rendered empty.
+    #[error("no training scene could be rendered (is the model's landmark list valid?)")]
+    NoScenes,
+    /// A loss became NaN or infinite.
+    #[error("training diverged at step {step} (loss {finder} / {initializer}); try a smaller learning rate")]
+    Diverged {
+        /// Steps done before.
+        step: usize,
+        /// The finder's loss.
+        finder: f32,
+        /// The initializer's loss.
+        initializer: f32,
+    },
+    /// A tensor operation failed.
+    #[error("{0}")]
+    Tensor(candle_core::Error),
+    /// The trained networks could not be encoded as an init file.
+    #[error("{0}")]
+    Encode(EncodeError),
+    /// The encoded init file does not read back.
+    #[error("{0}")]
+    InitFile(NetError),
+    /// The quantized detector failed on a validation scene.
+    #[error("{0}")]
+    Detect(DetectError),
 }
 
 /// Stable `ln(1 + e^x)`.
@@ -222,25 +254,26 @@ pub fn train(
     head: Option<&HeadContext>,
     opts: &TrainOptions,
     mut progress: impl FnMut(Progress),
-) -> Result<(Vec<u8>, TrainReport), String> {
+) -> Result<(Vec<u8>, TrainReport), TrainError> {
     let openings = Openings::of_model(model, &opts.ranges);
     let source = SceneSource { model, head, ranges: &opts.ranges, openings: &openings };
     let landmarks = model.landmarks.len();
     if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
-        return Err(format!("the model has {landmarks} landmarks; the initializer reads 1 to 68"));
+        return Err(TrainError::Landmarks(landmarks));
     }
     if opts.mirror && landmarks != gpmm_core::model::ibug::IBUG68_POINTS {
-        return Err(format!("mirrored crops need the 68 iBUG landmarks; the model has {landmarks}"));
+        return Err(TrainError::MirrorNeedsIbug68(landmarks));
     }
     let device = Device::Cpu;
     let geo = geometry(landmarks);
-    let finder = Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device).map_err(err)?;
+    let finder =
+        Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device).map_err(TrainError::Tensor)?;
     let initializer =
         Net::new(Shape { h: geo.crop_side, w: geo.crop_side, c: 3 }, initializer_specs(geo.initializer_outputs()), opts.seed ^ 1, &device)
-            .map_err(err)?;
+            .map_err(TrainError::Tensor)?;
     let params = |lr| ParamsAdamW { lr, weight_decay: 1e-4, ..Default::default() };
-    let mut opt_f = AdamW::new(finder.vars(), params(opts.lr)).map_err(err)?;
-    let mut opt_i = AdamW::new(initializer.vars(), params(opts.lr)).map_err(err)?;
+    let mut opt_f = AdamW::new(finder.vars(), params(opts.lr)).map_err(TrainError::Tensor)?;
+    let mut opt_i = AdamW::new(initializer.vars(), params(opts.lr)).map_err(TrainError::Tensor)?;
     let total = opts.steps();
     let net_total = opts.net_steps();
     let (mut done, mut net_done) = (0, [0usize; 2]);
@@ -257,7 +290,7 @@ pub fn train(
         render_seconds += t0.elapsed().as_secs_f64();
         let t0 = std::time::Instant::now();
         if data.is_empty() {
-            return Err("no training scene could be rendered (is the model's landmark list valid?)".into());
+            return Err(TrainError::NoScenes);
         }
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
@@ -268,25 +301,25 @@ pub fn train(
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
                 if train_f {
                     opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
-                    let lf = finder_loss(&finder, &batch, &geo, &device).map_err(err)?;
-                    opt_f.backward_step(&lf).map_err(err)?;
-                    f = lf.to_scalar::<f32>().map_err(err)?;
+                    let lf = finder_loss(&finder, &batch, &geo, &device).map_err(TrainError::Tensor)?;
+                    opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
+                    f = lf.to_scalar::<f32>().map_err(TrainError::Tensor)?;
                     net_done[0] += 1;
                 }
                 if train_i {
                     opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
                     let li = if opts.mirror && pass % 2 == 1 {
                         let seen: Vec<Sample> = batch.iter().filter_map(|s| s.mirrored(&geo)).collect();
-                        initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(err)?
+                        initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(TrainError::Tensor)?
                     } else {
-                        initializer_loss(&initializer, &batch, &geo, &device).map_err(err)?
+                        initializer_loss(&initializer, &batch, &geo, &device).map_err(TrainError::Tensor)?
                     };
-                    opt_i.backward_step(&li).map_err(err)?;
-                    i = li.to_scalar::<f32>().map_err(err)?;
+                    opt_i.backward_step(&li).map_err(TrainError::Tensor)?;
+                    i = li.to_scalar::<f32>().map_err(TrainError::Tensor)?;
                     net_done[1] += 1;
                 }
                 if !(f.is_finite() && i.is_finite()) {
-                    return Err(format!("training diverged at step {done} (loss {f} / {i}); try a smaller learning rate"));
+                    return Err(TrainError::Diverged { step: done, finder: f, initializer: i });
                 }
                 for (k, (last_pass, value)) in [(opts.passes, f), (opts.init_passes, i)].into_iter().enumerate() {
                     if pass + 1 == last_pass {
@@ -305,10 +338,10 @@ pub fn train(
         }
     }
     progress(Progress::Validating);
-    let fx = batch_tensor(calib.iter().map(|s| s.frame.as_slice()), geo.frame_side, &device).map_err(err)?;
-    let ix = batch_tensor(calib.iter().map(|s| s.crop.as_slice()), geo.crop_side, &device).map_err(err)?;
-    let f_float = finder.to_float(&finder.calibrate(&fx).map_err(err)?).map_err(err)?;
-    let i_float = initializer.to_float(&initializer.calibrate(&ix).map_err(err)?).map_err(err)?;
+    let fx = batch_tensor(calib.iter().map(|s| s.frame.as_slice()), geo.frame_side, &device).map_err(TrainError::Tensor)?;
+    let ix = batch_tensor(calib.iter().map(|s| s.crop.as_slice()), geo.crop_side, &device).map_err(TrainError::Tensor)?;
+    let f_float = finder.to_float(&finder.calibrate(&fx).map_err(TrainError::Tensor)?).map_err(TrainError::Tensor)?;
+    let i_float = initializer.to_float(&initializer.calibrate(&ix).map_err(TrainError::Tensor)?).map_err(TrainError::Tensor)?;
     let metadata = serde_json::json!({
         "format": "gpmm-init",
         "trained_on": model.metadata.kernel,
@@ -335,10 +368,11 @@ pub fn train(
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();
-    let bytes = init_file_bytes(&f_float, &i_float, geo.crop_margin, landmarks as u16, geo.light as u16, &metadata).map_err(err)?;
-    let mut detector = Detector::from_bytes(&bytes).map_err(err)?;
+    let bytes =
+        init_file_bytes(&f_float, &i_float, geo.crop_margin, landmarks as u16, geo.light as u16, &metadata).map_err(TrainError::Encode)?;
+    let mut detector = Detector::from_bytes(&bytes).map_err(TrainError::InitFile)?;
     let v = validate(source, opts.seed.wrapping_add(0x0DD5_EED5), opts.validation, &mut detector)?;
-    let file = detector.file().map_err(err)?;
+    let file = detector.file().map_err(TrainError::InitFile)?;
     let report = TrainReport {
         steps: total,
         finder_loss: last_f,
@@ -369,13 +403,15 @@ pub struct Validation {
 }
 
 /// Runs the detector on `count` scenes of the stream `seed`.
-pub fn validate(source: SceneSource<'_>, seed: u64, count: usize, detector: &mut Detector) -> Result<Validation, String> {
+pub fn validate(source: SceneSource<'_>, seed: u64, count: usize, detector: &mut Detector) -> Result<Validation, TrainError> {
     let mut renderer = Renderer::new();
     let (mut found, mut errors, mut yaws, mut scenes) = (0usize, Vec::new(), Vec::new(), 0usize);
     for i in 0..count as u64 {
         let Some(scene) = render_scene(source, seed, i, &mut renderer) else { continue };
         scenes += 1;
-        let Some(det) = detector.detect(&scene.frame, 0.0, gpmm_core::net::face::Reading::DEFAULT).map_err(err)? else { continue };
+        let Some(det) = detector.detect(&scene.frame, 0.0, gpmm_core::net::face::Reading::DEFAULT).map_err(TrainError::Detect)? else {
+            continue;
+        };
         let (hit, error) = score_detection(&det, &scene.landmarks);
         found += usize::from(hit);
         errors.extend(error);

@@ -5,14 +5,14 @@
 //! sometimes given hair. The finder then learns heads, not floating masks.
 
 use gpmm_core::geometry::Vec3;
-use gpmm_core::render::vertex_normals;
+use gpmm_core::render::{vertex_normals, VertexError};
 use gpmm_host::gp::model::GpModel;
 use gpmm_host::mesh::closest::{closest_on_triangle, Grid};
 use gpmm_host::mesh::geometry::dist2;
 use gpmm_host::mesh::template::{face_crop_indices, load_template, Template, TemplateError, TemplateOptions};
 use gpmm_host::render::Instance;
 use rand::{Rng, RngExt};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Nearest face vertices each head vertex follows.
 const ANCHORS: usize = 6;
@@ -76,23 +76,56 @@ pub struct HeadedInstance {
     pub triangles: Vec<[u32; 3]>,
 }
 
+/// Why a template cannot be the head around a model.
+#[derive(Debug, thiserror::Error)]
+pub enum HeadError {
+    /// The template's files could not be read or prepared.
+    #[error("{0}")]
+    Template(TemplateError),
+    /// The template and the model do not fit together.
+    #[error("{}: as the head around the model: {error}", path.display())]
+    Mismatch {
+        /// The template's mesh file.
+        path: PathBuf,
+        /// Why they do not fit.
+        error: HeadMismatch,
+    },
+}
+
+/// Why a template does not fit a model as its head.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HeadMismatch {
+    /// The model or the head has no vertices.
+    #[error("empty model or head")]
+    Empty,
+    /// The model's mean face is not on the head's surface.
+    #[error(
+        "the model's mean face lies {median_mm:.1} mm (median) from this head, more than {ALIGNED_MM} mm: \
+         the model was not built from this template (or at another scale)"
+    )]
+    NotOnHead {
+        /// Median distance of the mean face's vertices from the head (mm).
+        median_mm: f32,
+    },
+    /// The head's normals cannot be computed.
+    #[error("the head mesh: {0}")]
+    Normals(VertexError),
+}
+
 impl HeadContext {
     /// Loads the whole (uncropped) template from its mesh and landmark files, in the normalized
     /// frame a model built from it has, and links it to `model`.
-    pub fn load(model: &GpModel, mesh: &Path, landmarks: &Path) -> Result<Self, TemplateError> {
-        let head = load_template(mesh, landmarks, &TemplateOptions { no_crop: true, ..Default::default() })?;
-        Self::new(model, &head).map_err(|message| TemplateError::Processing {
-            path: mesh.to_path_buf(),
-            message: format!("as the head around the model: {message}"),
-        })
+    pub fn load(model: &GpModel, mesh: &Path, landmarks: &Path) -> Result<Self, HeadError> {
+        let head = load_template(mesh, landmarks, &TemplateOptions { no_crop: true, ..Default::default() }).map_err(HeadError::Template)?;
+        Self::new(model, &head).map_err(|error| HeadError::Mismatch { path: mesh.to_path_buf(), error })
     }
 
     /// Links a normalized, uncropped template to `model`; an error when the model's mean face
     /// does not lie on it (a model built from another scan or at another scale).
-    pub fn new(model: &GpModel, head: &Template) -> Result<Self, String> {
+    pub fn new(model: &GpModel, head: &Template) -> Result<Self, HeadMismatch> {
         let face: Vec<Vec3> = model.shape.mean.clone();
         if face.is_empty() || head.mesh.positions.is_empty() {
-            return Err("empty model or head".into());
+            return Err(HeadMismatch::Empty);
         }
         let positions: Vec<Vec3> = head.mesh.positions.iter().map(|p| p.map(|v| v as f32)).collect();
         let albedos: Vec<Vec3> = head.mesh.colors.iter().map(|c| c.map(|v| v.clamp(0.0, 1.0) as f32)).collect();
@@ -130,13 +163,10 @@ impl HeadContext {
         gaps.sort_by(f32::total_cmp);
         let median = gaps[gaps.len() / 2];
         if median.is_nan() || median > ALIGNED_MM {
-            return Err(format!(
-                "the model's mean face lies {median:.1} mm (median) from this head, more than {ALIGNED_MM} mm: \
-                 the model was not built from this template (or at another scale)"
-            ));
+            return Err(HeadMismatch::NotOnHead { median_mm: median });
         }
         let mut normals = vec![[0.0f32; 3]; positions.len()];
-        vertex_normals(&positions, &head.mesh.triangles, &mut normals).map_err(|e| format!("the head mesh: {e}"))?;
+        vertex_normals(&positions, &head.mesh.triangles, &mut normals).map_err(HeadMismatch::Normals)?;
         let positions: Vec<Vec3> = positions.iter().zip(&normals).map(|(p, n)| std::array::from_fn(|k| p[k] - INSET_MM * n[k])).collect();
         let anchors = positions.iter().map(|p| anchor(&face, *p)).collect();
         let inside = face_crop_indices(&head.mesh, &head.landmarks).unwrap_or_default();
