@@ -22,14 +22,14 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
     /// A file or directory could not be read, written or created.
-    #[error("{}: {action}: {source}", path.display())]
+    #[error("{}: {action}: {error}", path.display())]
     Io {
         /// The file or directory.
         path: PathBuf,
         /// What was being done.
         action: &'static str,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A model file could not be read or written.
     #[error(transparent)]
@@ -126,7 +126,7 @@ impl ImageFitError {
 
 /// `EvalError::Io` for `path`.
 pub(crate) fn io_err<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -> EvalError + 'a {
-    move |source| EvalError::Io { path: path.to_path_buf(), action, source }
+    move |error| EvalError::Io { path: path.to_path_buf(), action, error }
 }
 
 /// Writes `text` to `path`, naming the file on failure.

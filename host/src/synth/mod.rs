@@ -216,14 +216,14 @@ impl SynthOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum SynthError {
     /// A file could not be read, written or created.
-    #[error("{}: {action}: {source}", path.display())]
+    #[error("{}: {action}: {error}", path.display())]
     Io {
         /// The file or directory.
         path: PathBuf,
         /// What was being done.
         action: &'static str,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A `.npy` file is missing or malformed.
     #[error(transparent)]
@@ -238,7 +238,7 @@ pub enum SynthError {
     },
     /// The template (albedo source) could not be imported.
     #[error("albedo template: {0}")]
-    Template(#[from] TemplateError),
+    Template(TemplateError),
     /// An option is invalid.
     #[error("invalid synth option: {message}")]
     Options {
@@ -254,7 +254,7 @@ pub enum SynthError {
 }
 
 fn io_err<'a>(path: &'a Path, action: &'static str) -> impl FnOnce(std::io::Error) -> SynthError + 'a {
-    move |source| SynthError::Io { path: path.to_path_buf(), action, source }
+    move |error| SynthError::Io { path: path.to_path_buf(), action, error }
 }
 
 /// Which hole of the ICT face area a closed boundary loop is.

@@ -14,12 +14,12 @@ use npyz::{DType, NpyFile, Order, TypeChar};
 #[derive(Debug, thiserror::Error)]
 pub enum NpyError {
     /// The file could not be opened or read.
-    #[error("{}: cannot read: {source}", path.display())]
+    #[error("{}: cannot read: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file is not a valid `.npy` array of a supported type.
     #[error("{}: {problem}", path.display())]
@@ -68,7 +68,7 @@ pub enum NpyProblem {
 
 /// Reads a float array (`f4` or `f8`) as `f32` in C order; returns `(shape, values)`.
 pub fn read_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>), NpyError> {
-    let bytes = std::fs::read(path).map_err(|source| NpyError::Io { path: path.to_path_buf(), source })?;
+    let bytes = std::fs::read(path).map_err(|error| NpyError::Io { path: path.to_path_buf(), error })?;
     parse_f32(&bytes).map_err(|problem| NpyError::Format { path: path.to_path_buf(), problem })
 }
 
@@ -76,7 +76,7 @@ pub fn read_f32(path: &Path) -> Result<(Vec<usize>, Vec<f32>), NpyError> {
 ///
 /// A negative value or one above `u32::MAX` is an error.
 pub fn read_u32(path: &Path) -> Result<(Vec<usize>, Vec<u32>), NpyError> {
-    let bytes = std::fs::read(path).map_err(|source| NpyError::Io { path: path.to_path_buf(), source })?;
+    let bytes = std::fs::read(path).map_err(|error| NpyError::Io { path: path.to_path_buf(), error })?;
     parse_u32(&bytes).map_err(|problem| NpyError::Format { path: path.to_path_buf(), problem })
 }
 
