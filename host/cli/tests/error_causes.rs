@@ -37,10 +37,13 @@ fn a_missing_file_is_reported_once() {
     let missing = missing.to_str().unwrap();
     let image = photo(dir.path());
     let init = dir.path().join("absent.init");
+    let ict = dir.path().join("absent-ict");
+    let synth_out = dir.path().join("synth");
     for args in [
         vec!["info", missing],
         vec!["fit", missing, &image, "--landmarks", "absent.pts", "-o", dir.path().to_str().unwrap()],
         vec!["detect", &image, "--init", init.to_str().unwrap()],
+        vec!["synth", "--count", "1", "--ict", ict.to_str().unwrap(), "-o", synth_out.to_str().unwrap()],
     ] {
         let stderr = fails(&gpmm(&args));
         let cause = std::io::Error::from(std::io::ErrorKind::NotFound).to_string();

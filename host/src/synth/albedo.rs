@@ -8,7 +8,8 @@ use crate::mesh::closest::{closest_on_triangle, Grid};
 pub(super) fn transfer_albedo(options: &SynthOptions, neutral_face: &[[f64; 3]], landmarks: &[u32]) -> Result<Vec<Vec3>, SynthError> {
     let dir = &options.template_dir;
     let topts = TemplateOptions { no_crop: true, ..Default::default() };
-    let template = load_template(&dir.join("lee-perry-smith.ply"), &dir.join("landmarks_ibug68.json"), &topts).map_err(SynthError::Template)?;
+    let template =
+        load_template(&dir.join("lee-perry-smith.ply"), &dir.join("landmarks_ibug68.json"), &topts).map_err(SynthError::Template)?;
     if template.landmarks.len() != IBUG68_COUNT {
         return Err(SynthError::Data {
             path: dir.join("landmarks_ibug68.json"),
