@@ -9,8 +9,7 @@
 //! keeps the covered pixels of the last frames for re-shading without the rasterizer.
 
 use crate::error::FitError;
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
 use crate::render::frame_cache::{FrameCache, GeometryKey};

@@ -1,8 +1,7 @@
 //! The borrowed model view used by the fitter (its cached per-vertex instance is in [`super::instance`]).
 
 use crate::error::FitError;
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::model::basis::{Basis, FactoredBasis};
 
 /// Most landmarks a model or a fit target has.

@@ -21,8 +21,7 @@
 //! recent triangles on the stack), which still skips binning, the set-up of hidden triangles and
 //! the tile buffers.
 
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::render::pose::Pose;
 use crate::render::raster::{blend, fragment_weights, FragmentSetup};
 use crate::render::shading::ProjectedVertex;

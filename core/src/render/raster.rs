@@ -31,8 +31,7 @@
 //!   counted in [`FrameStats`]; for a face in front of the camera this happens only when the camera
 //!   is inside or right next to the mesh.
 
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::render::shading::ProjectedVertex;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 

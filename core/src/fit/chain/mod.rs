@@ -36,8 +36,7 @@ use crate::fit::likelihood::pixel::{BackgroundLikelihood, GaussianPixel, ImageLi
 use crate::fit::likelihood::prior::Prior;
 use crate::fit::solve::light::{solve_light, LightSolveConfig};
 use crate::fit::start::landmark_pivot;
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
@@ -203,8 +202,8 @@ fn check<I: TriIndex, P, const KS: usize, const KC: usize>(problem: &Problem<'_,
 /// The first stage for the proposal in `next` (its parameters, drawn by `proposal` from `cur`;
 /// the rest of `next` is overwritten): prior and landmarks (recomputing landmark vertices only
 /// after a shape change), accepted with `min(1, exp(filter_term(x') − filter_term(x) + hastings))`.
-/// Draws one uniform from `rng` first, whatever the outcome; `true` if accepted. The chain keeps two states and swaps their roles instead of
-/// moving a state of a few kilobytes per step.
+/// Draws one uniform from `rng` first, whatever the outcome; `true` if accepted. The chain keeps
+/// two states and swaps their roles instead of moving a state of a few kilobytes per step.
 fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: usize, const KC: usize>(
     problem: &Problem<'_, I, P>,
     cur: &ChainState<KS, KC>,

@@ -18,8 +18,7 @@ use crate::error::FitError;
 use crate::fit::likelihood::landmarks::LandmarkTarget;
 use crate::fit::solve::light::facing;
 use crate::geometry::mat_vec;
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::model::morphable::MorphableModel;
 use crate::render::{Camera, Pose};
 

@@ -14,8 +14,7 @@
 use crate::error::FitError;
 use crate::fit::likelihood::image::TargetImage;
 use crate::fit::solve::light::visit_facing;
-use crate::geometry::TriIndex;
-use crate::geometry::Vec3;
+use crate::geometry::{TriIndex, Vec3};
 use crate::model::basis::ModelError;
 use crate::model::morphable::MorphableModel;
 use crate::render::{Camera, Pose, ShLight};
