@@ -299,14 +299,17 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         note(&pb, format!("model {label}: {}", if built { "built" } else { "reused" }));
     })?;
     pb.finish_and_clear();
-    let defaults = gpmm_host::fit::FitSettings::DEFAULT;
-    let fit = defaults
-        .with_steps(
-            a.landmark_steps.unwrap_or(if q { 1500 } else { defaults.landmarks.steps }),
-            a.image_steps.unwrap_or(if q { 40 } else { defaults.image.steps }),
-        )
-        .with_ranks(a.shape_rank, a.color_rank);
-    let fit = gpmm_host::fit::override_settings(&fit, &a.overrides)?;
+    // The one resolution of a fit's settings; --quick only shortens the chains it is not told about.
+    let base = gpmm_host::fit::FitFlags {
+        size: Some(a.size),
+        landmark_steps: a.landmark_steps.or(q.then_some(1500)),
+        image_steps: a.image_steps.or(q.then_some(40)),
+        shape_rank: Some(a.shape_rank),
+        color_rank: Some(a.color_rank),
+        overrides: a.overrides.clone(),
+        ..gpmm_host::fit::FitFlags::default()
+    }
+    .resolve()?;
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let mut seeds: Vec<u64> = Vec::new();
     for s in &a.fit_seed {
@@ -325,7 +328,7 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         if seeds.len() > 1 {
             eprintln!("fit seed {seed} -> {}", out.display());
         }
-        let settings = gpmm_host::fit::FitOptions { size: a.size, seed, fit };
+        let settings = gpmm_host::fit::FitOptions { seed, ..base };
         settings.validate()?;
         let kde_settings = gpmm_host::fit::FitOptions {
             fit: settings.fit.with_steps(settings.fit.landmarks.steps, a.kde_image_steps.unwrap_or(settings.fit.image.steps)),
