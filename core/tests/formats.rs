@@ -2,7 +2,7 @@
 //! corruption (any single flipped bit, any truncation) is refused with an error, never a panic.
 #![allow(clippy::indexing_slicing, clippy::unwrap_used, clippy::expect_used)]
 
-use gpmm_core::fit::{FitSettings, ImageSettings, LandmarkSettings, StartSettings};
+use gpmm_core::fit::{CoveredPixels, FitSettings, ImageSettings, LandmarkSettings, StartSettings};
 use gpmm_core::format::detection::{self, DetectCounts, DetectionFigures, Frame};
 use gpmm_core::format::device_mesh::{self, DeviceMeshView, DeviceScene};
 use gpmm_core::format::fit_record::{self, DeviceCounts, FitFigures};
@@ -83,11 +83,12 @@ fn fit_input_carries_every_setting() {
     let pixels: Vec<[u8; 3]> = (0..w * h).map(|i| [i as u8, 2 * i as u8, 255 - i as u8]).collect();
     let landmarks = [[1.5f32, 2.5], [3.25, 0.5]];
     let mut out = vec![0u8; fit_input::buffer_len(w, h, 2)];
-    let n = fit_input::write(&mut out, w, h, 0xdead_beef_1234, &settings, &landmarks, &pixels).unwrap();
+    let covered = CoveredPixels { x0: 1, y0: 0, x1: 5, y1: 2 };
+    let n = fit_input::write(&mut out, w, h, 0xdead_beef_1234, covered, &settings, &landmarks, &pixels).unwrap();
     out.truncate(n);
     let words = aligned(&out);
     let back: fit_input::FitInput<'_, FitSettings> = fit_input::parse(as_bytes(&words, n), 128, 68).unwrap();
-    assert_eq!((back.width, back.height, back.seed), (w, h, 0xdead_beef_1234));
+    assert_eq!((back.width, back.height, back.seed, back.covered), (w, h, 0xdead_beef_1234, covered));
     assert_eq!(back.settings, settings);
     assert_eq!(back.landmarks, &landmarks);
     assert_eq!(back.pixels, &pixels[..]);
@@ -96,7 +97,13 @@ fn fit_input_carries_every_setting() {
     refuses_corruption(&out, |b| fit_input::parse::<FitSettings>(b, 128, 68).is_ok());
     // A buffer too small for the image is an error, not a panic.
     let mut small = vec![0u8; 40];
-    assert!(fit_input::write(&mut small, w, h, 1, &settings, &landmarks, &pixels).is_err());
+    assert!(fit_input::write(&mut small, w, h, 1, covered, &settings, &landmarks, &pixels).is_err());
+    // Covered pixels past the image are refused.
+    let past = CoveredPixels { x1: 6, ..covered };
+    assert_eq!(
+        fit_input::write(&mut out, w, h, 1, past, &settings, &landmarks, &pixels).unwrap_err(),
+        FormatError::BadField("covered pixels")
+    );
 }
 
 #[test]

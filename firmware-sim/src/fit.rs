@@ -73,7 +73,7 @@ pub(crate) fn landmark_fit(
         }
     };
     let t_parsed = instructions_now();
-    let image = match TargetImage::new(input.pixels, input.width, input.height) {
+    let image = match TargetImage::new(input.pixels, input.width, input.height).and_then(|t| t.with_covered(input.covered)) {
         Ok(i) => i,
         Err(e) => fit_failed("target image", e),
     };

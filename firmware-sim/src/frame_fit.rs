@@ -15,7 +15,7 @@ use crate::clock::{self, instructions_now};
 use crate::fit::{self, fit_failed, Buffers, Sizes};
 use crate::{detect, fail, PROFILE};
 
-use gpmm_core::fit::{FitSettings, TargetImage};
+use gpmm_core::fit::{CoveredPixels, FitSettings, TargetImage};
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::detection::{DetectCounts, Frame};
 use gpmm_core::format::frame_fit::{self, FrameFitJob};
@@ -143,7 +143,9 @@ fn crop_and_fit(
         detection
     );
     defmt::info!("crop: x0 {=f32} y0 {=f32} px, {=f32} frame px per working px", window.x0, window.y0, window.step);
-    let image = match TargetImage::new(pixels, job.side, job.side) {
+    // The working pixels whose centres lie in the frame: the rest is padding, left out of the fit.
+    let covered = CoveredPixels::of_crop(window.x0, window.y0, window.step, job.side, frame.width, frame.height);
+    let image = match TargetImage::new(pixels, job.side, job.side).and_then(|t| t.with_covered(covered)) {
         Ok(i) => i,
         Err(e) => fit_failed("target image", e),
     };

@@ -10,6 +10,7 @@
 //!   its [`Proposal`]s and mixtures, the [`ChainObserver`]s that see every proposal's outcome,
 //!   the posterior's moments and the random samples it draws.
 //! - [`start`]: the chains' starting point from the target landmarks alone.
+//! - [`frame`]: the photo's edge: how far outside it landmarks may lie, and the working pixels it covers.
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
 //! - [`settings`]: its one [`FitSettings`] (steps, ranks, σ's, proposal mixtures, light).
 //!
@@ -21,6 +22,7 @@
 //! chain only ever uses differences. Nothing allocates; every buffer is borrowed or fixed-size.
 
 pub mod chain;
+pub mod frame;
 pub mod likelihood;
 pub mod recipe;
 pub mod settings;
@@ -34,6 +36,7 @@ pub use chain::{
     image_chain, image_log_likelihood, landmark_chain, run_chain, ChainState, FitResult, ImageProblem, LandmarksOnly, Problem,
     RenderedImage, SecondStage,
 };
+pub use frame::{first_beyond_margin, landmark_margin, CoveredPixels, LANDMARK_MARGIN};
 pub use likelihood::contour::{Silhouette, CONTOUR_POOL, MAX_CONTOUR, NO_VERTEX};
 pub use likelihood::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use likelihood::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget};

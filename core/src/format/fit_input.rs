@@ -8,27 +8,29 @@
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `GPFI` |
-//! | 4 | 4 | version (`u32`, 4) |
+//! | 4 | 4 | version (`u32`, [`VERSION`]) |
 //! | 8 | 4 | image width `W` |
 //! | 12 | 4 | image height `H` |
 //! | 16 | 4 | landmark count `L` |
 //! | 20 | 4 | settings payload bytes `S` (at most [`SETTINGS_CAPACITY`]) |
 //! | 24 | 8 | seed (`u64`) |
-//! | 32 | S | settings, postcard-encoded, zero padding to 4 bytes |
+//! | 32 | 16 | pixels the photo covers: `x0, y0, x1, y1` (`u32`, half-open; [`CoveredPixels`]) |
+//! | 48 | S | settings, postcard-encoded, zero padding to 4 bytes |
 //! | … | 8 L | landmarks `[f32; 2]`, pixel coordinates (pixel centres at +0.5) |
 //! | … | 3 W H | pixels, RGB8, row-major from the top-left, zero padding to 4 bytes |
 //! | end − 4 | 4 | CRC-32 of every byte before it |
 
 use super::bytes::{check_crc, Reader, Writer};
 use super::FormatError;
+use crate::fit::frame::CoveredPixels;
 use serde::{de::DeserializeOwned, Serialize};
 
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFI";
 /// The layout version written and read.
-pub const VERSION: u32 = 8;
+pub const VERSION: u32 = 9;
 /// Bytes before the settings payload.
-pub const HEADER_BYTES: usize = 32;
+pub const HEADER_BYTES: usize = 48;
 /// Largest settings payload.
 pub const SETTINGS_CAPACITY: usize = 1024;
 
@@ -41,6 +43,8 @@ pub struct FitInput<'a, S> {
     pub height: u32,
     /// Seed of the chains.
     pub seed: u64,
+    /// The pixels the photo covers (the rest of the crop lay past its edge).
+    pub covered: CoveredPixels,
     /// The fit settings.
     pub settings: S,
     /// Target landmarks (image pixels).
@@ -55,17 +59,22 @@ pub fn buffer_len(width: u32, height: u32, landmarks: usize) -> usize {
 }
 
 /// Writes a fit input into `out` (see [`buffer_len`]); returns the bytes written.
+#[allow(clippy::too_many_arguments)]
 pub fn write<S: Serialize>(
     out: &mut [u8],
     width: u32,
     height: u32,
     seed: u64,
+    covered: CoveredPixels,
     settings: &S,
     landmarks: &[[f32; 2]],
     pixels: &[[u8; 3]],
 ) -> Result<usize, FormatError> {
     if width == 0 || height == 0 || pixels.len() != width as usize * height as usize {
         return Err(FormatError::BadField("image size"));
+    }
+    if !covered.fits(width, height) {
+        return Err(FormatError::BadField("covered pixels"));
     }
     let room = out.len();
     let payload = out.get_mut(HEADER_BYTES..).ok_or(FormatError::BufferTooSmall { needed: buffer_len(width, height, landmarks.len()) })?;
@@ -79,6 +88,9 @@ pub fn write<S: Serialize>(
     w.u32(landmarks.len() as u32)?;
     w.u32(s as u32)?;
     w.u64(seed)?;
+    for v in [covered.x0, covered.y0, covered.x1, covered.y1] {
+        w.u32(v)?;
+    }
     w.advance(s)?;
     w.align4()?;
     w.f32s(landmarks.iter().flatten().copied())?;
@@ -99,6 +111,7 @@ pub fn parse<S: DeserializeOwned>(bytes: &[u8], max_side: u32, max_landmarks: us
     let mut r = Reader::after_header(bytes, MAGIC, VERSION)?;
     let (width, height, count, s) = (r.u32()?, r.u32()?, r.u32()? as usize, r.u32()? as usize);
     let seed = r.u64()?;
+    let covered = CoveredPixels { x0: r.u32()?, y0: r.u32()?, x1: r.u32()?, y1: r.u32()? };
     if width == 0 || width > max_side {
         return Err(FormatError::BadField("image width"));
     }
@@ -111,11 +124,14 @@ pub fn parse<S: DeserializeOwned>(bytes: &[u8], max_side: u32, max_landmarks: us
     if s > SETTINGS_CAPACITY {
         return Err(FormatError::BadField("settings size"));
     }
+    if !covered.fits(width, height) {
+        return Err(FormatError::BadField("covered pixels"));
+    }
     let body = HEADER_BYTES + s.next_multiple_of(4) + 8 * count + (3 * width as usize * height as usize).next_multiple_of(4);
     check_crc(bytes, body)?;
     let settings = postcard::from_bytes(r.take(s)?).map_err(|_| FormatError::Payload)?;
     r.align4()?;
     let landmarks = r.slice(count)?;
     let pixels = r.slice(width as usize * height as usize)?;
-    Ok(FitInput { width, height, seed, settings, landmarks, pixels })
+    Ok(FitInput { width, height, seed, covered, settings, landmarks, pixels })
 }

@@ -398,3 +398,54 @@ fn bench_fit_recovers_yaw_without_a_frontal_bias() {
     assert!(j["model_frame"].is_null(), "{j}");
     assert!(j["model_frame_error"].as_str().unwrap().contains("/nonexistent-ict"), "{j}");
 }
+
+/// A face at the frame's edge: a chip cut so the chin point lies a pixel below its last row fits
+/// (the point is within the margin) and gives the pose of the same face with 4 px of the photo
+/// around it; a point far outside is still refused.
+#[test]
+fn a_chip_with_the_chin_a_pixel_outside_fits_like_the_face_with_a_border() {
+    let Some(f) = fixture() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let (img, pts) = (f.synth.join("0000_yaw00.png"), f.synth.join("0000_yaw00.pts"));
+    let photo = image::open(&img).unwrap().to_rgb8();
+    let points = gpmm_host::photo::pts::read_pts(&pts, false).unwrap().points;
+    let (chin, top) = (points[8][1], points.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min));
+    // The chip: rows from 8 px above the highest point to one whole pixel above the chin point.
+    let (y0, y1) = ((top - 8.0).floor() as u32, chin.floor() as u32 - 1);
+    let (x0, x1) = (4u32, photo.width() - 4);
+    assert!(y0 >= 4 && y1 + 4 <= photo.height(), "the synthetic face leaves room for the border");
+    let mut files = Vec::new();
+    for (name, border) in [("chip", 0u32), ("bordered", 4)] {
+        let (left, up) = (x0 - border, y0 - border);
+        let cut = image::imageops::crop_imm(&photo, left, up, x1 - x0 + 2 * border, y1 - y0 + 2 * border).to_image();
+        let (png, p) = (dir.path().join(format!("{name}.png")), dir.path().join(format!("{name}.pts")));
+        cut.save(&png).unwrap();
+        std::fs::write(&p, shifted_pts(&pts, -(left as f32), -(up as f32))).unwrap();
+        files.push((png, p, cut.height()));
+    }
+    let chip_chin = points[8][1] - y0 as f32;
+    assert!(chip_chin > files[0].2 as f32 && chip_chin < files[0].2 as f32 + 2.0, "chin at {chip_chin}, chip height {}", files[0].2);
+    let mut poses = Vec::new();
+    for (png, p, _) in &files {
+        let out = dir.path().join(png.file_stem().unwrap());
+        ok(&fit(f, png, p, &out, &["--no-timing"]));
+        let j = read_json(&out.join("fit.json"));
+        poses.push(["yaw_deg", "pitch_deg", "roll_deg"].map(|k| j[k].as_f64().unwrap()));
+        let outside = j["crop_outside_fraction"].as_f64().unwrap();
+        assert!(outside > 0.05 && outside < 0.9, "the crop leaves the photo: {outside}");
+    }
+    for k in 0..3 {
+        assert!((poses[0][k] - poses[1][k]).abs() < 0.5, "chip {:?} vs bordered {:?}", poses[0], poses[1]);
+    }
+    // Far outside: refused with the point, its line and the image size.
+    let far = dir.path().join("far.pts");
+    let text = std::fs::read_to_string(&files[0].1).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[3 + 8] = "75.0 900.0".into();
+    std::fs::write(&far, lines.join("\n")).unwrap();
+    let e = fails(&fit(f, &files[0].0, &far, &dir.path().join("far"), &[]));
+    assert!(
+        e.contains("far.pts: landmark 8 (0-based; line 12) at (75, 900) lies outside the 120x") && e.contains("belong to this image"),
+        "{e}"
+    );
+}

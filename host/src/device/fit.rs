@@ -11,7 +11,7 @@
 use crate::device::quantize::BlobBuf;
 use crate::fit::{FitBuffers, Prepared};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, RankSettings, StandardFit, TargetImage};
+use gpmm_core::fit::{project_landmarks, standard_fit, CoveredPixels, FitSettings, RankSettings, StandardFit, TargetImage};
 use gpmm_core::format::{fit_input, fit_record, FormatError};
 use gpmm_core::profile::{DeviceProfile, M4F};
 use rand::SeedableRng;
@@ -86,13 +86,14 @@ pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSe
     FitSettings { ranks, ..settings.without_shape_solve() }
 }
 
-/// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and
-/// landmarks, the whole `settings` and `seed`.
+/// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image, the
+/// pixels of it the photo covers and its landmarks, the whole `settings` and `seed`.
 pub fn fit_input_bytes(prepared: &Prepared, settings: &FitSettings, seed: u64) -> Result<Vec<u8>, DeviceFitError> {
     let (w, h) = prepared.image.dimensions();
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
     let mut out = vec![0u8; fit_input::buffer_len(w, h, prepared.landmarks.len())];
-    let n = fit_input::write(&mut out, w, h, seed, settings, &prepared.landmarks, &pixels).map_err(DeviceFitError::Input)?;
+    let n =
+        fit_input::write(&mut out, w, h, seed, prepared.covered, settings, &prepared.landmarks, &pixels).map_err(DeviceFitError::Input)?;
     out.truncate(n);
     Ok(out)
 }
@@ -118,22 +119,25 @@ pub fn host_fit(
 ) -> Result<(StandardFit<DEVICE_KS, DEVICE_KC>, Vec<[f32; 2]>), DeviceFitError> {
     let (w, h) = prepared.image.dimensions();
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
-    host_fit_pixels(blob, &pixels, w, h, &prepared.landmarks, settings, seed)
+    host_fit_pixels(blob, &pixels, w, h, prepared.covered, &prepared.landmarks, settings, seed)
 }
 
-/// [`host_fit`] on a working image given as pixels (`w × h`, row-major) and its landmarks (px).
+/// [`host_fit`] on a working image given as pixels (`w × h`, row-major), the pixels of it the
+/// photo covers and its landmarks (px).
+#[allow(clippy::too_many_arguments)]
 pub fn host_fit_pixels(
     blob: &BlobBuf,
     pixels: &[[u8; 3]],
     w: u32,
     h: u32,
+    covered: CoveredPixels,
     landmarks: &[[f32; 2]],
     settings: &FitSettings,
     seed: u64,
 ) -> Result<(StandardFit<DEVICE_KS, DEVICE_KC>, Vec<[f32; 2]>), DeviceFitError> {
     let view = blob.view().map_err(|e| DeviceFitError::Blob(e.to_string()))?;
     let model = view.morphable().map_err(DeviceFitError::Core)?;
-    let image = TargetImage::new(pixels, w, h).map_err(DeviceFitError::Core)?;
+    let image = TargetImage::new(pixels, w, h).and_then(|t| t.with_covered(covered)).map_err(DeviceFitError::Core)?;
     // The firmware's compact frame cache, the same size (the fit is the same with or without it).
     let mut buffers = FitBuffers::device(model.vertices(), w, h, M4F.frame_cache_pixels);
     let mut inst = buffers.instance::<DEVICE_KS, DEVICE_KC>().map_err(DeviceFitError::Core)?;

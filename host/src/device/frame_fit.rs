@@ -10,6 +10,7 @@ use crate::detect::{DetectError, Detector, HOST_NET_SCRATCH};
 use crate::device::detect::{self, DeviceDetectError, DeviceDetectReport};
 use crate::device::fit::{self as dfit, host_fit_pixels, DeviceFitError, DeviceFitReport, DEVICE_KC, DEVICE_KS};
 use crate::device::quantize::BlobBuf;
+use gpmm_core::fit::CoveredPixels;
 use gpmm_core::fit::{FitSettings, StandardFit};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
 use gpmm_core::format::{frame_fit, FormatError};
@@ -157,7 +158,8 @@ pub fn host_frame_fit(
     let s = side as usize;
     let (mut pixels, mut working) = (vec![[0u8; 3]; s * s], vec![[0.0f32; 2]; det.landmarks.len()]);
     let window = crop_for_fit(frame.as_raw(), w, h, &det.landmarks, s, &mut pixels, &mut working).map_err(FrameFitError::Net)?;
-    let (fit, fitted_landmarks) = host_fit_pixels(blob, &pixels, side, side, &working, settings, seed)?;
+    let covered = CoveredPixels::of_crop(window.x0, window.y0, window.step, side, w as u32, h as u32);
+    let (fit, fitted_landmarks) = host_fit_pixels(blob, &pixels, side, side, covered, &working, settings, seed)?;
     Ok(HostFrameFit { face, detection: Some(det), fitted: Some(HostCropFit { window, working_landmarks: working, fit, fitted_landmarks }) })
 }
 

@@ -33,7 +33,7 @@ use crate::photo::pts::PtsError;
 use crate::photo::{crop_box, crop_resize, CropBox, PhotoError};
 use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{standard_fit, TargetImage};
+use gpmm_core::fit::{standard_fit, CoveredPixels, TargetImage};
 use gpmm_core::model::{FitParams, MorphableModel, MAX_LANDMARKS};
 use gpmm_core::render::Cull;
 use image::{RgbImage, Rgba, RgbaImage};
@@ -105,6 +105,8 @@ pub struct Prepared {
     pub landmarks: Vec<[f32; 2]>,
     /// The crop in the original image.
     pub crop: CropBox,
+    /// The working pixels the photo covers (the rest of the crop lay past its edge).
+    pub covered: CoveredPixels,
     /// Original image size.
     pub original_size: [u32; 2],
     /// Landmarks in the original image.
@@ -117,6 +119,7 @@ pub fn prepare(image: &RgbImage, points: &[[f32; 2]], size: u32) -> Result<Prepa
     Ok(Prepared {
         image: crop_resize(image, &crop, size),
         landmarks: points.iter().map(|p| crop.to_working(*p, size)).collect(),
+        covered: crop.covered(size, image.width(), image.height()),
         crop,
         original_size: [image.width(), image.height()],
         original_landmarks: points.to_vec(),
@@ -204,7 +207,7 @@ pub fn fit_prepared(
     };
     let core_settings = settings.core();
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
-    let target = TargetImage::new(&pixels, w, h).map_err(core("target image"))?;
+    let target = TargetImage::new(&pixels, w, h).and_then(|t| t.with_covered(prepared.covered)).map_err(core("target image"))?;
     let valid = vec![true; n_lm];
     let mut buffers = FitBuffers::host(mm.vertices(), w, h, &core_settings);
     let mut inst = buffers.instance::<KS, KC>().map_err(core("instance"))?;
@@ -347,6 +350,9 @@ pub struct FitReport {
     pub image_size: [u32; 2],
     /// The crop in the original image.
     pub crop: CropBox,
+    /// The share of the crop outside the photo (0 to 1; those pixels are left out of the fit).
+    #[serde(default)]
+    pub crop_outside_fraction: f32,
     /// Working image side.
     pub working_size: u32,
     /// Seed.
@@ -454,6 +460,7 @@ pub fn report(
         pts_one_based: inputs.pts_one_based,
         image_size: prepared.original_size,
         crop: prepared.crop,
+        crop_outside_fraction: prepared.crop.outside_fraction(prepared.original_size[0], prepared.original_size[1]),
         working_size: size,
         seed: settings.seed,
         landmark_steps: settings.fit.landmarks.steps,

@@ -5,7 +5,8 @@
 //! the crop is the square of side `S = ceil(CROP_FACTOR · e)` pixels centred on
 //! `c − (0, CROP_LIFT · e)` (lifted so the forehead, which no landmark marks, fits), snapped to
 //! whole pixels. If the square fits in the image it is shifted to lie inside it; otherwise the
-//! missing pixels are filled by repeating the nearest border pixel. The crop is resampled to
+//! missing pixels are filled by repeating the nearest border pixel, and the working pixels whose
+//! centres lie outside the photo are left out of the fit ([`CropBox::covered`]). The crop is resampled to
 //! `size × size` with a Lanczos-3 filter (`image::imageops::resize`, which widens the kernel
 //! when shrinking, so it does not alias). Coordinates map exactly: working = (original − corner) ·
 //! size / S in continuous pixel coordinates (centres at +0.5 in both images).
@@ -13,6 +14,7 @@
 pub mod calibration;
 pub mod pts;
 
+use gpmm_core::fit::CoveredPixels;
 use image::{imageops::FilterType, RgbImage};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -89,6 +91,19 @@ impl CropBox {
     pub fn scale(&self, size: u32) -> f32 {
         self.side as f32 / size as f32
     }
+
+    /// The pixels of the `size × size` working image that a `width × height` photo covers (the
+    /// others are padding, left out of the fit: [`gpmm_core::fit::frame`]).
+    pub fn covered(&self, size: u32, width: u32, height: u32) -> CoveredPixels {
+        CoveredPixels::of_crop(self.x as f32, self.y as f32, self.scale(size), size, width, height)
+    }
+
+    /// The share of the crop's area that lies outside a `width × height` photo (0 to 1).
+    pub fn outside_fraction(&self, width: u32, height: u32) -> f32 {
+        let span = |start: i64, extent: u32| (start + i64::from(self.side)).min(i64::from(extent)) - start.max(0);
+        let inside = span(self.x, width).max(0) as f64 * span(self.y, height).max(0) as f64;
+        (1.0 - inside / (f64::from(self.side) * f64::from(self.side))) as f32
+    }
 }
 
 /// The crop of the module docs for landmarks `points` in a `width × height` image.
@@ -162,6 +177,14 @@ mod tests {
         let img = RgbImage::from_fn(200, 200, |x, y| image::Rgb([x as u8, y as u8, 7]));
         let out = crop_resize(&img, &b, 64);
         assert_eq!(out.dimensions(), (64, 64));
+        // 216 px from (42, 40): 58 px past the right edge, 56 past the bottom (3.375 px a working px).
+        assert_eq!((b.x, b.y, b.side), (42, 40, 216));
+        let cov = b.covered(64, 200, 200);
+        assert_eq!((cov.x0, cov.y0), (0, 0));
+        assert_eq!((cov.x1, cov.y1), (47, 47));
+        let outside = 1.0 - (158.0 * 160.0) / (216.0 * 216.0);
+        assert!((b.outside_fraction(200, 200) - outside).abs() < 1e-6, "{}", b.outside_fraction(200, 200));
+        assert_eq!(crop_box(&pts, 1000, 1000).unwrap().outside_fraction(1000, 1000), 0.0);
         assert!(crop_box(&[[3.0, 3.0], [3.0, 3.0]], 10, 10).is_err());
     }
 }

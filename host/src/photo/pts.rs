@@ -11,6 +11,7 @@
 //! left of the pixel centre they name. That is 0.1 px at a 128-pixel working size for a face
 //! 300 px across, far below the detector's own error, so no correction is applied.
 
+use gpmm_core::fit::{first_beyond_margin, landmark_margin};
 use std::path::{Path, PathBuf};
 
 /// Why a landmark file was refused; every variant names the file.
@@ -46,9 +47,9 @@ pub enum PtsError {
         /// The model's landmark scheme.
         scheme: String,
     },
-    /// A point lies outside the image.
+    /// A point lies farther outside the image than the margin ([`gpmm_core::fit::LANDMARK_MARGIN`]).
     #[error(
-        "{}: landmark {index} (0-based; line {line}) at ({x}, {y}) lies outside the {width}x{height} image{hint}",
+        "{}: landmark {index} (0-based; line {line}) at ({x}, {y}) lies outside the {width}x{height} image by more than the margin of {margin:.1} px (a fifth of the landmarks' box){hint}",
         path.display()
     )]
     Outside {
@@ -66,6 +67,8 @@ pub enum PtsError {
         width: u32,
         /// Image height.
         height: u32,
+        /// How far outside the image a point may lie (px).
+        margin: f32,
         /// A hint (e.g. the wrong image or a 1-based file).
         hint: String,
     },
@@ -150,23 +153,25 @@ pub fn read_pts(path: &Path, one_based: bool) -> Result<Pts, PtsError> {
 
 impl Pts {
     /// Checks the point count against the model's `expected` landmarks (scheme named in the message)
-    /// and that every point lies in the `width × height` image (continuous coordinates, border included).
+    /// and that every point lies in the `width × height` image (continuous coordinates, border
+    /// included) or outside it by at most the margin ([`gpmm_core::fit::first_beyond_margin`]: a
+    /// face cut by the frame). A refused 0-based file whose points all pass once shifted by one
+    /// is named as probably 1-based.
     pub fn check(&self, path: &Path, expected: usize, scheme: &str, width: u32, height: u32, one_based: bool) -> Result<(), PtsError> {
         if self.points.len() != expected {
             return Err(PtsError::Count { path: path.to_path_buf(), found: self.points.len(), expected, scheme: scheme.to_string() });
         }
-        for (index, (p, &line)) in self.points.iter().zip(&self.lines).enumerate() {
-            let inside = p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= width as f32 && p[1] <= height as f32;
-            if !inside {
-                let hint = if !one_based && (p[0] <= width as f32 + 1.0 && p[1] <= height as f32 + 1.0) {
-                    " (is the file 1-based? then pass --pts-one-based)".to_string()
-                } else {
-                    " (does the landmark file belong to this image?)".to_string()
-                };
-                return Err(PtsError::Outside { path: path.to_path_buf(), index, line, x: p[0], y: p[1], width, height, hint });
-            }
-        }
-        Ok(())
+        let (w, h) = (width as f32, height as f32);
+        let Some(index) = first_beyond_margin(&self.points, w, h) else { return Ok(()) };
+        let shifted: Vec<[f32; 2]> = self.points.iter().map(|p| [p[0] - 1.0, p[1] - 1.0]).collect();
+        let hint = if !one_based && first_beyond_margin(&shifted, w, h).is_none() {
+            " (is the file 1-based? then pass --pts-one-based)"
+        } else {
+            " (does the landmark file belong to this image?)"
+        };
+        let (p, line) = (self.points.get(index).copied().unwrap_or_default(), self.lines.get(index).copied().unwrap_or(0));
+        let margin = landmark_margin(&self.points);
+        Err(PtsError::Outside { path: path.to_path_buf(), index, line, x: p[0], y: p[1], width, height, margin, hint: hint.to_string() })
     }
 }
 
@@ -226,10 +231,14 @@ mod tests {
         }
         let ok = parse_pts("version: 1\nn_points: 2\n{\n1 2\n30 4\n}\n", false, p).unwrap();
         assert!(matches!(ok.check(p, 68, "ibug68", 100, 100, false), Err(PtsError::Count { found: 2, expected: 68, .. })));
+        // The box is 29 px: the margin 5.8 px; x = 30 is 10 px past a 20 px image.
         let e = ok.check(p, 2, "ibug68", 20, 100, false).unwrap_err();
         assert!(matches!(e, PtsError::Outside { index: 1, line: 5, .. }), "{e}");
-        assert!(e.to_string().contains("landmark 1"), "{e}");
+        assert!(e.to_string().contains("landmark 1") && e.to_string().contains("20x100 image") && e.to_string().contains("5.8 px"), "{e}");
+        assert!(e.to_string().contains("belong to this image"), "{e}");
         assert!(ok.check(p, 2, "ibug68", 30, 4, false).is_ok());
+        // Within the margin: 5 px past a 25 px image, 3 px below a 1 px one.
+        assert!(ok.check(p, 2, "ibug68", 25, 1, false).is_ok());
     }
 
     #[test]
@@ -239,11 +248,31 @@ mod tests {
         assert_eq!(moved, 2);
         assert_eq!(inside[..4], [[5.0, 128.0], [0.0, 40.0], [64.0, 64.0], [128.0, 0.0]]);
         assert!(inside[4][0].is_nan());
-        // What was refused before passes the check now.
+        // Both pass the check: the points lay within the margin.
         let p = Path::new("detected.pts");
         let before = Pts { points: points[..4].to_vec(), lines: vec![4, 5, 6, 7] };
-        assert!(matches!(before.check(p, 4, "ibug68", 128, 128, false), Err(PtsError::Outside { index: 0, .. })));
+        assert!(before.check(p, 4, "ibug68", 128, 128, false).is_ok());
         let after = Pts { points: inside[..4].to_vec(), lines: vec![4, 5, 6, 7] };
         assert!(after.check(p, 4, "ibug68", 128, 128, false).is_ok());
+    }
+
+    #[test]
+    fn a_face_cut_by_the_frame_passes_and_a_one_based_file_is_named() {
+        let p = Path::new("chip.pts");
+        // A 150 x 150 chip: the chin a pixel below the last row, a jaw point at x = -1.
+        let chip = Pts { points: vec![[-1.0, 40.0], [75.0, 151.0], [149.0, 40.0], [75.0, 10.0]], lines: vec![4, 5, 6, 7] };
+        assert!(chip.check(p, 4, "ibug68", 150, 150, false).is_ok());
+        // Far outside: refused, naming the point, its line and the image size.
+        let far = Pts { points: vec![[10.0, 10.0], [99999.0, 99999.0], [60.0, 40.0], [30.0, 70.0]], lines: vec![4, 5, 6, 7] };
+        let e = far.check(p, 4, "ibug68", 150, 150, false).unwrap_err().to_string();
+        assert!(e.contains("chip.pts: landmark 1 (0-based; line 5) at (99999, 99999) lies outside the 150x150 image"), "{e}");
+        // A tiny 1-based face in the bottom-right corner, read 0-based: 1 px past the edge, more
+        // than the 0.8 px margin; shifted by one it fits.
+        let shifted = Pts { points: vec![[147.0, 147.0], [151.0, 147.0], [147.0, 151.0], [151.0, 151.0]], lines: vec![4, 5, 6, 7] };
+        let e = shifted.check(p, 4, "ibug68", 150, 150, false).unwrap_err().to_string();
+        assert!(e.contains("is the file 1-based? then pass --pts-one-based"), "{e}");
+        // Declared 1-based already: the other hint.
+        let e = shifted.check(p, 4, "ibug68", 150, 150, true).unwrap_err().to_string();
+        assert!(e.contains("belong to this image"), "{e}");
     }
 }

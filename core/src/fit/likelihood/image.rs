@@ -3,6 +3,7 @@
 //! is in [`crate::fit::likelihood`].
 
 use crate::error::FitError;
+use crate::fit::frame::CoveredPixels;
 use crate::geometry::Vec3;
 
 /// The foreground σ of Schönborn et al. on colours in [0, 1].
@@ -13,12 +14,15 @@ pub const BG_BINS: usize = 8;
 const BG_SHIFT: u32 = 5; // 256 / 8 = 32 = 1 << 5
 const BG_TOTAL: usize = BG_BINS * BG_BINS * BG_BINS;
 
-/// A borrowed 8-bit RGB target image, row-major, top row first, linear colours (value / 255).
+/// A borrowed 8-bit RGB target image, row-major, top row first, linear colours (value / 255),
+/// with the pixels the photo covers: the others (a crop past the photo's edge) read as absent.
 #[derive(Debug, Clone, Copy)]
 pub struct TargetImage<'a> {
     pixels: &'a [[u8; 3]],
     width: u32,
     height: u32,
+    covered: CoveredPixels,
+    partial: bool,
 }
 
 impl<'a> TargetImage<'a> {
@@ -33,7 +37,21 @@ impl<'a> TargetImage<'a> {
         if width > crate::render::raster::MAX_IMAGE_SIZE || height > crate::render::raster::MAX_IMAGE_SIZE {
             return Err(FitError::BadConfig);
         }
-        Ok(Self { pixels, width, height })
+        Ok(Self { pixels, width, height, covered: CoveredPixels::whole(width, height), partial: false })
+    }
+
+    /// The image with only `covered` observed (see [`crate::fit::frame`]); the rectangle must lie
+    /// in the image and cover a pixel.
+    pub fn with_covered(self, covered: CoveredPixels) -> Result<Self, FitError> {
+        if !covered.fits(self.width, self.height) {
+            return Err(FitError::EmptyImage);
+        }
+        Ok(Self { covered, partial: covered != CoveredPixels::whole(self.width, self.height), ..self })
+    }
+
+    /// The pixels the photo covers.
+    pub fn covered(&self) -> CoveredPixels {
+        self.covered
     }
 
     /// Width in pixels.
@@ -46,9 +64,9 @@ impl<'a> TargetImage<'a> {
         self.height
     }
 
-    /// The pixel at `(x, y)`, if inside.
+    /// The pixel at `(x, y)`, if inside and covered.
     pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
-        if x >= self.width || y >= self.height {
+        if x >= self.width || y >= self.height || (self.partial && !self.covered.contains(x, y)) {
             return None;
         }
         self.pixels.get(y as usize * self.width as usize + x as usize).copied()
@@ -64,17 +82,19 @@ impl<'a> TargetImage<'a> {
     }
 
     /// The linear colour at the continuous position `(x, y)`, interpolated bilinearly between the
-    /// four nearest pixel centres (edge pixels repeated), if `(x, y)` is inside the image.
+    /// four nearest pixel centres (the covered pixels' edge pixels repeated), if `(x, y)` lies in
+    /// a covered pixel.
     pub fn sample_bilinear(&self, x: f32, y: f32) -> Option<Vec3> {
-        if !(x >= 0.0 && y >= 0.0 && x < self.width as f32 && y < self.height as f32) {
+        let cov = self.covered;
+        if !(x >= cov.x0 as f32 && y >= cov.y0 as f32 && x < cov.x1 as f32 && y < cov.y1 as f32) {
             return None;
         }
         let (fx, fy) = (x - 0.5, y - 0.5);
         let (x0, y0) = (libm::floorf(fx), libm::floorf(fy));
         let (tx, ty) = (fx - x0, fy - y0);
-        let clamp = |v: f32, hi: u32| -> u32 { (v.max(0.0) as u32).min(hi.saturating_sub(1)) };
-        let (xa, xb) = (clamp(x0, self.width), clamp(x0 + 1.0, self.width));
-        let (ya, yb) = (clamp(y0, self.height), clamp(y0 + 1.0, self.height));
+        let clamp = |v: f32, lo: u32, hi: u32| -> u32 { (v.max(lo as f32) as u32).clamp(lo, hi.saturating_sub(1).max(lo)) };
+        let (xa, xb) = (clamp(x0, cov.x0, cov.x1), clamp(x0 + 1.0, cov.x0, cov.x1));
+        let (ya, yb) = (clamp(y0, cov.y0, cov.y1), clamp(y0 + 1.0, cov.y0, cov.y1));
         let px = |xx: u32, yy: u32| self.pixel(xx, yy).map(to_linear);
         let (a, b, c, d) = (px(xa, ya)?, px(xb, ya)?, px(xa, yb)?, px(xb, yb)?);
         let mut out = [0.0f32; 3];
@@ -87,12 +107,17 @@ impl<'a> TargetImage<'a> {
         Some(out)
     }
 
-    /// The pixel at row-major index `index`, if inside.
-    pub fn pixel_at(&self, index: u32) -> Option<[u8; 3]> {
-        self.pixels.get(index as usize).copied()
+    /// The pixel at row-major index `index`, if inside; `Some(None)` if inside but not covered.
+    #[inline(always)]
+    pub fn pixel_at(&self, index: u32) -> Option<Option<[u8; 3]>> {
+        let p = self.pixels.get(index as usize).copied()?;
+        if self.partial && !self.covered.contains(index % self.width, index / self.width) {
+            return Some(None);
+        }
+        Some(Some(p))
     }
 
-    /// Row `y` (`width` pixels).
+    /// Row `y` (`width` pixels), covered or not (see [`TargetImage::covered`]).
     pub fn row(&self, y: u32) -> Option<&'a [[u8; 3]]> {
         let w = self.width as usize;
         let start = (y as usize).checked_mul(w)?;
@@ -124,12 +149,16 @@ impl BackgroundModel {
             return Err(FitError::BadConfig);
         }
         let mut counts = [0u32; BG_TOTAL];
-        for p in image.pixels {
-            if let Some(c) = counts.get_mut(bin(*p)) {
-                *c = c.saturating_add(1);
+        let cov = image.covered;
+        for y in cov.y0..cov.y1 {
+            let Some(row) = image.row(y) else { continue };
+            for p in row.get(cov.x0 as usize..cov.x1 as usize).unwrap_or(&[]) {
+                if let Some(c) = counts.get_mut(bin(*p)) {
+                    *c = c.saturating_add(1);
+                }
             }
         }
-        let n = image.pixels.len().max(1) as f32;
+        let n = cov.count().max(1) as f32;
         let mut log_density = [0.0f32; BG_TOTAL];
         for (l, c) in log_density.iter_mut().zip(counts) {
             // Density on the unit cube: probability / bin volume, bin volume = 1 / 512.
@@ -188,6 +217,31 @@ mod tests {
         assert_eq!(crate::fit::ImageLikelihood::new(img, &bg, f32::NAN).err(), Some(FitError::BadConfig));
         assert_eq!(img.pixel(3, 0), None);
         assert_eq!(img.sample(-0.5, 0.0), None);
+    }
+
+    #[test]
+    fn pixels_past_the_photo_are_absent_and_not_in_the_background() {
+        // 2 × 2: the right column lies past the photo (white padding).
+        let px: [[u8; 3]; 4] = [[0, 0, 0], [255, 255, 255], [0, 0, 0], [255, 255, 255]];
+        let whole = TargetImage::new(&px, 2, 2).unwrap();
+        let img = whole.with_covered(CoveredPixels { x0: 0, y0: 0, x1: 1, y1: 2 }).unwrap();
+        assert_eq!(img.pixel(1, 0), None);
+        assert_eq!(img.pixel(0, 1), Some([0, 0, 0]));
+        assert_eq!(img.pixel_at(1), Some(None));
+        assert_eq!(img.pixel_at(2), Some(Some([0, 0, 0])));
+        assert_eq!(img.pixel_at(4), None);
+        assert_eq!(img.sample(1.5, 0.5), None);
+        // Bilinear samples repeat the covered edge: at the edge pixel's right border, its colour.
+        assert_eq!(img.sample_bilinear(0.99, 0.5), Some([0.0; 3]));
+        assert_eq!(img.sample_bilinear(1.5, 0.5), None);
+        // The background sees only the covered black pixels.
+        let bg = BackgroundModel::from_image(&img, 0.01).unwrap();
+        let bg_whole = BackgroundModel::from_image(&whole, 0.01).unwrap();
+        assert!(bg.log_density([255, 255, 255]) < bg_whole.log_density([255, 255, 255]));
+        assert!((bg.log_density([255, 255, 255]) - libm::logf(0.01)).abs() < 1e-5);
+        // A rectangle outside the image or covering nothing is refused.
+        assert!(whole.with_covered(CoveredPixels { x0: 0, y0: 0, x1: 3, y1: 2 }).is_err());
+        assert!(whole.with_covered(CoveredPixels { x0: 1, y0: 0, x1: 1, y1: 2 }).is_err());
     }
 
     #[test]

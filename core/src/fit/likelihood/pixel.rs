@@ -111,11 +111,17 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
         let (x0, y0) = tile.origin();
         let (w, h) = tile.size();
         let (mut sum, mut sq, mut covered) = (0.0f32, 0.0f32, 0u32);
+        // The photo's pixels in this tile's columns (a crop past the photo's edge observes nothing there).
+        let photo = self.image.covered();
+        let (first, end) = (photo.x0.saturating_sub(x0) as usize, photo.x1.saturating_sub(x0) as usize);
         for ((tri_row, col_row), y) in tile.triangles().iter().zip(tile.colors()).zip(y0..y0 + h) {
+            if y < photo.y0 || y >= photo.y1 {
+                continue;
+            }
             let Some(target_row) = self.image.row(y) else { continue };
             let Some(target_row) = target_row.get(x0 as usize..) else { continue };
             // Colours and targets are read only where the model covers.
-            for (x, t) in tri_row.iter().enumerate().take(w as usize) {
+            for (x, t) in tri_row.iter().enumerate().take((w as usize).min(end)).skip(first) {
                 if *t == NO_TRIANGLE {
                     continue;
                 }
@@ -160,6 +166,8 @@ impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> FragmentSink for Imag
             self.tile.0 = f32::NAN;
             return;
         };
+        // Past the photo's edge: nothing observed.
+        let Some(p) = p else { return };
         let (term, d2sum) = self.pixel_terms(p, color);
         self.tile.1 += d2sum;
         self.tile.0 += term;
