@@ -52,6 +52,70 @@ pub fn mat_vec(m: &Mat3, v: Vec3) -> Vec3 {
     [r.x, r.y, r.z]
 }
 
+/// The working pixels whose centres lie in the photo: a rectangle, half-open (`x0 ≤ x < x1`,
+/// `y0 ≤ y < y1`), in working pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct CoveredPixels {
+    /// First covered column.
+    pub x0: u32,
+    /// First covered row.
+    pub y0: u32,
+    /// One past the last covered column.
+    pub x1: u32,
+    /// One past the last covered row.
+    pub y1: u32,
+}
+
+impl CoveredPixels {
+    /// Every pixel of a `width × height` image.
+    pub const fn whole(width: u32, height: u32) -> Self {
+        Self { x0: 0, y0: 0, x1: width, y1: height }
+    }
+
+    /// The pixels of a `side × side` working image whose pixel `(u, v)` spans the photo from
+    /// `(left + u · step, top + v · step)` to `step` further (continuous photo pixels) that lie in
+    /// a `width × height` photo: the centre of each lies inside it.
+    pub fn of_crop(left: f32, top: f32, step: f32, side: u32, width: u32, height: u32) -> Self {
+        // Pixel u's centre left + (u + 0.5) · step lies in [0, extent) for first ≤ u < end.
+        let range = |start: f32, extent: u32| -> (u32, u32) {
+            if !(step > 0.0 && step.is_finite() && start.is_finite()) {
+                return (0, 0);
+            }
+            let bound = |edge: f32| -> u32 {
+                let u = libm::ceilf((edge - start) / step - 0.5);
+                if u <= 0.0 {
+                    0
+                } else if u >= side as f32 {
+                    side
+                } else {
+                    u as u32
+                }
+            };
+            let (a, b) = (bound(0.0), bound(extent as f32));
+            (a, b.max(a))
+        };
+        let ((x0, x1), (y0, y1)) = (range(left, width), range(top, height));
+        Self { x0, y0, x1, y1 }
+    }
+
+    /// Whether pixel `(x, y)` is covered.
+    #[inline(always)]
+    pub fn contains(&self, x: u32, y: u32) -> bool {
+        x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
+    }
+
+    /// Covered pixels.
+    pub fn count(&self) -> u32 {
+        self.x1.saturating_sub(self.x0).saturating_mul(self.y1.saturating_sub(self.y0))
+    }
+
+    /// Whether the rectangle lies in a `width × height` image and covers at least one pixel.
+    pub fn fits(&self, width: u32, height: u32) -> bool {
+        self.x0 < self.x1 && self.y0 < self.y1 && self.x1 <= width && self.y1 <= height
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::indexing_slicing)]
 mod tests {

@@ -231,3 +231,32 @@ fn firmware_fit_uses_every_setting() {
     let (default_fit, _) = host_fit(blob, &prep, &device_settings(&defaults.with_ranks(30, 20), &M4F), seed).expect("default fit");
     assert_ne!(default_fit.params().pose.yaw, host.params().pose.yaw, "the settings changed nothing");
 }
+
+/// A face at the photo's edge: the synthetic face cut a pixel above its chin point, so the chin
+/// lies outside the photo and the fit's crop leaves it; the host and the firmware leave the same
+/// pixels out (the fit input carries them) and give the same fit bit for bit.
+#[test]
+fn firmware_fit_of_a_face_cut_by_the_frame_matches_the_host_bit_for_bit() {
+    let (_, blob) = models();
+    let face = &faces(1, 11)[0];
+    let chin = face.truth.landmarks[8][1];
+    let rows = chin.floor() as u32 - 1;
+    let photo = image::imageops::crop_imm(&face.image, 0, 0, face.image.width(), rows).to_image();
+    let prep = prepare(&photo, &face.truth.landmarks, 128).expect("prepare");
+    assert!(prep.covered.y1 < 128, "the crop leaves the photo at the bottom: {:?}", prep.covered);
+    let settings = device_settings(&CoreSettings::DEFAULT.with_ranks(30, 20).with_steps(600, 30), &M4F);
+    let (host, host_lm) = host_fit(blob, &prep, &settings, 7).expect("host fit");
+    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &settings, 7).expect("fit input"));
+    let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-edge.partition");
+    std::fs::write(&file, &part).expect("write partition");
+    let log = run_firmware("m4f", &file, 600).unwrap_or_else(|e| panic!("firmware run: {e}"));
+    let dev = parse_report("m4f", &log).unwrap_or_else(|e| panic!("{e}\n{log}"));
+    let host_ll = host.image.best_image.expect("image term").log_likelihood;
+    assert_eq!(host_lm, dev.landmarks_px, "fitted landmarks differ between host and firmware");
+    assert_eq!(host_ll.to_bits(), dev.log_likelihood.to_bits(), "log-likelihood {host_ll} vs {}", dev.log_likelihood);
+    // Leaving the pixels out changed the fit: the same input with every pixel counted differs.
+    let mut whole = prep.clone();
+    whole.covered = gpmm_core::fit::CoveredPixels::whole(128, 128);
+    let (counted, _) = host_fit(blob, &whole, &settings, 7).expect("host fit, all pixels counted");
+    assert_ne!(counted.image.best_image.expect("image term").log_likelihood.to_bits(), host_ll.to_bits());
+}

@@ -22,7 +22,7 @@
 
 use super::bytes::{check_crc, Reader, Writer};
 use super::FormatError;
-use crate::fit::frame::CoveredPixels;
+use crate::geometry::CoveredPixels;
 use serde::{de::DeserializeOwned, Serialize};
 
 /// Magic bytes.

@@ -3,7 +3,7 @@
 //! is in [`crate::fit::likelihood`].
 
 use crate::error::FitError;
-use crate::fit::frame::CoveredPixels;
+use crate::geometry::CoveredPixels;
 use crate::geometry::Vec3;
 
 /// The foreground σ of Schönborn et al. on colours in [0, 1].
