@@ -137,6 +137,12 @@ fn main() -> ! {
     // 4. Stack high-water mark (everything any code above has used, exception frames included).
     let peak = stack::peak_bytes();
     defmt::info!("stack_peak_bytes={=u32} stack_free_bytes={=u32}", peak, stack::size_bytes() - peak);
+    // Painted words left at the bottom of the stack's RAM, else it ran into what lies below (the
+    // statics, or on the STM32F405 nothing: a fault) and the results cannot be trusted.
+    if peak >= stack::size_bytes() {
+        defmt::error!("the stack overflowed its {=u32} B of RAM ({=str} memory map)", stack::size_bytes(), MAP.name);
+        fail();
+    }
 
     defmt::info!("status=ok");
     semihosting::process::exit(0)
