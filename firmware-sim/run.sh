@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the firmware, runs it under QEMU and decodes its defmt log.
 #
-#   firmware-sim/run.sh [--profile m4f|m7] [--data FILE] [--timeout SECONDS]
+#   firmware-sim/run.sh [--profile m4f|m7] [--map mps2|netduinoplus2] [--data FILE] [--timeout SECONDS]
 #   firmware-sim/run.sh --elf ELF [--data FILE] ...     (run a built ELF; cargo's runner)
 #
 # stdout: the decoded log lines, then one machine-readable line
@@ -17,6 +17,7 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 target=thumbv7em-none-eabihf
 profile=m4f
+map=mps2
 data=""
 elf=""
 timeout_s=300
@@ -26,6 +27,7 @@ die() { log "$*"; exit 1; }
 while [ $# -gt 0 ]; do
     case "$1" in
         --profile) profile="${2:?--profile needs m4f or m7}"; shift 2 ;;
+        --map) map="${2:?--map needs mps2 or netduinoplus2}"; shift 2 ;;
         --data) data="${2:?--data needs a file}"; shift 2 ;;
         --elf) elf="${2:?--elf needs a file}"; shift 2 ;;
         --timeout) timeout_s="${2:?--timeout needs seconds}"; shift 2 ;;
@@ -34,6 +36,12 @@ while [ $# -gt 0 ]; do
     esac
 done
 case "$profile" in m4f|m7) ;; *) die "unknown profile $profile (m4f or m7)" ;; esac
+case "$map" in
+    mps2) ;;
+    netduinoplus2) [ "$profile" = m4f ] || die "the netduinoplus2 memory map (an STM32F405) takes the m4f profile" ;;
+    stm32f405|nrf52840) die "the $map map is for a board: build and flash it with probe-rs (firmware-sim/README.md, \"On a board\")" ;;
+    *) die "unknown memory map $map (mps2 or netduinoplus2)" ;;
+esac
 if [ -n "$data" ]; then
     [ -f "$data" ] || die "no such data file: $data"
     data="$(cd "$(dirname "$data")" && pwd)/$(basename "$data")"
@@ -48,18 +56,22 @@ decoder="$here/target/host/release/gpmm-defmt-decode"
 if [ -z "$elf" ]; then
     features=()
     [ "$profile" = m7 ] && features=(--features m7)
+    # Another map builds in its own target directory: switching features in one would rebuild
+    # the firmware each time, and runs of both at once would race for the one ELF.
+    target_dir="$here/target"
+    [ "$map" = netduinoplus2 ] && { features=(--features netduinoplus2); target_dir="$here/target/map-netduinoplus2"; }
     cd "$here"
     # Outer settings that would change what or where cargo builds (e.g. when a test
     # under cargo calls this script) do not apply to the firmware.
     unset RUSTFLAGS CARGO_ENCODED_RUSTFLAGS CARGO_BUILD_RUSTFLAGS CARGO_BUILD_TARGET CARGO_TARGET_DIR CARGO_BUILD_TARGET_DIR
-    args=(build --release --locked --target "$target" --target-dir "$here/target" "${features[@]}")
+    args=(build --release --locked --target "$target" --target-dir "$target_dir" "${features[@]}")
     log "building ($toolchain toolchain, profile $profile)"
     if [ "$toolchain" = debian ]; then
         RUSTC=/usr/bin/rustc RUSTC_BOOTSTRAP=1 /usr/bin/cargo "${args[@]}" -Z build-std=core
     else
         env -u RUSTC -u RUSTC_BOOTSTRAP cargo "${args[@]}"
     fi
-    elf="$here/target/$target/release/gpmm-firmware-sim"
+    elf="$target_dir/$target/release/gpmm-firmware-sim"
 fi
 [ -f "$elf" ] || die "no ELF at $elf"
 
@@ -71,9 +83,13 @@ part_start=$(( $(sym "$elf" _gpmm_data_start) ))
 part_end=$(( $(sym "$elf" _gpmm_data_end) ))
 part_bytes=$(( part_end - part_start ))
 code_budget=$(( flash_size - part_bytes ))
-case "$ram_size" in
-    196608) elf_profile=m4f; machine=(-M mps2-an386 -cpu cortex-m4) ;;
-    524288) elf_profile=m7; machine=(-M mps2-an500 -cpu cortex-m7) ;;
+statics_size=$(( $(sym "$elf" _gpmm_statics_size) ))
+stack_size=$(( $(sym "$elf" _gpmm_stack_size) ))
+case "$(( $(sym "$elf" _gpmm_memory_map) )):$ram_size" in
+    1:196608) elf_profile=m4f; machine=(-M mps2-an386 -cpu cortex-m4) ;;
+    1:524288) elf_profile=m7; machine=(-M mps2-an500 -cpu cortex-m7) ;;
+    3:196608) elf_profile=m4f; machine=(-M netduinoplus2) ;;
+    2:*|4:*) die "the ELF is linked for a board (STM32F405 or nRF52840), not a QEMU machine: flash it with probe-rs, or run --map netduinoplus2" ;;
     *) die "ELF has an unknown memory map (RAM $ram_size bytes)" ;;
 esac
 part_hex=$(printf '0x%08x' "$part_start")
@@ -112,7 +128,8 @@ set -e
 # 6. Decode.
 set +e
 "$decoder" "$elf" --figures flash_bytes="$flash_bytes" ram_static_bytes="$ram_static_bytes" \
-    flash_code_budget_bytes="$code_budget" ram_budget_bytes="$ram_size" qemu_exit="$qemu_rc" <"$raw" \
+    flash_code_budget_bytes="$code_budget" ram_budget_bytes="$ram_size" statics_budget_bytes="$statics_size" \
+    stack_budget_bytes="$stack_size" qemu_machine="${machine[1]}" qemu_exit="$qemu_rc" <"$raw" \
     | tee "$declog"
 decode_rc=${PIPESTATUS[0]}
 set -e

@@ -108,20 +108,143 @@ impl DeviceProfile {
         self.image_side as usize * self.image_side as usize * 3
     }
 
-    /// The linker memory map (`memory.x`) of this profile, at QEMU's mps2 addresses: program
-    /// flash at 0, the data partition after it, RAM at `0x2000_0000`.
-    pub fn write_memory_x(&self, out: &mut impl core::fmt::Write) -> core::fmt::Result {
-        let (code, data, ram) = (self.flash_code_bytes / 1024, self.partition_bytes / 1024, self.ram_bytes / 1024);
-        writeln!(out, "/* Device profile {}: generated from gpmm_core::profile by build.rs; do not edit. */", self.name)?;
+    /// The linker memory map (`memory.x`) of this profile on `map`: program flash, the data
+    /// partition right after it, the statics in `RAM` and the stack in `STACK` (the same block
+    /// unless the map has a separate one). `_gpmm_*` symbols tell `run.sh` the sizes and the map.
+    pub fn write_memory_x(&self, map: &MemoryMap, out: &mut impl core::fmt::Write) -> core::fmt::Result {
+        let (code, data) = (self.flash_code_bytes / 1024, self.partition_bytes / 1024);
+        let statics = map.statics_bytes.unwrap_or(self.ram_bytes) / 1024;
+        writeln!(out, "/* Device profile {} on {}: generated from gpmm_core::profile by build.rs; do not edit. */", self.name, map.name)?;
         writeln!(out, "MEMORY\n{{")?;
-        writeln!(out, "  FLASH     : ORIGIN = 0x00000000, LENGTH = {code}K")?;
-        writeln!(out, "  GPMM_DATA : ORIGIN = {:#010x}, LENGTH = {data}K", self.flash_code_bytes)?;
-        writeln!(out, "  RAM       : ORIGIN = 0x20000000, LENGTH = {ram}K\n}}")?;
+        writeln!(out, "  FLASH     : ORIGIN = {:#010x}, LENGTH = {code}K", map.flash_origin)?;
+        writeln!(out, "  GPMM_DATA : ORIGIN = {:#010x}, LENGTH = {data}K", map.flash_origin as usize + self.flash_code_bytes)?;
+        writeln!(out, "  RAM       : ORIGIN = {:#010x}, LENGTH = {statics}K", map.ram_origin)?;
+        if let Some(stack) = map.stack {
+            writeln!(out, "  STACK     : ORIGIN = {:#010x}, LENGTH = {}K", stack.origin, stack.bytes / 1024)?;
+        }
+        writeln!(out, "}}")?;
+        if map.stack.is_some() {
+            // cortex-m-rt PROVIDEs both at the end of the statics; its reset handler paints
+            // [_stack_end, _stack_start) for the high-water mark.
+            writeln!(out, "_stack_start = ORIGIN(STACK) + LENGTH(STACK);")?;
+            writeln!(out, "_stack_end   = ORIGIN(STACK);")?;
+        }
         writeln!(out, "_gpmm_data_start = ORIGIN(GPMM_DATA);")?;
         writeln!(out, "_gpmm_data_end   = ORIGIN(GPMM_DATA) + LENGTH(GPMM_DATA);")?;
         writeln!(out, "_gpmm_flash_size = LENGTH(FLASH) + LENGTH(GPMM_DATA);")?;
         writeln!(out, "_gpmm_ram_start  = ORIGIN(RAM);")?;
-        writeln!(out, "_gpmm_ram_size   = LENGTH(RAM);")?;
-        writeln!(out, "ASSERT(ORIGIN(GPMM_DATA) >= ORIGIN(FLASH) + LENGTH(FLASH), \"GPMM_DATA overlaps the code region\");")
+        writeln!(out, "_gpmm_ram_size   = {:#x};", self.ram_bytes)?;
+        writeln!(out, "_gpmm_statics_size = LENGTH(RAM);")?;
+        writeln!(out, "_gpmm_stack_size = {:#x};", map.stack.map_or(0, |s| s.bytes))?;
+        writeln!(out, "_gpmm_memory_map = {};", map.code)?;
+        writeln!(out, "ASSERT(ORIGIN(GPMM_DATA) >= ORIGIN(FLASH) + LENGTH(FLASH), \"GPMM_DATA overlaps the code region\");")?;
+        writeln!(
+            out,
+            "ASSERT(LENGTH(FLASH) + LENGTH(GPMM_DATA) <= {:#x}, \"the program and the data partition exceed the chip's flash\");",
+            map.flash_bytes
+        )
+    }
+}
+
+/// A separate stack RAM block (the STM32F405's core-coupled RAM).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StackBlock {
+    /// Start address.
+    pub origin: u32,
+    /// Bytes.
+    pub bytes: usize,
+}
+
+/// Where a firmware image lies on a chip or an emulated machine: flash, the statics' RAM and the
+/// stack's. A profile's sizes go into it ([`DeviceProfile::write_memory_x`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MemoryMap {
+    /// Name (`mps2`, `stm32f405`, `netduinoplus2`, `nrf52840`): the firmware's cargo feature.
+    pub name: &'static str,
+    /// Number `run.sh` reads from the ELF (`_gpmm_memory_map`) to pick the QEMU machine.
+    pub code: u32,
+    /// Flash start address (the vector table).
+    pub flash_origin: u32,
+    /// Flash bytes of the chip (program + data partition must fit).
+    pub flash_bytes: usize,
+    /// Start address of the statics' RAM.
+    pub ram_origin: u32,
+    /// Bytes of the statics' RAM block (`None`: the profile's whole RAM, the stack after the statics).
+    pub statics_bytes: Option<usize>,
+    /// The stack's own block, if it has one.
+    pub stack: Option<StackBlock>,
+    /// Core clock (Hz) SysTick counts (under QEMU with `-icount shift=0` one instruction is 1 ns,
+    /// so a tick is `10⁹ / core_clock_hz` instructions).
+    pub core_clock_hz: u32,
+    /// Whether this is a QEMU machine (SysTick then counts instructions, checked at start-up; on
+    /// a board it counts clock cycles).
+    pub emulated: bool,
+}
+
+/// QEMU's mps2 boards (`mps2-an386` for `m4f`, `mps2-an500` for `m7`): flash at 0, one RAM block
+/// at `0x2000_0000` for statics and stack, 25 MHz.
+pub const MPS2: MemoryMap = MemoryMap {
+    name: "mps2",
+    code: 1,
+    flash_origin: 0,
+    flash_bytes: 2 * 1024 * 1024,
+    ram_origin: 0x2000_0000,
+    statics_bytes: None,
+    stack: None,
+    core_clock_hz: 25_000_000,
+    emulated: true,
+};
+
+/// The STM32F405 (and F407): 1 MiB flash at `0x0800_0000`, the statics in the 128 KiB SRAM at
+/// `0x2000_0000`, the stack in the 64 KiB core-coupled RAM at `0x1000_0000`; the firmware sets up
+/// no PLL, so the core runs on the 16 MHz internal oscillator.
+pub const STM32F405: MemoryMap = MemoryMap {
+    name: "stm32f405",
+    code: 2,
+    flash_origin: 0x0800_0000,
+    flash_bytes: 1024 * 1024,
+    ram_origin: 0x2000_0000,
+    statics_bytes: Some(128 * 1024),
+    stack: Some(StackBlock { origin: 0x1000_0000, bytes: 64 * 1024 }),
+    core_clock_hz: 16_000_000,
+    emulated: false,
+};
+
+/// QEMU's STM32F405 machine (`netduinoplus2`). QEMU 7.2 maps 192 KiB of SRAM at `0x2000_0000`
+/// and no core-coupled RAM, so the stack's 64 KiB block sits at `0x2002_0000`, right after the
+/// chip's 128 KiB of statics, instead of at `0x1000_0000`: same sizes, same flash, one address
+/// apart. QEMU's core clock is a fixed 168 MHz.
+pub const NETDUINOPLUS2: MemoryMap = MemoryMap {
+    name: "netduinoplus2",
+    code: 3,
+    stack: Some(StackBlock { origin: 0x2002_0000, bytes: 64 * 1024 }),
+    core_clock_hz: 168_000_000,
+    emulated: true,
+    ..STM32F405
+};
+
+/// The nRF52840 (nRF52840-DK): 1 MiB flash at 0, the statics and the stack in 192 KiB of its
+/// 256 KiB RAM at `0x2000_0000` (the mps2 layout), 64 MHz.
+pub const NRF52840: MemoryMap =
+    MemoryMap { name: "nrf52840", code: 4, flash_bytes: 1024 * 1024, core_clock_hz: 64_000_000, emulated: false, ..MPS2 };
+
+/// Every memory map.
+pub const MEMORY_MAPS: [MemoryMap; 4] = [MPS2, STM32F405, NETDUINOPLUS2, NRF52840];
+
+impl MemoryMap {
+    /// The map called `name` (any case).
+    pub fn by_name(name: &str) -> Option<Self> {
+        MEMORY_MAPS.into_iter().find(|m| m.name.eq_ignore_ascii_case(name))
+    }
+
+    /// Whether the m4f-class `profile` fits: program + partition in the flash, statics + stack in
+    /// the RAM blocks (`ram_bytes` is their sum when the stack has its own block).
+    pub fn fits(&self, profile: &DeviceProfile) -> bool {
+        let flash = profile.flash_code_bytes + profile.partition_bytes <= self.flash_bytes;
+        let ram = match (self.statics_bytes, self.stack) {
+            (Some(s), Some(k)) => s + k.bytes == profile.ram_bytes,
+            _ => true,
+        };
+        flash && ram
     }
 }

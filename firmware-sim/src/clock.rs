@@ -1,18 +1,25 @@
 //! Time as instructions: SysTick under QEMU `-icount shift=0`.
 //!
 //! QEMU implements no DWT cycle counter. With `-icount shift=0` every instruction
-//! advances virtual time by exactly 1 ns, and SysTick on the processor clock (mps2:
-//! 25 MHz) ticks every 40 ns, i.e. every 40 instructions, deterministically. The
-//! 24-bit counter wraps every 2^24 ticks (671 M instructions); the SysTick exception
-//! counts the wraps, so [`ticks`] is a 64-bit count since [`start`].
-//! On a board the same code counts core clock cycles instead.
+//! advances virtual time by exactly 1 ns, and SysTick on the processor clock (the memory
+//! map's `core_clock_hz`: mps2 25 MHz, netduinoplus2 168 MHz) ticks every 10⁹ / Hz ns
+//! (40 instructions on mps2, 125/21 on netduinoplus2), deterministically. The 24-bit counter
+//! wraps every 2^24 ticks; the SysTick exception counts the wraps, so [`ticks`] is a 64-bit
+//! count since [`start`]. On a board the same code counts nanoseconds of the core clock instead.
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::{syst::SystClkSource, SYST};
 
-/// Instructions per SysTick tick under QEMU `-icount shift=0` on mps2 (25 MHz clock).
-pub const INSTRUCTIONS_PER_TICK: u32 = 40;
+/// Nanoseconds per `TICK_DEN` SysTick ticks: instructions under QEMU `-icount shift=0`.
+const TICK_NS: u64 = 1_000_000_000;
+/// SysTick ticks per second (the core clock).
+const TICK_DEN: u64 = crate::MAP.core_clock_hz as u64;
+
+/// Instructions (ns) in `ticks` SysTick ticks, rounded to nearest.
+fn ticks_to_instructions(ticks: u64) -> u64 {
+    (ticks * TICK_NS + TICK_DEN / 2) / TICK_DEN
+}
 
 const RELOAD: u32 = 0x00ff_ffff;
 static WRAPS: AtomicU32 = AtomicU32::new(0);
@@ -87,7 +94,7 @@ fn measure_raw<R>(f: impl FnOnce() -> R) -> (R, u64, u32) {
 }
 
 fn raw_instructions(ticks: u64, polls: u32) -> u64 {
-    (ticks * u64::from(INSTRUCTIONS_PER_TICK)).saturating_sub(u64::from(polls) * POLL_INSTRUCTIONS)
+    ticks_to_instructions(ticks).saturating_sub(u64::from(polls) * POLL_INSTRUCTIONS)
 }
 
 /// Instructions `f` executes, to within a few (the polling loop's length), whatever ran
@@ -129,10 +136,10 @@ pub struct Calibration {
 impl Calibration {
     /// Ticks expected under QEMU `-icount shift=0`.
     pub fn expected_ticks(&self) -> u32 {
-        self.instructions / INSTRUCTIONS_PER_TICK
+        (u64::from(self.instructions) * TICK_DEN / TICK_NS) as u32
     }
 
-    /// Whether the measurement matches [`INSTRUCTIONS_PER_TICK`] (within 0.1 %, which
+    /// Whether the measurement matches the core clock (within 0.1 %, which
     /// leaves room for the few instructions of the timer reads around the loop).
     pub fn ok(&self) -> bool {
         let expected = self.expected_ticks();
@@ -151,7 +158,7 @@ pub fn calibrate() -> Calibration {
     Calibration { instructions: 2 * ITERATIONS, ticks: t1.wrapping_sub(t0) as u32, measured_2000 }
 }
 
-/// Instructions since the clock started (SysTick ticks × [`INSTRUCTIONS_PER_TICK`]).
+/// Instructions since the clock started (from SysTick ticks and the core clock).
 pub(crate) fn instructions_now() -> u64 {
-    ticks() * u64::from(INSTRUCTIONS_PER_TICK)
+    ticks_to_instructions(ticks())
 }

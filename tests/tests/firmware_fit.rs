@@ -18,9 +18,12 @@ use gpmm_core::fit::FitSettings as CoreSettings;
 use gpmm_core::fit::{
     Drift, DriftSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, ProposalSettings, RankSettings, StartSettings,
 };
+use gpmm_core::format::fit_record;
 use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
-use gpmm_host::device::fit::{device_settings, fit_input_bytes, host_fit, parse_report, partition_bytes, run_firmware};
+use gpmm_host::device::fit::{
+    device_settings, figure, fit_input_bytes, host_fit, parse_report, partition_bytes, record_bytes, run_firmware, run_firmware_on,
+};
 use gpmm_host::device::quantize::{quantize, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
 use gpmm_host::fit::{fit_prepared, prepare, rmse, FitOptions, Prepared};
 use gpmm_host::gp::kernel::ModelKernel;
@@ -259,4 +262,61 @@ fn firmware_fit_of_a_face_cut_by_the_frame_matches_the_host_bit_for_bit() {
     whole.covered = gpmm_core::fit::CoveredPixels::whole(128, 128);
     let (counted, _) = host_fit(blob, &whole, &settings, 7).expect("host fit, all pixels counted");
     assert_ne!(counted.image.best_image.expect("image term").log_likelihood.to_bits(), host_ll.to_bits());
+}
+
+/// The STM32F405's memory map (`gpmm_core::profile::NETDUINOPLUS2`, QEMU's F405 machine: statics
+/// in the 128 KiB SRAM, the stack in its own 64 KiB block, flash and the data partition at
+/// `0x0800_0000`) gives the same fit record as the mps2 board, and the fit stays in both blocks.
+#[test]
+fn the_stm32f405_memory_map_gives_the_same_fit_record_within_its_ram_blocks() {
+    let (q, blob) = models();
+    let prep = prepared(&faces(1, 11)[1]);
+    // The device's default fit, shortened (stack depth and statics do not depend on the steps).
+    let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F).with_steps(400, 40);
+    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &fit, 5).expect("fit input"));
+    let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fit-m4f-maps.partition");
+    std::fs::write(&file, &part).expect("write partition");
+    let run = |map: &str| {
+        let log = run_firmware_on("m4f", map, &file, 900).unwrap_or_else(|e| panic!("firmware run on {map}: {e}"));
+        (record_bytes(&log).unwrap_or_else(|e| panic!("{e}\n{log}")), log)
+    };
+    let ((mps2, _), (f405, f405_log)) = std::thread::scope(|s| {
+        let a = s.spawn(|| run("mps2"));
+        let b = s.spawn(|| run("netduinoplus2"));
+        (a.join().expect("mps2 run"), b.join().expect("netduinoplus2 run"))
+    });
+    let (a, b) = (fit_record::parse(&mps2).expect("mps2 record"), fit_record::parse(&f405).expect("f405 record"));
+    // The fit itself, bit for bit.
+    assert_eq!(format!("{:?}", a.figures), format!("{:?}", b.figures));
+    assert_eq!(a.light, b.light);
+    let bits = |v: fit_record::F32s<'_>| v.iter().map(f32::to_bits).collect::<Vec<_>>();
+    assert_eq!(bits(a.shape), bits(b.shape));
+    assert_eq!(bits(a.color), bits(b.color));
+    assert_eq!(bits(a.landmarks), bits(b.landmarks));
+    let (ca, cb) = (a.counts, b.counts);
+    assert_eq!(
+        (ca.shape_updates, ca.color_updates, ca.blob_bytes, ca.partition_bytes),
+        (cb.shape_updates, cb.color_updates, cb.blob_bytes, cb.partition_bytes)
+    );
+    // The instructions: the same code, counted from a 25 MHz or a 168 MHz SysTick.
+    let rel = (ca.instructions_total as f64 - cb.instructions_total as f64).abs() / ca.instructions_total as f64;
+    println!(
+        "instructions: mps2 {} vs netduinoplus2 {} ({rel:e}); stack peak {} vs {} B",
+        ca.instructions_total, cb.instructions_total, ca.stack_peak_bytes, cb.stack_peak_bytes
+    );
+    assert!(rel < 1e-3, "instruction counts differ by {rel}");
+    // The F405's blocks: statics in 128 KiB, the stack's peak in 64 KiB (the whole run's).
+    let statics: u64 = figure(&f405_log, "ram_static_bytes").expect("statics");
+    let peak: u64 = figure(&f405_log, "stack_peak_bytes").expect("stack peak");
+    let (statics_budget, stack_budget): (u64, u64) = (
+        figure(&f405_log, "statics_budget_bytes").expect("statics budget"),
+        figure(&f405_log, "stack_budget_bytes").expect("stack budget"),
+    );
+    let f405 = gpmm_core::profile::STM32F405;
+    assert_eq!((statics_budget, stack_budget), (f405.statics_bytes.unwrap_or(0) as u64, f405.stack.map_or(0, |s| s.bytes) as u64));
+    assert_eq!((statics_budget, stack_budget), (128 * 1024, 64 * 1024));
+    println!("STM32F405 map: statics {statics} of {statics_budget} B, stack peak {peak} of {stack_budget} B");
+    assert!(statics <= statics_budget, "statics {statics} B > {statics_budget} B");
+    assert!(peak < stack_budget, "stack peak {peak} B reaches the {stack_budget} B block");
+    assert!(peak >= u64::from(cb.stack_peak_bytes) && peak > 10_000, "implausible stack peak {peak}");
 }

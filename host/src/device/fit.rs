@@ -242,10 +242,16 @@ pub fn firmware_dir() -> Result<PathBuf, DeviceFitError> {
 
 /// Runs the firmware (`run.sh --profile P --data FILE`) and returns its decoded log (stdout).
 pub fn run_firmware(profile: &str, partition: &Path, timeout_s: u32) -> Result<String, DeviceFitError> {
+    run_firmware_on(profile, "mps2", partition, timeout_s)
+}
+
+/// Runs the firmware linked for memory map `map` (`gpmm_core::profile`: `mps2`, or
+/// `netduinoplus2`, QEMU's STM32F405) and returns its decoded log (stdout).
+pub fn run_firmware_on(profile: &str, map: &str, partition: &Path, timeout_s: u32) -> Result<String, DeviceFitError> {
     let dir = firmware_dir()?;
     let out = Command::new("bash")
         .arg(dir.join("run.sh"))
-        .args(["--profile", profile, "--timeout", &timeout_s.to_string(), "--data"])
+        .args(["--profile", profile, "--map", map, "--timeout", &timeout_s.to_string(), "--data"])
         .arg(partition)
         .output()
         .map_err(|e| DeviceFitError::Io(dir.join("run.sh").display().to_string(), e))?;
@@ -328,7 +334,7 @@ pub fn parse_report(profile: &str, log: &str) -> Result<DeviceFitReport, DeviceF
 }
 
 /// A figure from run.sh's `GPMM_FIGURES {json}` line.
-pub(crate) fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError> {
+pub fn figure(log: &str, key: &'static str) -> Result<u64, DeviceFitError> {
     let line = log.lines().find_map(|l| l.strip_prefix("GPMM_FIGURES ")).ok_or(DeviceFitError::Missing("GPMM_FIGURES line"))?;
     let v: serde_json::Value = serde_json::from_str(line).map_err(|_| DeviceFitError::Missing("GPMM_FIGURES line"))?;
     v.get(key).and_then(|x| x.as_u64().or_else(|| x.as_str().and_then(|s| s.parse().ok()))).ok_or(DeviceFitError::Missing(key))

@@ -1,0 +1,12 @@
+//! Fuzzes the landmark-free fit job (`GPFF`) as the firmware reads it.
+//! The body, `bodies::frame_fit_job`, is shared with the stable test core/tests/fuzz.rs. Any panic is a bug.
+#![no_main]
+
+// Each target uses one body of the shared file.
+#[allow(dead_code)]
+#[path = "../src/bodies.rs"]
+mod bodies;
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    bodies::frame_fit_job(data);
+});
