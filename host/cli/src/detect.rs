@@ -171,12 +171,28 @@ pub fn draw_box(out: &mut RgbImage, [x0, y0, x1, y1]: [f32; 4], color: Rgb<u8>, 
     }
 }
 
+/// What `gpmm eval detect` does on a real-photo set.
+#[derive(Debug)]
+pub struct PhotoSetRun<'a> {
+    /// The set.
+    pub dir: &'a Path,
+    /// The init file (named in detect.json).
+    pub init: &'a Path,
+    /// Smallest finder score counted as a face.
+    pub min_score: f32,
+    /// How the initializer reads each face.
+    pub reading: Reading,
+    /// Where to draw each photo's boxes, if anywhere.
+    pub draw_dir: Option<&'a Path>,
+    /// Write DIR/detect.json.
+    pub write: bool,
+}
+
 /// `gpmm eval detect` on a real-photo set: prints the summary, writes DIR/detect.json (unless
 /// --no-write) and the pictures (--draw-dir).
-pub fn eval_photo_set(detector: &mut Detector, a: &crate::eval::DetectEvalArgs) -> Result<()> {
-    let reading = Reading { refine: a.refine, mirror: !a.single_read };
-    let (summary, results) = gpmm_host::detect::photos::evaluate_photos(detector, &a.dir, a.min_score, reading)?;
-    if let Some(dir) = &a.draw_dir {
+pub fn eval_photo_set(detector: &mut Detector, a: &PhotoSetRun<'_>) -> Result<()> {
+    let (summary, results) = gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.reading)?;
+    if let Some(dir) = a.draw_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in &results {
             let image = image::open(&r.path).with_context(|| format!("cannot read image {}", r.path.display()))?.to_rgb8();
@@ -185,7 +201,7 @@ pub fn eval_photo_set(detector: &mut Detector, a: &crate::eval::DetectEvalArgs) 
         }
         eprintln!("wrote {} pictures to {}", results.len(), dir.display());
     }
-    if !a.no_write {
+    if a.write {
         let path = a.dir.join("detect.json");
         let rows: Vec<_> = results.iter().map(|r| &r.scored).collect();
         let body = serde_json::json!({ "init": a.init, "summary": summary, "images": rows });

@@ -490,7 +490,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
 fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     let mut init = gpmm_host::detect::Detector::load(&a.init)?;
     if !gpmm_host::detect::photos::list_photo_set(&a.dir)?.is_empty() {
-        return crate::detect::eval_photo_set(&mut init, &a);
+        let run = crate::detect::PhotoSetRun {
+            dir: &a.dir,
+            init: &a.init,
+            min_score: a.min_score,
+            reading: gpmm_core::net::face::Reading { refine: a.refine, mirror: !a.single_read },
+            draw_dir: a.draw_dir.as_deref(),
+            write: !a.no_write,
+        };
+        return crate::detect::eval_photo_set(&mut init, &run);
     }
     let images = gpmm_host::detect::eval::list_images(&a.dir, a.reference_dir.as_deref())?;
     if images.is_empty() {
