@@ -232,31 +232,144 @@ fn look<const A: usize>(
     window: Window,
     scratch: &mut NetScratch<A>,
 ) -> Result<FaceBox, NetError> {
+    let mut out = [0f32; MAX_NET_OUTPUT];
+    let cells = run_finder(init, (rgb, w, h), window, scratch, &mut out)?;
+    cells.best(|_| true).ok_or(NetError::LengthMismatch)
+}
+
+/// Runs the finder on `window` of the frame into `out`; its cells.
+fn run_finder<'o, const A: usize>(
+    init: &InitFile<'_>,
+    (rgb, w, h): (&[u8], usize, usize),
+    window: Window,
+    scratch: &mut NetScratch<A>,
+    out: &'o mut [f32; MAX_NET_OUTPUT],
+) -> Result<FinderCells<'o>, NetError> {
     let net = &init.finder;
     let side = net.input().w;
     sample_rgb(rgb, w, h, window, side, scratch.input_mut(net.input().len())?)?;
-    let mut out = [0f32; MAX_NET_OUTPUT];
     let grid = net.output();
-    let out = out.get_mut(..grid.len()).ok_or(NetError::LengthMismatch)?;
-    net.run(scratch, out)?;
-    let cell = side as f32 / grid.w as f32;
-    let mut best: Option<(usize, f32)> = None;
-    for (i, v) in out.chunks_exact(FINDER_CHANNELS).enumerate() {
-        let logit = v.first().copied().unwrap_or(f32::NEG_INFINITY);
-        if best.is_none_or(|(_, b)| logit > b) {
-            best = Some((i, logit));
+    let values = out.get_mut(..grid.len()).ok_or(NetError::LengthMismatch)?;
+    net.run(scratch, values)?;
+    Ok(FinderCells { values, grid_w: grid.w, side, window })
+}
+
+/// One finder run's output: [`FINDER_CHANNELS`] values per cell of a `grid_w`-wide square grid over
+/// a `side`-pixel input sampled from `window` of the frame.
+#[derive(Debug, Clone, Copy)]
+pub struct FinderCells<'a> {
+    /// The values, cell by cell in rows.
+    pub values: &'a [f32],
+    /// Cells per row.
+    pub grid_w: usize,
+    /// The finder's input side (px).
+    pub side: usize,
+    /// Where the input was sampled from.
+    pub window: Window,
+}
+
+impl FinderCells<'_> {
+    /// Cell `i`'s box in frame pixels (`None` past the grid).
+    pub fn cell(&self, i: usize) -> Option<FaceBox> {
+        let (dx, dy, log_size, logit) = match self.values.get(i * FINDER_CHANNELS..(i + 1) * FINDER_CHANNELS)? {
+            [logit, dx, dy, s] => (dx.clamp(0.0, 1.0), dy.clamp(0.0, 1.0), s.clamp(-6.0, 2.0), *logit),
+            _ => return None,
+        };
+        let grid_w = self.grid_w.max(1);
+        let cell = self.side as f32 / grid_w as f32;
+        let (u, v) = (((i % grid_w) as f32 + dx) * cell, ((i / grid_w) as f32 + dy) * cell);
+        let (cx, cy) = self.window.to_source(u, v);
+        let size = libm::expf(log_size) * self.side as f32 * self.window.step;
+        Some(FaceBox { cx, cy, size, score: sigmoid(logit), looks: 1 })
+    }
+
+    /// The box of the cell with the highest face logit among those `keep` accepts (the first such
+    /// cell on a tie); `None` if it accepts none.
+    pub fn best(&self, keep: impl Fn(&FaceBox) -> bool) -> Option<FaceBox> {
+        let mut best: Option<(f32, FaceBox)> = None;
+        for (i, v) in self.values.chunks_exact(FINDER_CHANNELS).enumerate() {
+            let logit = v.first().copied().unwrap_or(f32::NEG_INFINITY);
+            if best.is_none_or(|(b, _)| logit > b) {
+                if let Some(face) = self.cell(i).filter(|f| keep(f)) {
+                    best = Some((logit, face));
+                }
+            }
+        }
+        best.map(|(_, face)| face)
+    }
+
+    /// Non-maximum suppression: the best cell at `min_score` or above, then again and again the
+    /// best whose box overlaps no box taken before by more than [`SAME_FACE_IOU`], up to
+    /// [`MAX_FACES`], best first.
+    pub fn faces(&self, min_score: f32) -> Faces {
+        let mut faces = Faces::new();
+        while !faces.is_full() {
+            let Some(face) = self.best(|f| is_face(f, min_score) && !faces.iter().any(|k| iou(k, f) > SAME_FACE_IOU)) else {
+                break;
+            };
+            let _ = faces.push(face);
+        }
+        faces
+    }
+}
+
+/// Most faces the finder reports in one frame.
+pub const MAX_FACES: usize = 8;
+
+/// Faces found in a frame, at most [`MAX_FACES`].
+pub type Faces = Vec<FaceBox, MAX_FACES>;
+
+/// Two boxes whose intersection over union exceeds this are one face (the lesser is dropped).
+pub const SAME_FACE_IOU: f32 = 0.3;
+
+/// Intersection over union of two square boxes (0 for boxes that are not numbers or have no area).
+pub fn iou(a: &FaceBox, b: &FaceBox) -> f32 {
+    if ![a.cx, a.cy, a.size, b.cx, b.cy, b.size].iter().all(|v| v.is_finite()) {
+        return 0.0;
+    }
+    let overlap = |ca: f32, cb: f32| {
+        let lo = (ca - 0.5 * a.size).max(cb - 0.5 * b.size);
+        let hi = (ca + 0.5 * a.size).min(cb + 0.5 * b.size);
+        (hi - lo).max(0.0)
+    };
+    let inter = overlap(a.cx, b.cx) * overlap(a.cy, b.cy);
+    let union = a.size * a.size + b.size * b.size - inter;
+    if union > 0.0 {
+        inter / union
+    } else {
+        0.0
+    }
+}
+
+/// Runs the finder on an RGB frame (`w × h`) and keeps every face at `min_score` or above: the
+/// first look's cells after non-maximum suppression ([`FinderCells::faces`]), each then given its
+/// own second look as [`find_face`] gives the best one, and dropped if that moved it onto a face
+/// kept before it. Best first (by the first look's score): the first is [`find_face`]'s box.
+pub fn find_faces<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    min_score: f32,
+    scratch: &mut NetScratch<A>,
+) -> Result<Faces, NetError> {
+    let side = init.finder.input().w;
+    let mut out = [0f32; MAX_NET_OUTPUT];
+    let firsts = run_finder(init, (rgb, w, h), Window::letterbox(w, h, side), scratch, &mut out)?.faces(min_score);
+    let mut faces = Faces::new();
+    for first in &firsts {
+        let face = match second_look(first, w, h, side) {
+            Some(window) => {
+                let second = look(init, rgb, w, h, window, scratch)?;
+                FaceBox { looks: 2, ..if same_face(first, &second) { second } else { *first } }
+            }
+            None => *first,
+        };
+        if !faces.iter().any(|k| iou(k, &face) > SAME_FACE_IOU) {
+            let _ = faces.push(face);
         }
     }
-    let (i, logit) = best.ok_or(NetError::LengthMismatch)?;
-    let v = out.get(i * FINDER_CHANNELS..(i + 1) * FINDER_CHANNELS).ok_or(NetError::LengthMismatch)?;
-    let (dx, dy, log_size) = match v {
-        [_, dx, dy, s] => (dx.clamp(0.0, 1.0), dy.clamp(0.0, 1.0), s.clamp(-6.0, 2.0)),
-        _ => return Err(NetError::LengthMismatch),
-    };
-    let (u, vv) = (((i % grid.w) as f32 + dx) * cell, ((i / grid.w) as f32 + dy) * cell);
-    let (cx, cy) = window.to_source(u, vv);
-    let size = libm::expf(log_size) * side as f32 * window.step;
-    Ok(FaceBox { cx, cy, size, score: sigmoid(logit), looks: 1 })
+    Ok(faces)
 }
 
 /// Runs the initializer on the crop around `(cx, cy, size)`; fills `det` (landmarks in frame px).
@@ -464,6 +577,27 @@ pub fn detect<const A: usize>(
     read_landmarks(init, rgb, w, h, face, reading, scratch).map(Some)
 }
 
+/// Finds every face at `min_score` or above and reads each ([`find_faces`], then
+/// [`read_landmarks`] on each box); best first, as [`find_faces`] orders them.
+pub fn detect_faces<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    min_score: f32,
+    reading: Reading,
+    scratch: &mut NetScratch<A>,
+) -> Result<Vec<Detection, MAX_FACES>, NetError> {
+    let mut out = Vec::new();
+    for face in find_faces(init, rgb, w, h, min_score, scratch)? {
+        let det = read_landmarks(init, rgb, w, h, face, reading, scratch)?;
+        if out.push(det).is_err() {
+            break;
+        }
+    }
+    Ok(out)
+}
+
 /// A detection record's figures, landmarks and light for the finder's box and, when it was
 /// taken as a face, the initializer's reading (the firmware and the host build records alike).
 pub fn record_parts<'a>(face: &FaceBox, det: Option<&'a Detection>) -> (DetectionFigures, &'a [[f32; 2]], &'a [f32]) {
@@ -482,7 +616,7 @@ pub fn record_parts<'a>(face: &FaceBox, det: Option<&'a Detection>) -> (Detectio
 }
 
 #[cfg(test)]
-#[allow(clippy::unwrap_used)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 
@@ -515,6 +649,55 @@ mod tests {
         for f in [face(f32::NAN, 1.0, 10.0), face(1.0, f32::INFINITY, 10.0), face(1.0, 1.0, f32::NAN), face(1.0, 1.0, 0.1)] {
             assert!(second_look(&f, 640, 480, 96).is_none(), "{f:?}");
         }
+    }
+
+    /// A 4 × 4 grid over a 64 px input seeing a 64 px frame 1:1: every cell's logit −5 and size
+    /// log(0.25) (16 px), but for `cells` (index, logit, log size over the side).
+    fn grid(cells: &[(usize, f32, f32)]) -> [f32; 64] {
+        let mut values = [0f32; 64];
+        for c in values.chunks_exact_mut(FINDER_CHANNELS) {
+            c.copy_from_slice(&[-5.0, 0.5, 0.5, libm::logf(0.25)]);
+        }
+        for &(i, logit, log_size) in cells {
+            values[i * FINDER_CHANNELS] = logit;
+            values[i * FINDER_CHANNELS + 3] = log_size;
+        }
+        values
+    }
+
+    fn cells(values: &[f32]) -> FinderCells<'_> {
+        FinderCells { values, grid_w: 4, side: 64, window: Window { x0: 0.0, y0: 0.0, step: 1.0 } }
+    }
+
+    #[test]
+    fn two_faces_are_found_and_an_overlapping_duplicate_is_suppressed() {
+        let big = libm::logf(0.5);
+        // Cell 5 (centre 24, 24) and its neighbour 6 (40, 24) both see a 32 px face; cell 15
+        // (56, 56) a second, 16 px face; cell 0 a weak one below the threshold.
+        let values = grid(&[(5, 3.0, big), (6, 2.0, big), (15, 1.0, libm::logf(0.25)), (0, -3.0, libm::logf(0.25))]);
+        let faces = cells(&values).faces(0.5);
+        let boxes: std::vec::Vec<[i32; 3]> = faces.iter().map(|f| [f.cx, f.cy, f.size].map(|v| libm::roundf(v) as i32)).collect();
+        assert_eq!(boxes, [[24, 24, 32], [56, 56, 16]]);
+        assert!(iou(&faces[0], &cells(&values).cell(6).unwrap()) > SAME_FACE_IOU);
+        // A lower threshold lets the weak cell in too; the best is always the single-face box.
+        let all = cells(&values).faces(0.04);
+        assert_eq!(all.len(), 3);
+        assert_eq!(all[0], cells(&values).best(|_| true).unwrap());
+        // Sixteen separate faces: MAX_FACES of them, best first.
+        let many: std::vec::Vec<(usize, f32, f32)> = (0..16).map(|i| (i, i as f32, libm::logf(0.2))).collect();
+        let values = grid(&many);
+        let faces = cells(&values).faces(0.5);
+        assert_eq!(faces.len(), MAX_FACES);
+        assert!(faces.windows(2).all(|p| p[0].score >= p[1].score));
+    }
+
+    #[test]
+    fn iou_of_square_boxes() {
+        let a = face(10.0, 10.0, 10.0);
+        assert_eq!(iou(&a, &a), 1.0);
+        assert_eq!(iou(&a, &face(15.0, 10.0, 10.0)), 50.0 / 150.0);
+        assert_eq!(iou(&a, &face(30.0, 10.0, 10.0)), 0.0);
+        assert_eq!(iou(&a, &face(f32::NAN, 10.0, 10.0)), 0.0);
     }
 
     #[test]

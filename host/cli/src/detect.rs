@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use gpmm_core::net::face::Reading;
+use gpmm_core::net::face::{Detection, Reading};
 use gpmm_host::detect::Detector;
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};
@@ -16,11 +16,15 @@ pub struct DetectArgs {
     /// Init file from `gpmm train-init`.
     #[arg(long, value_name = "INIT")]
     pub init: PathBuf,
-    /// Write the 68 landmarks as an iBUG .pts file (0-based, pixel centres at +0.5, as `gpmm fit` reads;
-    /// points past the image's edge moved onto it).
+    /// Write the 68 landmarks of one face (the largest, or --face) as an iBUG .pts file (0-based,
+    /// pixel centres at +0.5, as `gpmm fit` reads; points past the image's edge moved onto it).
     #[arg(short, long, value_name = "PTS")]
     pub output: Option<PathBuf>,
-    /// Write the image with the box and landmarks drawn.
+    /// Which face --output writes: its place in the printed list (from 0; faces are listed by the
+    /// finder's score, best first). Default: the largest.
+    #[arg(long, value_name = "N")]
+    pub face: Option<usize>,
+    /// Write the image with every face's box and landmarks drawn.
     #[arg(long, value_name = "PNG")]
     pub draw: Option<PathBuf>,
     /// Re-centre the crop on the read landmarks this many times.
@@ -39,45 +43,67 @@ pub struct DetectArgs {
 pub fn detect(a: DetectArgs) -> Result<()> {
     let mut detector = Detector::load(&a.init)?;
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
-    let Some(det) = detector.detect(&image, a.min_score, Reading { refine: a.refine, mirror: !a.single_read })? else {
+    let faces = detector.detect_all(&image, a.min_score, Reading { refine: a.refine, mirror: !a.single_read })?;
+    if faces.is_empty() {
         bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
-    };
+    }
+    let chosen = pick(&a.image, &faces, a.face)?;
     if let Some(path) = &a.output {
-        write_pts(path, &det.landmarks, image.width(), image.height())?;
-        eprintln!("wrote {}", path.display());
+        write_pts(path, &faces[chosen].landmarks, image.width(), image.height())?;
+        eprintln!("wrote face {chosen}'s landmarks to {}", path.display());
     }
     if let Some(path) = &a.draw {
-        let drawn = draw_detection(&image, &det);
+        let drawn = faces.iter().fold(image.clone(), |img, det| draw_detection(&img, det));
         drawn.save(path).with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
-    let json = serde_json::json!({
-        "image": a.image,
-        "box": { "cx": det.face.cx, "cy": det.face.cy, "size": det.face.size, "score": det.face.score },
-        "yaw_deg": det.angles[0].to_degrees(),
-        "pitch_deg": det.angles[1].to_degrees(),
-        "roll_deg": det.angles[2].to_degrees(),
-        "landmarks": det.landmarks.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>(),
-    });
+    let list: Vec<serde_json::Value> = faces
+        .iter()
+        .map(|det| {
+            serde_json::json!({
+                "box": { "cx": det.face.cx, "cy": det.face.cy, "size": det.face.size, "score": det.face.score },
+                "yaw_deg": det.angles[0].to_degrees(),
+                "pitch_deg": det.angles[1].to_degrees(),
+                "roll_deg": det.angles[2].to_degrees(),
+                "landmarks": det.landmarks.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let json = serde_json::json!({ "image": a.image, "chosen": chosen, "faces": list });
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
 }
 
-/// Detects the face in `image_path` with the init file `init_path` (default refinement and
-/// score), writes OUTDIR/detected.pts and OUTDIR/detected.png, and returns the .pts path.
-pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path) -> Result<PathBuf> {
+/// The face a command takes ([`gpmm_host::detect::choose_face`]), or an error naming the image
+/// and how many faces it has.
+fn pick(image: &Path, faces: &[Detection], index: Option<usize>) -> Result<usize> {
+    gpmm_host::detect::choose_face(faces, index).with_context(|| {
+        let last = faces.len().saturating_sub(1);
+        format!("{}: --face {} asked for, but {} faces were found (0 to {last})", image.display(), index.unwrap_or(0), faces.len())
+    })
+}
+
+/// Detects the faces in `image_path` with the init file `init_path` (default refinement and
+/// score), writes the chosen face's (the largest, or `face`) landmarks to OUTDIR/detected.pts and
+/// every face to OUTDIR/detected.png, and returns the .pts path.
+pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: Option<usize>) -> Result<PathBuf> {
     let mut detector = Detector::load(init_path)?;
     let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
-    let Some(det) = detector.detect(&image, DEFAULT_MIN_SCORE, Reading::DEFAULT)? else {
+    let faces = detector.detect_all(&image, DEFAULT_MIN_SCORE, Reading::DEFAULT)?;
+    if faces.is_empty() {
         bail!("{}: no face found by {}", image_path.display(), init_path.display());
-    };
+    }
+    let chosen = pick(image_path, &faces, face)?;
+    let det = &faces[chosen];
     std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
     let pts = out_dir.join("detected.pts");
     write_pts(&pts, &det.landmarks, image.width(), image.height())?;
     let png = out_dir.join("detected.png");
-    draw_detection(&image, &det).save(&png).with_context(|| format!("cannot write {}", png.display()))?;
+    let drawn = faces.iter().fold(image.clone(), |img, d| draw_detection(&img, d));
+    drawn.save(&png).with_context(|| format!("cannot write {}", png.display()))?;
     eprintln!(
-        "face at ({:.0}, {:.0}) size {:.0} px (score {:.2}), yaw {:.0} pitch {:.0} roll {:.0} deg; wrote {}",
+        "face {chosen} of {} at ({:.0}, {:.0}) size {:.0} px (score {:.2}), yaw {:.0} pitch {:.0} roll {:.0} deg; wrote {}",
+        faces.len(),
         det.face.cx,
         det.face.cy,
         det.face.size,
@@ -106,33 +132,98 @@ pub fn write_pts(path: &Path, points: &[[f32; 2]], width: u32, height: u32) -> R
 }
 
 /// The image with the finder's box (blue) and the landmarks (green) drawn.
-pub fn draw_detection(image: &RgbImage, det: &gpmm_core::net::face::Detection) -> RgbImage {
+pub fn draw_detection(image: &RgbImage, det: &Detection) -> RgbImage {
     let mut out = image.clone();
-    let (w, h) = (out.width() as i64, out.height() as i64);
-    let mut put = |x: i64, y: i64, c: Rgb<u8>| {
-        if x >= 0 && y >= 0 && x < w && y < h {
-            out.put_pixel(x as u32, y as u32, c);
-        }
-    };
-    let blue = Rgb([40, 120, 255]);
     let half = det.face.size * 0.5;
-    let (x0, x1) = ((det.face.cx - half) as i64, (det.face.cx + half) as i64);
-    let (y0, y1) = ((det.face.cy - half) as i64, (det.face.cy + half) as i64);
-    for x in x0..=x1 {
-        put(x, y0, blue);
-        put(x, y1, blue);
-    }
-    for y in y0..=y1 {
-        put(x0, y, blue);
-        put(x1, y, blue);
-    }
+    let (cx, cy) = (det.face.cx, det.face.cy);
+    draw_box(&mut out, [cx - half, cy - half, cx + half, cy + half], Rgb([40, 120, 255]), 1);
+    let (w, h) = (out.width() as i64, out.height() as i64);
     let r = (w.max(h) / 200).max(1);
     for p in &det.landmarks {
         let (px, py) = (p[0] as i64, p[1] as i64);
         for d in -r..=r {
-            put(px + d, py, Rgb([0, 255, 0]));
-            put(px, py + d, Rgb([0, 255, 0]));
+            put(&mut out, px + d, py, Rgb([0, 255, 0]));
+            put(&mut out, px, py + d, Rgb([0, 255, 0]));
         }
+    }
+    out
+}
+
+/// Sets a pixel if it lies in the image.
+fn put(out: &mut RgbImage, x: i64, y: i64, c: Rgb<u8>) {
+    if x >= 0 && y >= 0 && x < i64::from(out.width()) && y < i64::from(out.height()) {
+        out.put_pixel(x as u32, y as u32, c);
+    }
+}
+
+/// Draws the outline of the box `[x0, y0, x1, y1]` (px), `thick` pixels wide, inward.
+pub fn draw_box(out: &mut RgbImage, [x0, y0, x1, y1]: [f32; 4], color: Rgb<u8>, thick: i64) {
+    let (x0, x1, y0, y1) = (x0 as i64, x1 as i64, y0 as i64, y1 as i64);
+    for t in 0..thick {
+        for x in x0..=x1 {
+            put(out, x, y0 + t, color);
+            put(out, x, y1 - t, color);
+        }
+        for y in y0..=y1 {
+            put(out, x0 + t, y, color);
+            put(out, x1 - t, y, color);
+        }
+    }
+}
+
+/// What `gpmm eval detect` does on a real-photo set.
+#[derive(Debug)]
+pub struct PhotoSetRun<'a> {
+    /// The set.
+    pub dir: &'a Path,
+    /// The init file (named in detect.json).
+    pub init: &'a Path,
+    /// Smallest finder score counted as a face.
+    pub min_score: f32,
+    /// How the initializer reads each face.
+    pub reading: Reading,
+    /// Where to draw each photo's boxes, if anywhere.
+    pub draw_dir: Option<&'a Path>,
+    /// Write DIR/detect.json.
+    pub write: bool,
+}
+
+/// `gpmm eval detect` on a real-photo set: prints the summary, writes DIR/detect.json (unless
+/// --no-write) and the pictures (--draw-dir).
+pub fn eval_photo_set(detector: &mut Detector, a: &PhotoSetRun<'_>) -> Result<()> {
+    let (summary, results) = gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.reading)?;
+    if let Some(dir) = a.draw_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for r in &results {
+            let image = image::open(&r.path).with_context(|| format!("cannot read image {}", r.path.display()))?.to_rgb8();
+            let path = dir.join(Path::new(&r.scored.image).with_extension("png"));
+            draw_photo_result(&image, r).save(&path).with_context(|| format!("cannot write {}", path.display()))?;
+        }
+        eprintln!("wrote {} pictures to {}", results.len(), dir.display());
+    }
+    if a.write {
+        let path = a.dir.join("detect.json");
+        let rows: Vec<_> = results.iter().map(|r| &r.scored).collect();
+        let body = serde_json::json!({ "init": a.init, "summary": summary, "images": rows });
+        std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    println!("{}", serde_json::to_string_pretty(&summary)?);
+    Ok(())
+}
+
+/// A real-photo set's image with its reference boxes (found green, missed red) and the false
+/// positives' boxes (orange).
+pub fn draw_photo_result(image: &RgbImage, r: &gpmm_host::detect::photos::PhotoResult) -> RgbImage {
+    let mut out = image.clone();
+    let thick = i64::from(out.width().max(out.height()) / 300).max(2);
+    for (face, found) in r.faces.iter().zip(&r.scored.found) {
+        let color = if *found { Rgb([0, 220, 0]) } else { Rgb([230, 0, 0]) };
+        draw_box(&mut out, face.bbox, color, thick);
+    }
+    for d in r.scored.detections.iter().filter(|d| d.matched.is_none()) {
+        let half = d.size * 0.5;
+        draw_box(&mut out, [d.cx - half, d.cy - half, d.cx + half, d.cy + half], Rgb([255, 150, 0]), thick);
     }
     out
 }

@@ -54,6 +54,12 @@ pub enum EvalCommand {
     /// mean landmark error over the outer-eye-corner distance, the median |yaw error| per |yaw|,
     /// and the finder's box size over the reference's (10th, 50th, 90th percentile). Writes
     /// DIR/detect.json with every image unless --no-write.
+    ///
+    /// DIR may instead be a real-photo set (images with a STEM.faces.json of reference boxes and
+    /// points; docs/formats.md): every face found at --min-score is matched to the reference faces
+    /// at IoU ≥ 0.5 and it prints recall and precision by face size (≥ 64, 32–64, < 32 px), false
+    /// positives per face-free photo and the landmark error of the faces found; --draw-dir writes
+    /// each photo with its faces found (green), missed (red) and false positives (orange).
     Detect(DetectEvalArgs),
 }
 
@@ -86,6 +92,12 @@ pub struct DetectEvalArgs {
     /// (one initializer run fewer; for comparisons and the device's budget).
     #[arg(long)]
     pub single_read: bool,
+    /// Real-photo sets: the smallest finder score counted as a face.
+    #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE)]
+    pub min_score: f32,
+    /// Real-photo sets: write each photo with its boxes drawn to DRAW_DIR/STEM.png.
+    #[arg(long, value_name = "DRAW_DIR")]
+    pub draw_dir: Option<PathBuf>,
 }
 
 /// Model selection and building options shared by the evaluations.
@@ -477,6 +489,17 @@ pub fn eval(a: EvalArgs) -> Result<()> {
 /// Runs `gpmm eval detect`.
 fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     let mut init = gpmm_host::detect::Detector::load(&a.init)?;
+    if !gpmm_host::detect::photos::list_photo_set(&a.dir)?.is_empty() {
+        let run = crate::detect::PhotoSetRun {
+            dir: &a.dir,
+            init: &a.init,
+            min_score: a.min_score,
+            reading: gpmm_core::net::face::Reading { refine: a.refine, mirror: !a.single_read },
+            draw_dir: a.draw_dir.as_deref(),
+            write: !a.no_write,
+        };
+        return crate::detect::eval_photo_set(&mut init, &run);
+    }
     let images = gpmm_host::detect::eval::list_images(&a.dir, a.reference_dir.as_deref())?;
     if images.is_empty() {
         bail!("{}: no image with a reference .pts found", a.dir.display());

@@ -18,11 +18,15 @@ pub struct FitArgs {
     /// Landmarks: iBUG .pts (68 points), continuous 0-based pixel coordinates (pixel centres at +0.5).
     #[arg(long, value_name = "PTS", conflicts_with = "init")]
     pub landmarks: Option<PathBuf>,
-    /// No landmark file: find the face and read its landmarks with this init file (`gpmm
-    /// train-init`); they are written to OUTDIR/detected.pts and OUTDIR/detected.png, then the
-    /// fit runs as with --landmarks.
+    /// No landmark file: find the faces and read their landmarks with this init file (`gpmm
+    /// train-init`); the largest face's (or --face's) are written to OUTDIR/detected.pts and every
+    /// face to OUTDIR/detected.png, then the fit runs as with --landmarks.
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
+    /// With --init: fit this face instead of the largest, by its place in the list `gpmm detect`
+    /// prints (from 0; by the finder's score, best first).
+    #[arg(long, value_name = "N", requires = "init")]
+    pub face: Option<usize>,
     /// With --init: the landmark σ (fraction of the image side) of the initializer's landmarks,
     /// in place of --landmark-sigma (they are less precise than a face-mesh detector's).
     #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, requires = "init")]
@@ -148,7 +152,7 @@ pub fn fit(a: FitArgs) -> Result<()> {
     let settings = flags.resolve()?;
     let landmarks = match (a.landmarks, &a.init) {
         (Some(pts), _) => pts,
-        (None, Some(init)) => crate::detect::detect_to_dir(&a.image, init, &a.output)?,
+        (None, Some(init)) => crate::detect::detect_to_dir(&a.image, init, &a.output, a.face)?,
         (None, None) => {
             anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")
         }

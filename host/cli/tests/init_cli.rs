@@ -76,14 +76,69 @@ fn detect_writes_68_landmarks_and_a_picture() {
     let (pts, png) = (f.dir.path().join("d.pts"), f.dir.path().join("d.png"));
     let out = ok(&gpmm(&["detect", s(&image), "--init", s(&f.init), "-o", s(&pts), "--draw", s(&png)]));
     let json: serde_json::Value = serde_json::from_str(&out).unwrap();
-    assert_eq!(json["landmarks"].as_array().unwrap().len(), 68);
-    assert!(json["box"]["score"].as_f64().unwrap() >= 0.0);
+    let faces = json["faces"].as_array().unwrap();
+    assert!(!faces.is_empty() && faces.len() <= gpmm_core::net::face::MAX_FACES);
+    for face in faces {
+        assert_eq!(face["landmarks"].as_array().unwrap().len(), 68);
+        assert!(face["box"]["score"].as_f64().unwrap() >= 0.0);
+    }
+    // Listed best first; the .pts is the largest face's.
+    let score = |k: usize| faces[k]["box"]["score"].as_f64().unwrap();
+    assert!((1..faces.len()).all(|k| score(k - 1) >= score(k)));
+    let size = |k: usize| faces[k]["box"]["size"].as_f64().unwrap();
+    let chosen = json["chosen"].as_u64().unwrap() as usize;
+    assert!((0..faces.len()).all(|k| size(chosen) >= size(k)));
     let read = gpmm_host::photo::pts::read_pts(&pts, false).unwrap();
     assert_eq!(read.points.len(), 68);
     assert_eq!(image::image_dimensions(&png).unwrap(), image::image_dimensions(&image).unwrap());
     // A finder score no face reaches: a clear error, no output.
     let err = fails(&gpmm(&["detect", s(&image), "--init", s(&f.init), "--min-score", "1.5"]));
     assert!(err.contains("no face found"), "{err}");
+    // A face the list does not have: an error naming the image and the count.
+    let err = fails(&gpmm(&["detect", s(&image), "--init", s(&f.init), "--face", "99"]));
+    assert!(err.contains("0000_yaw30.png") && err.contains("--face 99"), "{err}");
+}
+
+#[test]
+fn eval_detect_scores_a_real_photo_set() {
+    let Some(f) = fixture() else { return };
+    // Two faces with reference points (the synthetic set's own) and a face-free gray image.
+    let set = f.dir.path().join("photo-set");
+    std::fs::create_dir_all(&set).unwrap();
+    for stem in ["0000_yaw00", "0000_yaw30"] {
+        std::fs::copy(f.synth.join(format!("{stem}.png")), set.join(format!("{stem}.png"))).unwrap();
+        let points = gpmm_host::photo::pts::read_pts(&f.synth.join(format!("{stem}.pts")), false).unwrap().points;
+        let xs = points.iter().map(|p| p[0]);
+        let ys = points.iter().map(|p| p[1]);
+        let bbox = [
+            xs.clone().fold(f32::MAX, f32::min),
+            ys.clone().fold(f32::MAX, f32::min),
+            xs.fold(f32::MIN, f32::max),
+            ys.fold(f32::MIN, f32::max),
+        ];
+        let face = serde_json::json!({ "box": bbox, "landmarks": points.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>() });
+        let json = serde_json::json!({ "source": "gpmm synth", "reference": "exact", "faces": [face] });
+        std::fs::write(set.join(format!("{stem}.faces.json")), json.to_string()).unwrap();
+    }
+    image::RgbImage::from_pixel(200, 150, image::Rgb([128, 128, 128])).save(set.join("gray.png")).unwrap();
+    std::fs::write(set.join("gray.faces.json"), r#"{"source": "flat", "reference": "none", "faces": []}"#).unwrap();
+    let draw = f.dir.path().join("photo-draw");
+    let out = ok(&gpmm(&["eval", "detect", s(&set), "--init", s(&f.init), "--draw-dir", s(&draw), "--min-score", "0.5"]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!((json["images"].as_u64(), json["face_free_images"].as_u64(), json["faces"].as_u64()), (Some(3), Some(1), Some(2)));
+    assert_eq!(json["by_size"].as_array().unwrap().len(), 3);
+    let found = json["all"]["found"].as_u64().unwrap();
+    assert!(found <= 2 && json["landmark_faces"].as_u64().unwrap() == found);
+    assert!(json["false_positives_per_face_free_image"].as_f64().unwrap() >= 0.0);
+    for name in ["0000_yaw00.png", "0000_yaw30.png", "gray.png"] {
+        assert!(draw.join(name).exists(), "{name} not drawn");
+    }
+    let written: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(set.join("detect.json")).unwrap()).unwrap();
+    assert_eq!(written["images"].as_array().unwrap().len(), 3);
+    // A broken reference file is refused with its name.
+    std::fs::write(set.join("gray.faces.json"), r#"{"faces": [{"box": [1, 2, 3], "landmarks": null}]}"#).unwrap();
+    let err = fails(&gpmm(&["eval", "detect", s(&set), "--init", s(&f.init), "--no-write"]));
+    assert!(err.contains("gray.faces.json"), "{err}");
 }
 
 #[test]

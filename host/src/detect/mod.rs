@@ -3,8 +3,9 @@
 //! them and writing init files is the `gpmm-train` crate's job.
 
 pub mod eval;
+pub mod photos;
 
-use gpmm_core::net::face::{detect, read_landmarks, Detection, FaceBox, InitFile, Reading};
+use gpmm_core::net::face::{detect, detect_faces, read_landmarks, Detection, FaceBox, InitFile, Reading};
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
@@ -86,6 +87,15 @@ impl Detector {
         detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(DetectError::Run)
     }
 
+    /// Finds every face in `image` whose finder score reaches `min_score` and reads each as
+    /// `reading` says; best first (the first is [`Self::detect`]'s face).
+    pub fn detect_all(&mut self, image: &RgbImage, min_score: f32, reading: Reading) -> Result<Vec<Detection>, DetectError> {
+        let (file, scratch) = self.parts()?;
+        let (w, h) = image.dimensions();
+        let faces = detect_faces(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(DetectError::Run)?;
+        Ok(faces.into_iter().collect())
+    }
+
     /// Reads the face in a given box (no finder run), as `reading` says.
     pub fn read_at(&mut self, image: &RgbImage, face: FaceBox, reading: Reading) -> Result<Detection, DetectError> {
         let (file, scratch) = self.parts()?;
@@ -97,5 +107,14 @@ impl Detector {
     fn parts(&mut self) -> Result<(InitFile<'_>, &mut NetScratch<HOST_NET_SCRATCH>), DetectError> {
         let bytes = bytemuck::cast_slice::<u32, u8>(&self.words).get(..self.len).unwrap_or(&[]);
         Ok((InitFile::parse(bytes).map_err(DetectError::Run)?, &mut self.scratch))
+    }
+}
+
+/// Which face of several a command takes: the largest box unless `index` names one (the order
+/// [`Detector::detect_all`] gives, from 0); `None` if there is no such face.
+pub fn choose_face(faces: &[Detection], index: Option<usize>) -> Option<usize> {
+    match index {
+        Some(i) => (i < faces.len()).then_some(i),
+        None => (0..faces.len()).max_by(|&a, &b| faces[a].face.size.total_cmp(&faces[b].face.size).then(b.cmp(&a))),
     }
 }
