@@ -21,9 +21,14 @@ GROUPS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "e
 
 
 def mesh_points(path):
+    from PIL import Image
+    return mesh_points_of(Image.open(path).convert("RGB"))
+
+
+def mesh_points_of(img):
+    """The 468 face-mesh points of the one face in a PIL RGB image, or None."""
     import mediapipe as mp  # only here: reading and writing .pts needs numpy alone
     from PIL import Image
-    img = Image.open(path).convert("RGB")
     w, h = img.size
     up = UPSCALE if max(w, h) < 400 else 1  # photos are large enough as they are
     big = np.asarray(img.resize((w * up, h * up), Image.BICUBIC))
@@ -33,6 +38,11 @@ def mesh_points(path):
         return None
     # Normalized [0, 1] image coordinates -> 0-based continuous pixels of the original image.
     return np.array([[p.x * w, p.y * h] for p in r.multi_face_landmarks[0].landmark])
+
+
+def load_mapping(path):
+    """The iBUG-68 <- MediaPipe-468 index list that `calibrate` wrote to PATH."""
+    return json.load(open(path))["ibug68_from_mediapipe"]
 
 
 def read_pts(path):
@@ -64,7 +74,7 @@ def main():
     p.add_argument("-o", "--output", required=True)
     a = ap.parse_args()
     if a.cmd == "photos":
-        mapping = json.load(open(a.mapping))["ibug68_from_mediapipe"]
+        mapping = load_mapping(a.mapping)
         os.makedirs(a.output, exist_ok=True)
         report = {}
         for name in sorted(os.listdir(a.dir)):
@@ -105,7 +115,7 @@ def main():
         json.dump({"detector": "mediapipe face_mesh 468", "frontal_images": n, "ibug68_from_mediapipe": mapping}, open(a.output, "w"), indent=1)
         print(f"mapping from {n} frontal images written to {a.output}", file=sys.stderr)
         return
-    mapping = json.load(open(a.mapping))["ibug68_from_mediapipe"]
+    mapping = load_mapping(a.mapping)
     os.makedirs(a.output, exist_ok=True)
     sq, missed = [], []
     for im in truth["images"]:

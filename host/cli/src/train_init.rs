@@ -5,6 +5,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_core::model::ibug::IBUG68_POINTS;
 use gpmm_host::gp::model_io;
+use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::head::HeadContext;
 use gpmm_train::scene::{Openings, SceneSource};
 use indicatif::ProgressBar;
@@ -65,6 +66,18 @@ pub struct TrainInitArgs {
     /// without them the finder's box on photos of people came out about twice the face).
     #[arg(long, help_heading = COMPARISONS)]
     pub undressed: bool,
+    /// Folder of face-free photos (.jpg/.png) to draw some scenes over, and to cut face-free
+    /// frames from that the finder learns as "no face" (the hardest of several candidates, by the
+    /// finder's own score, each chunk). `tests/realphotos/backgrounds.py` makes one from Debian's
+    /// wallpaper packages. Default: procedural backgrounds only.
+    #[arg(long, value_name = "DIR")]
+    pub backgrounds: Option<PathBuf>,
+    /// Fraction of scenes drawn over a photo of --backgrounds (the rest over procedural ones).
+    #[arg(long, value_name = "F", default_value_t = 0.5, requires = "backgrounds")]
+    pub background_share: f64,
+    /// Face-free frames per scene with --backgrounds.
+    #[arg(long, value_name = "F", requires = "backgrounds")]
+    pub face_free: Option<f64>,
 }
 
 /// Runs `gpmm train-init`.
@@ -94,8 +107,20 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         eprintln!("head: {} vertices from {}", head.vertices(), mesh.display());
         Some(head)
     };
+    if !(0.0..=1.0).contains(&a.background_share) {
+        bail!("--background-share {} is not a fraction from 0 to 1", a.background_share);
+    }
+    opts.face_free = a.face_free.unwrap_or(opts.face_free);
+    if !(0.0..=1.0).contains(&opts.face_free) {
+        bail!("--face-free {} is not a fraction from 0 to 1", opts.face_free);
+    }
+    let backgrounds = a.backgrounds.as_deref().map(|dir| Backgrounds::load(dir, a.background_share)).transpose()?;
+    if let (Some(b), Some(dir)) = (&backgrounds, &a.backgrounds) {
+        eprintln!("backgrounds: {} photos from {}", b.len(), dir.display());
+    }
     let openings = Openings::of_model(&model, &opts.ranges);
-    let source = SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges, openings: &openings };
+    let source =
+        SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges, openings: &openings, backgrounds: backgrounds.as_ref() };
     if let Some(path) = &a.preview {
         let grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
@@ -104,7 +129,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     }
     let bar = ProgressBar::new(opts.steps() as u64);
     bar.set_style(bar_style("{bar:30} {pos}/{len} steps ({msg}) [{elapsed} / ~{duration}]"));
-    let (bytes, report) = gpmm_train::train(&model, head.as_ref(), &opts, |p| match p {
+    let (bytes, report) = gpmm_train::train_with(&model, head.as_ref(), backgrounds.as_ref(), &opts, |p| match p {
         gpmm_train::train::Progress::Rendering { chunk } => bar.set_message(format!("rendering chunk {}/{}", chunk + 1, opts.chunks)),
         gpmm_train::train::Progress::Step { done, finder, initializer, .. } => {
             bar.set_position(done as u64);

@@ -216,6 +216,27 @@ fn fit_without_landmarks_detects_them_first() {
 }
 
 #[test]
+fn training_over_background_photos_records_them_and_names_a_bad_photo() {
+    let Some(f) = fixture() else { return };
+    let photos = f.dir.path().join("backgrounds");
+    std::fs::create_dir_all(&photos).unwrap();
+    for (i, colour) in [[40u8, 160, 60], [150, 120, 90]].into_iter().enumerate() {
+        let img =
+            image::RgbImage::from_fn(300, 200, |x, y| image::Rgb(colour.map(|c| c.wrapping_add(((x * 7 + y * 13 + i as u32) % 50) as u8))));
+        img.save(photos.join(format!("photo{i}.png"))).unwrap();
+    }
+    let init = f.dir.path().join("backgrounds.init");
+    ok(&gpmm(&["train-init", s(&f.model), "-o", s(&init), "--quick", "--seed", "7", "--backgrounds", s(&photos)]));
+    let bytes = std::fs::read(&init).unwrap();
+    let text = String::from_utf8_lossy(&bytes);
+    assert!(text.contains("\"background_photos\":2") && text.contains("\"face_free_frames\":0.125"), "metadata lacks the photos");
+    assert_ne!(bytes, std::fs::read(&f.init).unwrap(), "the photos changed nothing");
+    std::fs::write(photos.join("broken.jpg"), b"not a jpeg").unwrap();
+    let err = fails(&gpmm(&["train-init", s(&f.model), "-o", s(&init), "--quick", "--backgrounds", s(&photos)]));
+    assert!(err.contains("broken.jpg"), "{err}");
+}
+
+#[test]
 fn corrupted_or_missing_init_files_are_refused_by_name() {
     let Some(f) = fixture() else { return };
     let image = f.synth.join("0000_yaw00.png");

@@ -196,7 +196,7 @@ fn main() -> Res<()> {
     let head = HeadContext::load(&model, &template.join("lee-perry-smith.ply"), &template.join("landmarks_ibug68.json"))?;
     let ranges = SceneRanges::default();
     let openings = Openings::of_model(&model, &ranges);
-    let source = SceneSource { model: &model, head: Some(&head), ranges: &ranges, openings: &openings };
+    let source = SceneSource { model: &model, head: Some(&head), ranges: &ranges, openings: &openings, backgrounds: None };
     let l = model.landmarks.len();
     let mut geo = geometry(l);
     match variant {

@@ -1,7 +1,7 @@
 //! Training samples: a rendered scene cut into the finder's letterboxed frame and the
 //! initializer's crop exactly as the core cuts them at run time, with their targets.
 
-use crate::scene::{render_scene, Scene, SceneSource};
+use crate::scene::{face_free_frame, render_scene, Scene, SceneSource};
 use gpmm_core::net::face::{landmark_box, mirror_outputs};
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::render::Renderer;
@@ -95,6 +95,22 @@ pub fn samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, c
             sample_of_scene(&scene, geo, &mut rng)
         })
         .filter_map(|s| s)
+        .collect()
+}
+
+/// Face-free frames `start..start + count` of the stream `seed` ([`face_free_frame`]),
+/// letterboxed into the finder's input as scenes are.
+pub fn face_free_frames(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, count: u64) -> Vec<Vec<i8>> {
+    (start..start + count)
+        .into_par_iter()
+        .filter_map(|i| {
+            let img = face_free_frame(source, seed, i);
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            let window = Window::letterbox(w, h, geo.frame_side);
+            let mut frame = vec![0i8; geo.frame_side * geo.frame_side * 3];
+            sample_rgb(img.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
+            Some(frame)
+        })
         .collect()
 }
 

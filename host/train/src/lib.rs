@@ -10,4 +10,4 @@ pub mod preview;
 pub mod scene;
 pub mod train;
 
-pub use train::{train, TrainOptions, TrainReport};
+pub use train::{train, train_with, TrainOptions, TrainReport};

@@ -1,9 +1,10 @@
 //! The training loop: fresh chunks of rendered samples, AdamW with a cosine learning rate, then
 //! calibration, quantization and a check of the quantized networks through the core's detector.
 
-use crate::data::{samples, Geometry, Sample};
+use crate::data::{face_free_frames, samples, Geometry, Sample};
 use crate::encode::{init_file_bytes, EncodeError};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
+use crate::scene::backgrounds::Backgrounds;
 use crate::scene::head::HeadContext;
 use crate::scene::{render_scene, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
 use candle_core::{Device, Tensor, D};
@@ -38,7 +39,18 @@ pub struct TrainOptions {
     pub validation: usize,
     /// What the scenes are drawn from.
     pub ranges: SceneRanges,
+    /// With background photos: face-free frames cut from them per scene, shown to the finder
+    /// with every cell "no face" (the hardest of [`MINED_FROM`] candidates each chunk).
+    pub face_free: f64,
 }
+
+/// Face-free frames are the hardest one of this many candidates: those the finder, as trained so
+/// far, scores highest.
+pub const MINED_FROM: usize = 4;
+
+/// Weight of one cell of a face-free frame in the finder's loss (a positive frame's one face
+/// cell weighs 1, all its other cells together 1).
+const FACE_FREE_CELL_WEIGHT: f64 = 0.25;
 
 impl TrainOptions {
     /// The default training (3,840 steps on 81,920 scenes, each seen three times, the second
@@ -55,6 +67,7 @@ impl TrainOptions {
             lr: 2e-3,
             validation: 300,
             ranges: SceneRanges::default(),
+            face_free: 0.125,
         }
     }
 
@@ -71,6 +84,7 @@ impl TrainOptions {
             lr: 2e-3,
             validation: 12,
             ranges: SceneRanges::default(),
+            face_free: 0.125,
         }
     }
 
@@ -181,12 +195,14 @@ fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
     x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
 }
 
-fn finder_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
-    let x = batch_tensor(batch.iter().map(|s| s.frame.as_slice()), geo.frame_side, device)?;
+/// The finder's loss on a batch of scenes and face-free frames (`face_free`, every cell negative).
+fn finder_loss(net: &Net, batch: &[&Sample], face_free: &[&[i8]], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
+    let x = batch_tensor(batch.iter().map(|s| s.frame.as_slice()).chain(face_free.iter().copied()), geo.frame_side, device)?;
     let (out, _) = net.forward(&x)?;
     let (b, cells) = (batch.len(), geo.grid * geo.grid);
     // NHWC output: (b, cells, 4) → (b, 4, cells).
-    let out = out.reshape((b, cells, 4))?.transpose(1, 2)?.contiguous()?;
+    let all = out.reshape((b + face_free.len(), cells, 4))?.transpose(1, 2)?.contiguous()?;
+    let out = all.narrow(0, 0, b)?;
     let mut onehot = vec![0f32; b * cells];
     for (i, s) in batch.iter().enumerate() {
         onehot[i * cells + s.cell] = 1.0;
@@ -200,7 +216,44 @@ fn finder_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &Device) ->
     let place = out.narrow(1, 1, 3)?.broadcast_mul(&y)?.sum(D::Minus1)?;
     let target = Tensor::from_vec(batch.iter().flat_map(|s| s.place).collect::<Vec<f32>>(), (b, 3), device)?;
     let reg = (place - target)?.abs()?.mean_all()?;
-    cls + (reg * 4.0)?
+    let loss = (cls + (reg * 4.0)?)?;
+    if face_free.is_empty() {
+        return Ok(loss);
+    }
+    let free = softplus(&all.narrow(0, b, face_free.len())?.narrow(1, 0, 1)?)?.sum_all()?;
+    loss + (free * (FACE_FREE_CELL_WEIGHT / b as f64))?
+}
+
+/// The finder's highest face logit on each of `frames` (letterboxed), without training.
+fn finder_peaks(net: &Net, frames: &[Vec<i8>], geo: &Geometry, device: &Device) -> candle_core::Result<Vec<f32>> {
+    let cells = geo.grid * geo.grid;
+    let mut peaks = Vec::with_capacity(frames.len());
+    for chunk in frames.chunks(128) {
+        let x = batch_tensor(chunk.iter().map(Vec::as_slice), geo.frame_side, device)?;
+        let (out, _) = net.forward(&x)?;
+        let logits = out.reshape((chunk.len(), cells, 4))?.narrow(2, 0, 1)?.squeeze(2)?.max(1)?.detach();
+        peaks.extend(logits.to_vec1::<f32>()?);
+    }
+    Ok(peaks)
+}
+
+/// Face-free frames for one chunk: the `keep` of `keep · MINED_FROM` fresh candidates that the
+/// finder scores highest (hard negatives: textures, foliage, things it takes for faces).
+fn mine_face_free(
+    net: &Net,
+    source: SceneSource<'_>,
+    geo: &Geometry,
+    seed: u64,
+    start: u64,
+    keep: usize,
+    device: &Device,
+) -> candle_core::Result<Vec<Vec<i8>>> {
+    let candidates = face_free_frames(source, geo, seed, start * MINED_FROM as u64, (keep * MINED_FROM) as u64);
+    let peaks = finder_peaks(net, &candidates, geo, device)?;
+    let mut order: Vec<usize> = (0..candidates.len()).collect();
+    order.sort_by(|&a, &b| peaks[b].total_cmp(&peaks[a]));
+    let mut slots: Vec<Option<Vec<i8>>> = candidates.into_iter().map(Some).collect();
+    Ok(order.into_iter().take(keep).filter_map(|i| slots.get_mut(i).and_then(Option::take)).collect())
 }
 
 /// The learning rate after `done` of `total` steps: a cosine from `peak` down to 5 % of it.
@@ -247,16 +300,28 @@ pub fn output_loss(out: Tensor, batch: &[&Sample], geo: &Geometry, device: &Devi
     (out - target)?.abs()?.broadcast_mul(&w)?.mean_all()? * (d as f64 / (2 * geo.landmarks) as f64)
 }
 
-/// Trains both networks on renders of `model` (faces on `head` when given); returns the init
-/// file's bytes and the report.
+/// Trains both networks on renders of `model` (faces on `head` when given) over procedural
+/// backgrounds; returns the init file's bytes and the report.
 pub fn train(
     model: &GpModel,
     head: Option<&HeadContext>,
     opts: &TrainOptions,
+    progress: impl FnMut(Progress),
+) -> Result<(Vec<u8>, TrainReport), TrainError> {
+    train_with(model, head, None, opts, progress)
+}
+
+/// [`train`], some scenes over real face-free photos and, as many as `opts.face_free` says,
+/// face-free frames mined from them.
+pub fn train_with(
+    model: &GpModel,
+    head: Option<&HeadContext>,
+    backgrounds: Option<&Backgrounds>,
+    opts: &TrainOptions,
     mut progress: impl FnMut(Progress),
 ) -> Result<(Vec<u8>, TrainReport), TrainError> {
     let openings = Openings::of_model(model, &opts.ranges);
-    let source = SceneSource { model, head, ranges: &opts.ranges, openings: &openings };
+    let source = SceneSource { model, head, ranges: &opts.ranges, openings: &openings, backgrounds };
     let landmarks = model.landmarks.len();
     if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
         return Err(TrainError::Landmarks(landmarks));
@@ -292,16 +357,23 @@ pub fn train(
         if data.is_empty() {
             return Err(TrainError::NoScenes);
         }
+        let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
+        let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
+        let per_batch = if face_free.is_empty() { 0 } else { (opts.batch as f64 * opts.face_free).ceil() as usize };
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
         for pass in 0..opts.passes.max(opts.init_passes) {
             let order = pass_order(opts.seed, chunk, pass, data.len());
             let (train_f, train_i) = (pass < opts.passes, pass < opts.init_passes);
-            for idx in order.chunks(opts.batch) {
+            for (step, idx) in order.chunks(opts.batch).enumerate() {
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
                 if train_f {
                     opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
-                    let lf = finder_loss(&finder, &batch, &geo, &device).map_err(TrainError::Tensor)?;
+                    let free: Vec<&[i8]> = (0..per_batch)
+                        .filter_map(|k| face_free.get((step * per_batch + k) % face_free.len().max(1)))
+                        .map(Vec::as_slice)
+                        .collect();
+                    let lf = finder_loss(&finder, &batch, &free, &geo, &device).map_err(TrainError::Tensor)?;
                     opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
                     f = lf.to_scalar::<f32>().map_err(TrainError::Tensor)?;
                     net_done[0] += 1;
@@ -365,6 +437,9 @@ pub fn train(
         "colour_spread": [1.0f32, 1.0],
         "wide_crops": 0.0f32,
         "shadows": false,
+        "background_photos": backgrounds.map_or(0, Backgrounds::len),
+        "background_share": backgrounds.map_or(0.0, |b| b.share),
+        "face_free_frames": if backgrounds.is_some() { opts.face_free } else { 0.0 },
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     })
     .to_string();

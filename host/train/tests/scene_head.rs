@@ -1,5 +1,6 @@
 //! The head put around training faces: it continues the face (same frame, face first, seams
-//! closed near the face, untouched far from it) and refuses a model built from another scan.
+//! closed near the face, untouched far from it) and refuses a model built from another scan. And
+//! what is behind it: background photos change the background only.
 
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::gp::kernel::ModelKernel;
@@ -7,8 +8,10 @@ use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::render::{Instance, Renderer};
+use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::head::HeadContext;
-use gpmm_train::scene::{render_scene, Openings, Scene, SceneRanges, SceneSource};
+use gpmm_train::scene::{face_free_frame, render_scene, Openings, Scene, SceneRanges, SceneSource};
+use image::{Rgb, RgbImage};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::path::{Path, PathBuf};
@@ -49,7 +52,7 @@ impl<'a> Scenes<'a> {
 
     /// Scene `i` of the stream `seed` drawn with `ranges`.
     fn render(&mut self, ranges: &SceneRanges, seed: u64, i: u64) -> Option<Scene> {
-        let source = SceneSource { model: self.model, head: Some(self.head), ranges, openings: &self.openings };
+        let source = SceneSource { model: self.model, head: Some(self.head), ranges, openings: &self.openings, backgrounds: None };
         render_scene(source, seed, i, &mut self.renderer)
     }
 }
@@ -143,4 +146,37 @@ fn dressed_heads_keep_the_face_and_its_labels() {
         assert_ne!(d.frame, a.frame, "scene {i}: dressing changed no pixel");
     }
     assert!(compared >= 3, "only {compared} of 4 scenes rendered");
+}
+
+/// Fraction of `frame`'s pixels (in rows `rows`) that are clearly green.
+fn green_share(frame: &RgbImage, rows: std::ops::Range<u32>) -> f64 {
+    let px: Vec<&Rgb<u8>> = frame.enumerate_pixels().filter(|(_, y, _)| rows.contains(y)).map(|(_, _, p)| p).collect();
+    px.iter().filter(|p| p[1] > p[0].saturating_add(60) && p[1] > p[2].saturating_add(60)).count() as f64 / px.len().max(1) as f64
+}
+
+#[test]
+fn a_background_photo_changes_the_background_and_nothing_else() {
+    let Some((mesh, lm)) = files() else { return };
+    let model = small_model(&mesh, &lm);
+    let ranges = SceneRanges { dressed: false, ..SceneRanges::default() };
+    let openings = Openings::of_model(&model, &ranges);
+    let green = Backgrounds::from_photos(vec![RgbImage::from_pixel(640, 480, Rgb([20, 200, 30]))], 1.0);
+    let plain = SceneSource { model: &model, head: None, ranges: &ranges, openings: &openings, backgrounds: None };
+    let photo = SceneSource { backgrounds: Some(&green), ..plain };
+    let mut renderer = Renderer::new();
+    let mut greener = 0;
+    for i in 0..6 {
+        let (Some(a), Some(b)) = (render_scene(plain, 5, i, &mut renderer), render_scene(photo, 5, i, &mut renderer)) else { continue };
+        assert_eq!(a.landmarks, b.landmarks, "scene {i}: the face moved");
+        assert_eq!((a.angles, &a.light), (b.angles, &b.light));
+        // The top rows are mostly background: green with the photo.
+        let rows = 0..b.frame.height() / 8;
+        greener += usize::from(green_share(&b.frame, rows.clone()) > 0.5 && green_share(&a.frame, rows) < 0.5);
+    }
+    assert!(greener >= 4, "only {greener} of 6 scenes show the photo");
+    // Face-free frames are views of the photo through the camera effects, the same for a seed.
+    let f = face_free_frame(photo, 9, 2);
+    assert!(green_share(&f, 0..f.height()) > 0.9, "{}", green_share(&f, 0..f.height()));
+    assert_eq!(f, face_free_frame(photo, 9, 2));
+    assert_ne!(face_free_frame(plain, 9, 2), f);
 }

@@ -4,13 +4,16 @@
 //! labelled by hand. One scene is a pure function of `(seed, index)`.
 //!
 //! Around the model's face: the template's whole head ([`head`]), dressed with hair and clothes
-//! ([`dress`]), and open eyes painted over the scan's shut ones ([`eyes`]).
+//! ([`dress`]), and open eyes painted over the scan's shut ones ([`eyes`]). Behind it, when the
+//! user gives a folder of them, real face-free photographs ([`backgrounds`]).
 
 mod almond;
+pub mod backgrounds;
 pub mod dress;
 pub mod eyes;
 pub mod head;
 
+use backgrounds::Backgrounds;
 use eyes::OpenEyes;
 use gpmm_core::net::face::landmark_box;
 use gpmm_core::render::light::SH_COEFFS;
@@ -206,11 +209,37 @@ pub struct SceneSource<'a> {
     pub ranges: &'a SceneRanges,
     /// The model's openings for these ranges ([`Openings::of_model`]).
     pub openings: &'a Openings,
+    /// Real face-free photos some scenes are drawn over (and face-free frames are cut from).
+    pub backgrounds: Option<&'a Backgrounds>,
+}
+
+/// Width and height of a frame whose longer side is `long` px.
+fn frame_size(long: u32, aspect: f32) -> (u32, u32) {
+    if aspect >= 1.0 {
+        (long, (long as f32 / aspect).round() as u32)
+    } else {
+        ((long as f32 * aspect).round() as u32, long)
+    }
+}
+
+/// Face-free frame `index` of the stream `seed`: a view of a background photo (a procedural
+/// background without photos) at a scene's size, through the same camera effects.
+pub fn face_free_frame(source: SceneSource<'_>, seed: u64, index: u64) -> RgbImage {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ 0xF4EE);
+    let ranges = source.ranges;
+    let long = rng.random_range(ranges.frame_side.0..=ranges.frame_side.1);
+    let aspect = ranges.aspects.get(rng.random_range(0..ranges.aspects.len().max(1))).copied().unwrap_or(1.0);
+    let (w, h) = frame_size(long, aspect);
+    let back = match source.backgrounds.and_then(|b| b.view(w, h, &mut rng)) {
+        Some(photo) => photo,
+        None => background(w, h, &mut rng),
+    };
+    camera_effects(&RgbaImage::new(w, h), &back, &mut rng)
 }
 
 /// Renders scene `index` of the set drawn with `seed`.
 pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &mut Renderer) -> Option<Scene> {
-    let SceneSource { model, head, ranges, openings } = source;
+    let SceneSource { model, head, ranges, openings, backgrounds } = source;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
@@ -224,7 +253,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     };
     let long = rng.random_range(ranges.frame_side.0..=ranges.frame_side.1);
     let aspect = ranges.aspects.get(rng.random_range(0..ranges.aspects.len().max(1))).copied().unwrap_or(1.0);
-    let (w, h) = if aspect >= 1.0 { (long, (long as f32 / aspect).round() as u32) } else { ((long as f32 * aspect).round() as u32, long) };
+    let (w, h) = frame_size(long, aspect);
     let fov_h = rng.random_range(ranges.fov.0..=ranges.fov.1);
     // The settings' field of view is across the shorter side.
     let fov_short = 2.0 * ((fov_h.to_radians() * 0.5).tan() * w.min(h) as f32 / w as f32).atan().to_degrees();
@@ -290,6 +319,11 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
         return None;
     }
     let mut back = background(w, h, &mut rng);
+    // A photo instead, from a stream of its own (the rest of the scene is the same without one).
+    let mut photo_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x94D0_49BB_1331_11EB) ^ 0xBAC0);
+    if let Some(b) = backgrounds.filter(|b| photo_rng.random_bool(b.share.clamp(0.0, 1.0))) {
+        back = b.view(w, h, &mut photo_rng).unwrap_or(back);
+    }
     if let (Some(backdrop), Some(&chin)) = (&backdrop, landmarks.get(8)) {
         backdrop.draw(&mut back, projected, (landmark_box(&landmarks).2, chin), &mut dress_rng);
     }
