@@ -57,7 +57,10 @@ fn kernels() -> Vec<&'static str> {
 #[pyfunction]
 #[pyo3(signature = (template, landmarks, kernel = "symmetric-full", rank_shape = None, rank_color = None,
     captured_shape = None, captured_color = None, vertices = None, scale = None, no_crop = false,
-    texture = None, config = None, default_color = None, nystrom_points = Int::of(2000), seed = None))]
+    texture = None, config = None, default_color = None, nystrom_points = Int::of(2000), seed = None),
+    text_signature = "(template, landmarks, kernel='symmetric-full', rank_shape=None, rank_color=None, captured_shape=None, \
+    captured_color=None, vertices=None, scale=None, no_crop=False, texture=None, config=None, default_color=None, \
+    nystrom_points=2000, seed=None)")]
 #[allow(clippy::too_many_arguments)]
 fn build(
     py: Python<'_>,

@@ -247,7 +247,7 @@ impl Model {
     }
 
     /// `n` random instances (all coefficients ~ N(0, 1)), drawn as `gpmm sample --seed` draws them: a list of (positions, colours).
-    #[pyo3(signature = (n = Int::of(1), seed = Int::of(0)))]
+    #[pyo3(signature = (n = Int::of(1), seed = Int::of(0)), text_signature = "(self, /, n=1, seed=0)")]
     fn sample<'py>(&self, py: Python<'py>, n: Int, seed: Int) -> PyResult<Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>> {
         let (n, seed): (usize, u64) = (n.get("n")?, seed.get("seed")?);
         let m = self.inner.clone();
@@ -262,7 +262,8 @@ impl Model {
 
     /// Renders the model as `gpmm render` does: an `H x W x 4` uint8 image (linear RGB as-is, alpha 0 where uncovered
     /// only with background="transparent"). `light`: a preset, JSON text/file or 9 rows of [r, g, b].
-    #[pyo3(signature = (shape = None, color = None, yaw = 0.0, pitch = 0.0, roll = 0.0, light = None, width = Int::of(256), height = Int::of(256), background = "0,0,0", fov = 20.0))]
+    #[pyo3(signature = (shape = None, color = None, yaw = 0.0, pitch = 0.0, roll = 0.0, light = None, width = Int::of(256), height = Int::of(256), background = "0,0,0", fov = 20.0),
+        text_signature = "(self, /, shape=None, color=None, yaw=0.0, pitch=0.0, roll=0.0, light=None, width=256, height=256, background='0,0,0', fov=20.0)")]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,

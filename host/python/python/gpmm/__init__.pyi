@@ -22,6 +22,25 @@ from ._json import jsonable as jsonable
 from os import PathLike
 from typing import Union
 
-__all__: list[str]
+__all__ = [
+    "LIGHT_PRESETS",
+    "GpmmError",
+    "GpmmFileNotFoundError",
+    "GpmmOSError",
+    "GpmmValueError",
+    "Model",
+    "__version__",
+    "build",
+    "data_dir",
+    "export_h5",
+    "import_h5",
+    "inspect",
+    "jsonable",
+    "kernels",
+    "load",
+    "load_image",
+    "model_from_bytes",
+    "read_pts",
+]
 
 def export_h5(model: Model, path: Union[str, PathLike[str]]) -> None: ...
