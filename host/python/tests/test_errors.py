@@ -130,3 +130,12 @@ def test_rgba_is_fitted_as_its_rgb(model, photo):
     b = model.fit(img, pts, **FIT_FLAGS)
     np.testing.assert_array_equal(a["shape"], b["shape"])
     assert a["log_likelihood"] == b["log_likelihood"]
+
+
+def test_data_dir_honours_gpmm_data(monkeypatch, data_dir, tmp_path):
+    monkeypatch.setenv("GPMM_DATA", str(data_dir))
+    assert gpmm.data_dir() == data_dir
+    monkeypatch.setenv("GPMM_DATA", str(tmp_path / "absent"))
+    with pytest.raises(FileNotFoundError, match="set GPMM_DATA") as e:
+        gpmm.data_dir()
+    assert e.value.filename == str(tmp_path / "absent")
