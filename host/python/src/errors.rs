@@ -9,7 +9,7 @@ use pyo3::PyErrArguments;
 use std::io::Read;
 use std::path::Path;
 
-/// `errno` of a missing file (ENOENT), the same on every platform Python runs on.
+/// `errno` of a missing file (ENOENT) in a message's `(os error N)`.
 const ENOENT: i32 = 2;
 
 fn raise(class: &str, args: impl PyErrArguments + 'static) -> PyErr {
@@ -32,9 +32,9 @@ pub(crate) fn err(e: impl std::error::Error) -> PyErr {
     value_error(e.to_string())
 }
 
-/// A `GpmmFileNotFoundError` (errno 2) or `GpmmOSError` for `path` with the program's message.
-fn os_error(message: String, errno: Option<i32>, path: &Path) -> PyErr {
-    let class = if errno == Some(ENOENT) { "GpmmFileNotFoundError" } else { "GpmmOSError" };
+/// A `GpmmFileNotFoundError` (`not_found`) or `GpmmOSError` for `path` with the program's message.
+fn os_error(message: String, not_found: bool, errno: Option<i32>, path: &Path) -> PyErr {
+    let class = if not_found { "GpmmFileNotFoundError" } else { "GpmmOSError" };
     raise(class, (message, errno, path.display().to_string()))
 }
 
@@ -47,7 +47,7 @@ pub(crate) fn read_error(message: impl std::fmt::Display, paths: &[&Path]) -> Py
     // The file the message names, if several cannot be read.
     let (named, others): (Vec<_>, Vec<_>) = failing.partition(|(p, _)| message.contains(&p.display().to_string()));
     match named.into_iter().chain(others).next() {
-        Some((p, io)) => os_error(message, io.raw_os_error(), p),
+        Some((p, io)) => os_error(message, io.kind() == std::io::ErrorKind::NotFound, io.raw_os_error(), p),
         None => value_error(message),
     }
 }
@@ -57,7 +57,7 @@ pub(crate) fn read_error(message: impl std::fmt::Display, paths: &[&Path]) -> Py
 pub(crate) fn write_error(message: impl std::fmt::Display, path: &Path) -> PyErr {
     let message = message.to_string();
     match os_errno(&message) {
-        Some(errno) => os_error(message, Some(errno), path),
+        Some(errno) => os_error(message, errno == ENOENT, Some(errno), path),
         None => value_error(message),
     }
 }
