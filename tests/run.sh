@@ -37,15 +37,26 @@ bash firmware-sim/install-deps.sh
 step "cargo test (workspace)"
 cargo test --workspace 2>&1 | tee target/test-output.txt
 
-step "Python package (venv, pip install ./host/python, pytest)"
-bash host/python/tests/setup-venv.sh target/py-venv
+step "Python package (the abi3 wheel, installed into a fresh venv; pytest and stubtest against it)"
+bash host/python/tests/setup-venv.sh build target/py-venv
 # The package's tests compare against the gpmm program. Both the program and the native module
 # are built in the dev profile that `cargo test` has just compiled the dependencies for (they are
 # at opt-level 3 there too): a release build would compile every dependency a second time
-# (minutes on two cores). Users' `pip install` still builds in release (pyproject.toml).
+# (minutes on two cores). Users' wheels build in release (pyproject.toml).
 cargo build -p gpmm
-MATURIN_PEP517_ARGS="--profile dev" target/py-venv/bin/pip install --quiet ./host/python
-GPMM_BIN="$PWD/target/debug/gpmm" target/py-venv/bin/python -m pytest host/python/tests -q -p no:cacheprovider 2>&1 \
+rm -f target/wheels/gpmm_faces-*.whl
+target/py-venv/bin/maturin build --profile dev -m host/python/Cargo.toml --out target/wheels
+wheel=$(ls target/wheels/gpmm_faces-*.whl)
+rm -rf target/py-wheel-venv
+python3 -m venv target/py-wheel-venv
+t0=$(date +%s%N)
+target/py-wheel-venv/bin/pip install --quiet "$wheel"
+echo "the wheel installed into a fresh venv in $(( ($(date +%s%N) - t0) / 1000000 )) ms"
+bash host/python/tests/setup-venv.sh test target/py-wheel-venv
+# From an empty directory, so that `import gpmm` can only find the installed wheel.
+(cd target/py-wheel-venv && bin/python -c 'import gpmm, sys; assert "site-packages" in gpmm.__file__, gpmm.__file__')
+(cd target/py-wheel-venv && bin/python -m mypy.stubtest gpmm)
+GPMM_BIN="$PWD/target/debug/gpmm" target/py-wheel-venv/bin/python -m pytest host/python/tests -q -p no:cacheprovider 2>&1 \
     | tee target/pytest-output.txt
 
 # Print one closing summary line over all test binaries and the pytest suite.

@@ -3,7 +3,8 @@
     python batch_fit.py face.gpmm photos/                      # a LocalCluster of 2 workers here
     python batch_fit.py face.gpmm photos/ --scheduler tcp://scheduler:8786   # a real cluster
 
-Each photo NAME.jpg needs NAME.pts (68 iBUG landmarks) beside it. Every worker loads the model
+Each photo NAME.jpg needs NAME.pts (68 iBUG landmarks) beside it; each line names its photo
+("name": NAME.jpg, "path"). Every worker loads the model
 once; each fit is the deterministic `gpmm fit` (same settings and seed as given here), so the
 results equal fitting the photos one after another. On a real cluster the model file and the
 folder must be on a file system every worker sees (or pass --scatter to ship the model itself).
@@ -13,15 +14,10 @@ import argparse
 import json
 import sys
 
-import numpy as np
 from distributed import Client, LocalCluster
 
 import gpmm
 import gpmm.batch
-
-
-def jsonable(v):
-    return v.tolist() if isinstance(v, np.ndarray) else v
 
 
 def main() -> int:
@@ -48,7 +44,7 @@ def main() -> int:
         client = Client(cluster)
     try:
         for r in gpmm.batch.fit_folder(model, a.folder, client=client, **settings):
-            print(json.dumps({k: jsonable(v) for k, v in r.items()}))
+            print(json.dumps(gpmm.jsonable(r)), flush=True)
     finally:
         client.close()
         if cluster is not None:

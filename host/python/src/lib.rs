@@ -2,12 +2,17 @@
 //! library (the code the `gpmm` program runs): models and their arrays, building from a template,
 //! sampling, rendering, fitting, quantization, blobs and statismo `.h5` files.
 //!
-//! Long work runs with the GIL released; every error is a `gpmm.GpmmError` (a `ValueError`)
-//! carrying the message the `gpmm` program prints for the same failure.
+//! Long work runs with the GIL released; every error is a `gpmm.GpmmError` carrying the message
+//! the `gpmm` program prints for the same failure (see `errors`).
 
+mod args;
 mod arrays;
+mod errors;
+mod from_arrays;
 mod model;
 
+use args::{opt, Int};
+use errors::{err, read_error, value_error};
 use gpmm_host::device::quantize::BlobBuf;
 use gpmm_host::gp::kernel::{Hyperparameters, ModelKernel};
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
@@ -17,20 +22,7 @@ use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use model::Model;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use std::path::PathBuf;
-
-pyo3::create_exception!(_gpmm, GpmmError, pyo3::exceptions::PyValueError, "An error of gpmm (the message is the gpmm program's).");
-
-/// A [`GpmmError`] from any error: its message, which names its cause itself (the `gpmm`
-/// program prints the same text).
-pub(crate) fn err(e: impl std::error::Error) -> PyErr {
-    GpmmError::new_err(e.to_string())
-}
-
-/// A [`GpmmError`] from a message.
-pub(crate) fn err_msg(s: impl Into<String>) -> PyErr {
-    GpmmError::new_err(s.into())
-}
+use std::path::{Path, PathBuf};
 
 /// A serializable value as Python objects (dicts, lists, numbers) through its JSON text, so that
 /// floats are the ones the `gpmm` program writes (an f32 reads back as the program's decimal).
@@ -43,7 +35,7 @@ pub(crate) fn json_to_py<'py, T: serde::Serialize + ?Sized>(py: Python<'py>, val
 #[pyfunction]
 fn load(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
     let name = path.display().to_string();
-    let m = py.detach(move || gpmm_host::gp::model_io::load(&path)).map_err(err)?;
+    let m = py.detach(|| gpmm_host::gp::model_io::load(&path)).map_err(|e| read_error(e, &[&path]))?;
     Ok(Model::new(m, name))
 }
 
@@ -65,49 +57,54 @@ fn kernels() -> Vec<&'static str> {
 #[pyfunction]
 #[pyo3(signature = (template, landmarks, kernel = "symmetric-full", rank_shape = None, rank_color = None,
     captured_shape = None, captured_color = None, vertices = None, scale = None, no_crop = false,
-    texture = None, config = None, default_color = None, nystrom_points = 2000, seed = None))]
+    texture = None, config = None, default_color = None, nystrom_points = Int::of(2000), seed = None),
+    text_signature = "(template, landmarks, kernel='symmetric-full', rank_shape=None, rank_color=None, captured_shape=None, \
+    captured_color=None, vertices=None, scale=None, no_crop=False, texture=None, config=None, default_color=None, \
+    nystrom_points=2000, seed=None)")]
 #[allow(clippy::too_many_arguments)]
 fn build(
     py: Python<'_>,
     template: PathBuf,
     landmarks: PathBuf,
     kernel: &str,
-    rank_shape: Option<usize>,
-    rank_color: Option<usize>,
+    rank_shape: Option<Int>,
+    rank_color: Option<Int>,
     captured_shape: Option<f64>,
     captured_color: Option<f64>,
-    vertices: Option<usize>,
+    vertices: Option<Int>,
     scale: Option<f64>,
     no_crop: bool,
     texture: Option<PathBuf>,
     config: Option<PathBuf>,
     default_color: Option<[f64; 3]>,
-    nystrom_points: usize,
-    seed: Option<u64>,
+    nystrom_points: Int,
+    seed: Option<Int>,
 ) -> PyResult<Model> {
     let kernel: ModelKernel = kernel.parse().map_err(err)?;
     let hyperparameters = match &config {
-        Some(p) => Hyperparameters::from_toml_file(p).map_err(err)?,
+        Some(p) => Hyperparameters::from_toml_file(p).map_err(|e| read_error(e, &[p]))?,
         None => Hyperparameters::default(),
     };
     let opts = BuildOptions {
         kernel,
         hyperparameters,
-        rank_shape: RankSpec::from_flags(rank_shape, captured_shape, "shape").map_err(err)?,
-        rank_color: RankSpec::from_flags(rank_color, captured_color, "color").map_err(err)?,
+        rank_shape: RankSpec::from_flags(opt(&rank_shape, "rank_shape")?, captured_shape, "shape").map_err(err)?,
+        rank_color: RankSpec::from_flags(opt(&rank_color, "rank_color")?, captured_color, "color").map_err(err)?,
         nystrom: NystromOptions {
-            points: nystrom_points.max(1),
-            seed: seed.unwrap_or(NystromOptions::default().seed),
+            points: nystrom_points.get::<usize>("nystrom_points")?.max(1),
+            seed: opt(&seed, "seed")?.unwrap_or(NystromOptions::default().seed),
             ..Default::default()
         },
     };
+    let vertices = opt(&vertices, "vertices")?;
+    let read: Vec<PathBuf> = [Some(&template), Some(&landmarks), texture.as_ref()].into_iter().flatten().cloned().collect();
     let topts = TemplateOptions { texture, scale, no_crop, vertices, default_color };
     let model = py
-        .detach(move || -> Result<_, gpmm_host::mesh::template::TemplateError> {
+        .detach(|| -> Result<_, gpmm_host::mesh::template::TemplateError> {
             let t = load_template(&template, &landmarks, &topts)?;
             Ok(build_model(&t, &opts, |_, _, _| {}))
         })
-        .map_err(err)?;
+        .map_err(|e| read_error(e, &read.iter().map(PathBuf::as_path).collect::<Vec<_>>()))?;
     Ok(Model::new(model, "<built>".into()))
 }
 
@@ -116,12 +113,13 @@ fn build(
 #[pyo3(signature = (path, scale = None, landmarks = None))]
 fn import_h5<'py>(py: Python<'py>, path: PathBuf, scale: Option<f64>, landmarks: Option<PathBuf>) -> PyResult<(Model, Bound<'py, PyAny>)> {
     let name = path.display().to_string();
+    let read: Vec<&Path> = [Some(path.as_path()), landmarks.as_deref()].into_iter().flatten().collect();
     let (model, report) = py
-        .detach(move || -> Result<_, String> {
+        .detach(|| -> Result<_, String> {
             let landmarks = landmarks.as_deref().map(gpmm_host::mesh::io::read_landmarks_json).transpose().map_err(|e| e.to_string())?;
             statismo::import(&path, &ImportOptions { scale, landmarks }).map_err(|e| e.to_string())
         })
-        .map_err(err_msg)?;
+        .map_err(|e| read_error(e, &read))?;
     let report = json_to_py(py, &report)?;
     Ok((Model::new(model, name), report))
 }
@@ -134,7 +132,7 @@ fn inspect<'py>(py: Python<'py>, blob: &[u8], strict: bool) -> PyResult<Bound<'p
     let buf = BlobBuf::from_bytes(blob);
     let (json, result) = gpmm_host::device::quantize::inspect(&buf);
     if let (true, Err(e)) = (strict, &result) {
-        return Err(err_msg(format!("not a valid model blob: {e}")));
+        return Err(value_error(format!("not a valid model blob: {e}")));
     }
     let d = json_to_py(py, &json)?;
     if let Ok(dict) = d.cast::<PyDict>() {
@@ -143,10 +141,11 @@ fn inspect<'py>(py: Python<'py>, blob: &[u8], strict: bool) -> PyResult<Bound<'p
     Ok(d)
 }
 
-/// Loads a photo (PNG, JPEG or PPM) as an `H x W x 3` uint8 array, as `gpmm fit` reads it.
+/// Loads a photo (PNG, JPEG or PPM) as an `H x W x 3` uint8 array, as `gpmm fit` reads it (an alpha
+/// channel is dropped; the values are used as they are).
 #[pyfunction]
 fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
-    let img = py.detach(move || gpmm_host::photo::load_rgb(&path)).map_err(err)?;
+    let img = py.detach(|| gpmm_host::photo::load_rgb(&path)).map_err(|e| read_error(e, &[&path]))?;
     arrays::rgb_to_numpy(py, &img)
 }
 
@@ -154,14 +153,25 @@ fn load_image<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>
 #[pyfunction]
 #[pyo3(signature = (path, one_based = false))]
 fn read_pts<'py>(py: Python<'py>, path: PathBuf, one_based: bool) -> PyResult<Bound<'py, PyAny>> {
-    let pts = gpmm_host::photo::pts::read_pts(&path, one_based).map_err(err)?;
+    let pts = gpmm_host::photo::pts::read_pts(&path, one_based).map_err(|e| read_error(e, &[&path]))?;
     arrays::points_to_numpy(py, &pts.points)
+}
+
+/// The data directory (template scan, photos): `$GPMM_DATA` if set, else `../shared/data` beside the
+/// current directory or the source checkout; a `FileNotFoundError` if it does not exist.
+#[pyfunction]
+fn data_dir(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+    let dir = gpmm_host::data::default_data_dir();
+    if !dir.is_dir() {
+        let message = format!("{}: the gpmm data directory does not exist (set GPMM_DATA to it)", dir.display());
+        return Err(read_error(message, &[&dir]));
+    }
+    py.import("pathlib")?.getattr("Path")?.call1((dir,))
 }
 
 /// The native module.
 #[pymodule]
 fn _gpmm(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("GpmmError", m.py().get_type::<GpmmError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("LIGHT_PRESETS", gpmm_host::render::light::LIGHT_PRESETS.to_vec())?;
     m.add_class::<Model>()?;
@@ -173,5 +183,6 @@ fn _gpmm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
     m.add_function(wrap_pyfunction!(load_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_pts, m)?)?;
+    m.add_function(wrap_pyfunction!(data_dir, m)?)?;
     Ok(())
 }

@@ -1,9 +1,12 @@
 //! `gpmm.Model`: a morphable model, its arrays, and what can be done with it.
 
+use crate::args::{coefficients, opt, overrides, Int};
 use crate::arrays::{
     basis_to_numpy, numpy_to_points, numpy_to_rgb, points_to_numpy, rgb_to_numpy, rgba_to_numpy, vec3_to_numpy, vec_to_numpy,
 };
-use crate::{err, err_msg, json_to_py};
+use crate::errors::{err, read_error, value_error, write_error};
+use crate::from_arrays::{model_from_arrays, PartArrays};
+use crate::json_to_py;
 use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
 use gpmm_host::fit::{fit_image, overlay, report, FitFlags, ReportInputs};
 use gpmm_host::gp::model::{GpModel, PartBasis};
@@ -47,7 +50,7 @@ fn light_arg(obj: &Bound<'_, PyAny>) -> PyResult<gpmm_core::render::ShLight> {
         return parse_light(&s).map_err(err);
     }
     let rows: Vec<Vec<f32>> =
-        obj.extract().map_err(|_| err_msg("light must be a preset name, JSON text, a file or 9 rows of [r, g, b]"))?;
+        obj.extract().map_err(|_| value_error("light must be a preset name, JSON text, a file or 9 rows of [r, g, b]"))?;
     light_from_rows(&rows).map_err(err)
 }
 
@@ -65,10 +68,52 @@ impl Model {
         crate::model_from_bytes(py, data)
     }
 
+    /// A model from numpy arrays: `shape_mean` `N x 3` (mm), `triangles` `T x 3` vertex ids, and for shape
+    /// and colour (linear RGB) a `*_basis` `K x N x 3` scaled by sqrt(eigenvalue) (as `shape_basis` gives)
+    /// or a factored `*_directions` `K x 3` + `*_fields` `K x N`, `*_eigenvalues` `K` (descending;
+    /// default: the components' squared norms), `landmarks` vertex ids and `metadata` entries.
+    #[staticmethod]
+    #[pyo3(signature = (shape_mean, triangles, *, shape_basis = None, shape_eigenvalues = None, shape_directions = None,
+        shape_fields = None, color_mean = None, color_basis = None, color_eigenvalues = None, color_directions = None,
+        color_fields = None, landmarks = None, metadata = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_arrays<'py>(
+        shape_mean: Bound<'py, PyAny>,
+        triangles: Bound<'py, PyAny>,
+        shape_basis: Option<Bound<'py, PyAny>>,
+        shape_eigenvalues: Option<Bound<'py, PyAny>>,
+        shape_directions: Option<Bound<'py, PyAny>>,
+        shape_fields: Option<Bound<'py, PyAny>>,
+        color_mean: Option<Bound<'py, PyAny>>,
+        color_basis: Option<Bound<'py, PyAny>>,
+        color_eigenvalues: Option<Bound<'py, PyAny>>,
+        color_directions: Option<Bound<'py, PyAny>>,
+        color_fields: Option<Bound<'py, PyAny>>,
+        landmarks: Option<Bound<'py, PyAny>>,
+        metadata: Option<Bound<'py, PyAny>>,
+    ) -> PyResult<Self> {
+        let shape = PartArrays {
+            mean: Some(shape_mean),
+            basis: shape_basis,
+            eigenvalues: shape_eigenvalues,
+            directions: shape_directions,
+            fields: shape_fields,
+        };
+        let color = PartArrays {
+            mean: color_mean,
+            basis: color_basis,
+            eigenvalues: color_eigenvalues,
+            directions: color_directions,
+            fields: color_fields,
+        };
+        let model = model_from_arrays(shape, color, &triangles, landmarks.as_ref(), metadata.as_ref())?;
+        Ok(Self::new(model, "<arrays>".into()))
+    }
+
     /// Writes the model file (safetensors, docs/model-format.md).
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let m = self.inner.clone();
-        py.detach(move || model_io::save(&m, &path)).map_err(err)
+        py.detach(|| model_io::save(&m, &path)).map_err(|e| write_error(e, &path))
     }
 
     /// The model file's bytes.
@@ -192,46 +237,51 @@ impl Model {
     fn instance<'py>(
         &self,
         py: Python<'py>,
-        shape: Option<Vec<f32>>,
-        color: Option<Vec<f32>>,
+        shape: Option<&Bound<'py, PyAny>>,
+        color: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        gpmm_host::render::check_coefficients(&self.inner, shape.as_deref().unwrap_or(&[]), color.as_deref().unwrap_or(&[]))
-            .map_err(err)?;
-        let mesh = self.inner.instance(&shape.unwrap_or_default(), &color.unwrap_or_default()).map_err(|e| err_msg(e.to_string()))?;
+        let shape = coefficients(shape, "shape", self.inner.shape.rank())?;
+        let color = coefficients(color, "color", self.inner.color.rank())?;
+        let mesh = self.inner.instance(&shape, &color).map_err(err)?;
         mesh_arrays(py, &mesh)
     }
 
     /// `n` random instances (all coefficients ~ N(0, 1)), drawn as `gpmm sample --seed` draws them: a list of (positions, colours).
-    #[pyo3(signature = (n = 1, seed = 0))]
-    fn sample<'py>(&self, py: Python<'py>, n: usize, seed: u64) -> PyResult<Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>> {
+    #[pyo3(signature = (n = Int::of(1), seed = Int::of(0)), text_signature = "(self, /, n=1, seed=0)")]
+    fn sample<'py>(&self, py: Python<'py>, n: Int, seed: Int) -> PyResult<Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>)>> {
+        let (n, seed): (usize, u64) = (n.get("n")?, seed.get("seed")?);
         let m = self.inner.clone();
         let meshes = py
             .detach(move || {
                 let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
                 (0..n).map(|_| m.sample(&mut rng)).collect::<Result<Vec<_>, _>>()
             })
-            .map_err(|e| err_msg(e.to_string()))?;
+            .map_err(err)?;
         meshes.iter().map(|mesh| mesh_arrays(py, mesh)).collect()
     }
 
     /// Renders the model as `gpmm render` does: an `H x W x 4` uint8 image (linear RGB as-is, alpha 0 where uncovered
     /// only with background="transparent"). `light`: a preset, JSON text/file or 9 rows of [r, g, b].
-    #[pyo3(signature = (shape = None, color = None, yaw = 0.0, pitch = 0.0, roll = 0.0, light = None, width = 256, height = 256, background = "0,0,0", fov = 20.0))]
+    #[pyo3(signature = (shape = None, color = None, yaw = 0.0, pitch = 0.0, roll = 0.0, light = None, width = Int::of(256), height = Int::of(256), background = "0,0,0", fov = 20.0),
+        text_signature = "(self, /, shape=None, color=None, yaw=0.0, pitch=0.0, roll=0.0, light=None, width=256, height=256, background='0,0,0', fov=20.0)")]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
         py: Python<'py>,
-        shape: Option<Vec<f32>>,
-        color: Option<Vec<f32>>,
+        shape: Option<&Bound<'py, PyAny>>,
+        color: Option<&Bound<'py, PyAny>>,
         yaw: f32,
         pitch: f32,
         roll: f32,
         light: Option<&Bound<'py, PyAny>>,
-        width: u32,
-        height: u32,
+        width: Int,
+        height: Int,
         background: &str,
         fov: f32,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let s = coefficients(shape, "shape", self.inner.shape.rank())?;
+        let c = coefficients(color, "color", self.inner.color.rank())?;
+        let (width, height) = (width.get("width")?, height.get("height")?);
         let light = match light {
             Some(l) => light_arg(l)?,
             None => parse_light("frontal").map_err(err)?,
@@ -246,7 +296,6 @@ impl Model {
         };
         settings.validate().map_err(err)?;
         let m = self.inner.clone();
-        let (s, c) = (shape.unwrap_or_default(), color.unwrap_or_default());
         let img = py.detach(move || render_model(&m, &s, &c, View { yaw, pitch, roll }, &settings)).map_err(err)?;
         rgba_to_numpy(py, &img)
     }
@@ -260,6 +309,8 @@ impl Model {
     /// docs/fit-json.md) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
     /// `working_image` (the crop the chains saw). `landmark_calibration`: a detector calibration file
     /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
+    /// `image` may also be `H x W x 4` (RGBA: alpha is dropped) or anything `numpy.asarray` makes such an
+    /// array of (a PIL image); its values are used as they are (the model's colours are linear RGB).
     #[pyo3(signature = (image, landmarks, *, seed = None, size = None, landmark_steps = None, image_steps = None,
         shape_rank = None, color_rank = None, landmark_sigma = None, contour_sigma = None, set = None,
         landmark_calibration = None))]
@@ -269,39 +320,40 @@ impl Model {
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
         landmarks: &Bound<'py, PyAny>,
-        seed: Option<u64>,
-        size: Option<u32>,
-        landmark_steps: Option<u32>,
-        image_steps: Option<u32>,
-        shape_rank: Option<usize>,
-        color_rank: Option<usize>,
+        seed: Option<Int>,
+        size: Option<Int>,
+        landmark_steps: Option<Int>,
+        image_steps: Option<Int>,
+        shape_rank: Option<Int>,
+        color_rank: Option<Int>,
         landmark_sigma: Option<f32>,
         contour_sigma: Option<f32>,
-        set: Option<Vec<String>>,
+        set: Option<&Bound<'py, PyAny>>,
         landmark_calibration: Option<PathBuf>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let flags = FitFlags {
-            size,
-            seed,
-            landmark_steps,
-            image_steps,
-            shape_rank,
-            color_rank,
+            size: opt(&size, "size")?,
+            seed: opt(&seed, "seed")?,
+            landmark_steps: opt(&landmark_steps, "landmark_steps")?,
+            image_steps: opt(&image_steps, "image_steps")?,
+            shape_rank: within_rank(opt(&shape_rank, "shape_rank")?, "shape_rank", self.inner.shape.rank())?,
+            color_rank: within_rank(opt(&color_rank, "color_rank")?, "color_rank", self.inner.color.rank())?,
             landmark_sigma,
             contour_sigma,
             initializer_sigma: None,
-            overrides: set.unwrap_or_default(),
+            overrides: overrides(set)?,
         };
-        let opts = flags.resolve().map_err(err)?;
+        // The program's messages name its flag (`--set`); here the parameter is `set`.
+        let opts = flags.resolve().map_err(|e| value_error(e.to_string().replace("--set ", "set: ")))?;
         let photo = numpy_to_rgb(image)?;
         let mut points = numpy_to_points(py, landmarks)?;
         let calibration_name = landmark_calibration.as_ref().map(|p| p.display().to_string());
         if let Some(path) = &landmark_calibration {
-            let cal = LandmarkCalibration::read(path).map_err(err)?;
+            let cal = LandmarkCalibration::read(path).map_err(|e| read_error(e, &[path]))?;
             // Points outside stay as they were, so the fit refuses them as it would without a calibration.
             points = cal
                 .correct_in_image(&points, photo.width() as f32, photo.height() as f32)
-                .map_err(|e| err_msg(format!("landmarks: {e}")))?;
+                .map_err(|e| value_error(format!("landmarks: {e}")))?;
         }
         let m = self.inner.clone();
         let source = self.source.clone();
@@ -322,14 +374,14 @@ impl Model {
             .map_err(err)?;
         let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
         let out = json_to_py(py, &rep)?;
-        let dict = out.cast::<PyDict>().map_err(|_| err_msg("fit report is not a dict"))?;
+        let dict = out.cast::<PyDict>().map_err(|_| value_error("fit report is not a dict"))?;
         dict.set_item("shape", vec_to_numpy(py, rep.shape.clone()))?;
         dict.set_item("color", vec_to_numpy(py, rep.color.clone()))?;
         dict.set_item("light", vec3_to_numpy(py, &rep.light)?)?;
         dict.set_item("translation_mm", vec_to_numpy(py, rep.translation_mm.to_vec()))?;
         dict.set_item("fitted_landmarks", points_to_numpy(py, &rep.fitted_landmarks)?)?;
         if let (Some(post), Ok(Some(d))) = (&rep.posterior, dict.get_item("posterior")) {
-            let d = d.cast::<PyDict>().map_err(|_| err_msg("posterior summary is not a dict"))?;
+            let d = d.cast::<PyDict>().map_err(|_| value_error("posterior summary is not a dict"))?;
             for (key, v) in [
                 ("shape_mean", &post.shape_mean),
                 ("shape_sd", &post.shape_sd),
@@ -351,18 +403,20 @@ impl Model {
         &self,
         py: Python<'py>,
         profile: &str,
-        vertices: Option<usize>,
-        rank_shape: Option<usize>,
-        rank_color: Option<usize>,
-        bits: Option<u8>,
+        vertices: Option<Int>,
+        rank_shape: Option<Int>,
+        rank_color: Option<Int>,
+        bits: Option<Int>,
     ) -> PyResult<Bound<'py, PyBytes>> {
-        let profile: Profile = profile.parse().map_err(err_msg)?;
+        let profile: Profile = profile.parse().map_err(|e: String| value_error(format!("profile: {e}")))?;
         let mut opts = QuantizeOptions::for_profile(profile);
-        opts.vertices = vertices.unwrap_or(opts.vertices);
-        opts.rank_shape = rank_shape.unwrap_or(opts.rank_shape.min(self.inner.shape.rank()));
-        opts.rank_color = rank_color.unwrap_or(opts.rank_color.min(self.inner.color.rank()));
-        if let Some(b) = bits {
-            opts.bits = Bits::from_count(b).ok_or_else(|| err_msg(format!("bits {b}: expected 8 or 16")))?;
+        opts.vertices = opt(&vertices, "vertices")?.unwrap_or(opts.vertices);
+        opts.rank_shape = within_rank(opt(&rank_shape, "rank_shape")?, "rank_shape", self.inner.shape.rank())?
+            .unwrap_or(opts.rank_shape.min(self.inner.shape.rank()));
+        opts.rank_color = within_rank(opt(&rank_color, "rank_color")?, "rank_color", self.inner.color.rank())?
+            .unwrap_or(opts.rank_color.min(self.inner.color.rank()));
+        if let Some(b) = opt::<u8>(&bits, "bits")? {
+            opts.bits = Bits::from_count(b).ok_or_else(|| value_error(format!("bits = {b}: expected 8 or 16")))?;
         }
         opts.source = PathBuf::from(&self.source).file_name().map(|f| f.to_string_lossy().into_owned());
         let m = self.inner.clone();
@@ -373,7 +427,15 @@ impl Model {
     /// Writes the model as a statismo `.h5` file (as `gpmm export-h5`).
     fn export_h5(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let m = self.inner.clone();
-        py.detach(move || statismo::export(&m, &path)).map_err(err)
+        py.detach(|| statismo::export(&m, &path)).map_err(|e| write_error(e, &path))
+    }
+}
+
+/// A rank the caller asked for, refused when the model has fewer components (`name` is the parameter).
+fn within_rank(rank: Option<usize>, name: &str, model_rank: usize) -> PyResult<Option<usize>> {
+    match rank {
+        Some(r) if r > model_rank => Err(value_error(format!("{name} = {r} is more than the model's {model_rank} components"))),
+        _ => Ok(rank),
     }
 }
 

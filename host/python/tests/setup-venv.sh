@@ -1,10 +1,13 @@
 #!/usr/bin/env bash
-# Creates (or reuses) the virtual environment the Python package is tested in, idempotently:
-#   bash host/python/tests/setup-venv.sh DIR
+# Creates (or reuses) a virtual environment of the Python package's tools, idempotently:
+#   bash host/python/tests/setup-venv.sh build DIR   maturin, to build the wheel (kept between runs)
+#   bash host/python/tests/setup-venv.sh test DIR    the test tools (pytest, h5py, Dask, mypy for
+#                                                    stubtest) for a venv the wheel is installed into
 # Needs CPython >= 3.9 with venv and pip; on Debian, installs python3-venv when missing (as root).
-# Then pip installs the build and test dependencies from PyPI.
+# Then pip installs the tools from PyPI.
 set -euo pipefail
-venv="${1:?usage: setup-venv.sh DIR}"
+kind="${1:?usage: setup-venv.sh build|test DIR}"
+venv="${2:?usage: setup-venv.sh build|test DIR}"
 log() { echo "setup-venv: $*" >&2; }
 
 if ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then
@@ -21,5 +24,8 @@ if [ ! -x "$venv/bin/python" ]; then
     log "python3 -m venv $venv ($(python3 --version))"
     python3 -m venv "$venv"
 fi
-"$venv/bin/python" -m pip install --quiet --upgrade pip
-"$venv/bin/python" -m pip install --quiet "maturin>=1.9,<2" numpy h5py pytest "dask[distributed]"
+case "$kind" in
+    build) "$venv/bin/python" -m pip install --quiet --upgrade pip "maturin>=1.9,<2" ;;
+    test) "$venv/bin/python" -m pip install --quiet pytest h5py "dask[distributed]" mypy ;;
+    *) log "unknown kind '$kind' (build or test)"; exit 1 ;;
+esac

@@ -1,11 +1,20 @@
 """The batch example: eight photos fitted on a local Dask cluster of two workers equal eight
 sequential fits, with one model load per worker."""
 
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from distributed import Client, LocalCluster
 
+import gpmm
 import gpmm.batch
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "batch_fit.py"
 
 SETTINGS = {"landmark_steps": 600, "image_steps": 20, "seed": 7}
 
@@ -18,7 +27,7 @@ def client():
 
 
 def same(a, b):
-    assert a["image"] == b["image"]
+    assert (a["name"], a["path"], a["image"]) == (b["name"], b["path"], b["image"])
     for k in ("yaw_deg", "pitch_deg", "roll_deg", "log_likelihood"):
         assert a[k] == b[k], (a["image"], k)
     for k in ("shape", "color", "light", "fitted_landmarks"):
@@ -44,3 +53,41 @@ def test_a_photo_without_landmarks_is_an_error(tmp_path, small_model_path, photo
     (photo_folder / "extra.png").write_bytes((photo_folder / "p0_astronaut.png").read_bytes())
     with pytest.raises(FileNotFoundError, match="extra.pts"):
         gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
+
+
+def test_each_result_names_its_photo(small_model_path, photo_folder):
+    """Every result carries its photo's name and path (not the "<array>" of a fit of arrays), and
+    its numbers are those of fitting that photo on its own."""
+    results = gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
+    photos = sorted(p for p in os.listdir(photo_folder) if not p.endswith(".pts"))
+    assert [r["name"] for r in results] == photos
+    model = gpmm.load(small_model_path)
+    for r in results[:3]:
+        path = photo_folder / r["name"]
+        assert r["path"] == r["image"] == str(path)
+        assert r["landmarks_file"] == str(path.with_suffix(".pts"))
+        alone = model.fit(gpmm.load_image(path), gpmm.read_pts(path.with_suffix(".pts")), **SETTINGS)
+        assert r["yaw_deg"] == alone["yaw_deg"] and r["log_likelihood"] == alone["log_likelihood"], r["name"]
+    # Photos that are not files: the names given come back.
+    items = [(f"frame{i}", gpmm.load_image(photo_folder / r["name"]), gpmm.read_pts(photo_folder / (os.path.splitext(r["name"])[0] + ".pts")))
+             for i, r in enumerate(results[:2])]
+    from_arrays = gpmm.batch.fit_arrays(model, items, **SETTINGS)
+    assert [(r["name"], r["image"], r["path"]) for r in from_arrays] == [("frame0", "frame0", None), ("frame1", "frame1", None)]
+    assert from_arrays[1]["yaw_deg"] == results[1]["yaw_deg"]
+    # The results are what json.dumps takes, through gpmm.jsonable.
+    again = json.loads(json.dumps(gpmm.jsonable(results)))
+    assert again[0]["name"] == photos[0] and again[0]["shape"] == results[0]["shape"].tolist()
+
+
+def test_the_example_program_prints_one_json_line_per_photo(small_model_path, photo_folder):
+    p = subprocess.run(
+        [sys.executable, str(EXAMPLE), str(small_model_path), str(photo_folder), "--workers", "2",
+         "--seed", "7", "--landmark-steps", "600", "--image-steps", "20"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert p.returncode == 0, p.stderr
+    lines = [json.loads(line) for line in p.stdout.splitlines() if line.strip()]
+    sequential = gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
+    assert [r["name"] for r in lines] == [r["name"] for r in sequential]
+    for got, want in zip(lines, sequential):
+        assert got["yaw_deg"] == want["yaw_deg"] and got["shape"] == want["shape"].tolist(), got["name"]

@@ -121,7 +121,7 @@ def test_errors_carry_the_cli_message(model, run_cli, tmp_path):
         gpmm.load(missing)
     assert str(e.value) == cli_message
     assert str(e.value).count("os error 2") == 1, "the cause is said once"
-    assert isinstance(e.value, ValueError)
+    assert isinstance(e.value, FileNotFoundError) and e.value.filename == str(missing)
     with pytest.raises(gpmm.GpmmError, match="unknown light 'dusk'"):
         model.render(light="dusk")
     with pytest.raises(gpmm.GpmmError, match="uint8"):

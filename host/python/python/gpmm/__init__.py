@@ -2,23 +2,26 @@
 
 The Python face of the gpmm Rust library: every function here runs the same code as the
 ``gpmm`` program (same settings, same seed, the same numbers), with the GIL released during
-long work. Errors are :class:`GpmmError` (a ``ValueError``) with the program's messages.
+long work. Every error is a :class:`GpmmError` with the program's message: a missing file is
+also a ``FileNotFoundError`` (``.filename`` names it), a bad argument or bad data also a
+``ValueError``.
 
 >>> import gpmm
+>>> images = gpmm.data_dir() / "images"
 >>> model = gpmm.load("face.gpmm")
->>> image = gpmm.load_image("photo.jpg"); points = gpmm.read_pts("photo.pts")
->>> fit = model.fit(image, points, seed=0)
+>>> fit = model.fit(gpmm.load_image(images / "astronaut.png"), gpmm.read_pts(images / "astronaut.pts"), seed=0)
 >>> fit["yaw_deg"], fit["shape"][:5], fit["overlay"].shape
 
 See docs/python.md for the tour and :mod:`gpmm.batch` for fitting folders on a Dask cluster.
 """
 
+from ._errors import GpmmError, GpmmFileNotFoundError, GpmmOSError, GpmmValueError
 from ._gpmm import (
     LIGHT_PRESETS,
-    GpmmError,
     Model,
     __version__,
     build,
+    data_dir,
     import_h5,
     inspect,
     kernels,
@@ -27,6 +30,7 @@ from ._gpmm import (
     model_from_bytes,
     read_pts,
 )
+from ._json import jsonable
 
 
 def export_h5(model: Model, path) -> None:
@@ -37,12 +41,17 @@ def export_h5(model: Model, path) -> None:
 __all__ = [
     "LIGHT_PRESETS",
     "GpmmError",
+    "GpmmFileNotFoundError",
+    "GpmmOSError",
+    "GpmmValueError",
     "Model",
     "__version__",
     "build",
+    "data_dir",
     "export_h5",
     "import_h5",
     "inspect",
+    "jsonable",
     "kernels",
     "load",
     "load_image",

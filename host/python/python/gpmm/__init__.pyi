@@ -1,9 +1,15 @@
+from ._errors import (
+    GpmmError as GpmmError,
+    GpmmFileNotFoundError as GpmmFileNotFoundError,
+    GpmmOSError as GpmmOSError,
+    GpmmValueError as GpmmValueError,
+)
 from ._gpmm import (
     LIGHT_PRESETS as LIGHT_PRESETS,
-    GpmmError as GpmmError,
     Model as Model,
     __version__ as __version__,
     build as build,
+    data_dir as data_dir,
     import_h5 as import_h5,
     inspect as inspect,
     kernels as kernels,
@@ -12,7 +18,29 @@ from ._gpmm import (
     model_from_bytes as model_from_bytes,
     read_pts as read_pts,
 )
+from ._json import jsonable as jsonable
 from os import PathLike
 from typing import Union
 
-def export_h5(model: Model, path: Union[str, PathLike]) -> None: ...
+__all__ = [
+    "LIGHT_PRESETS",
+    "GpmmError",
+    "GpmmFileNotFoundError",
+    "GpmmOSError",
+    "GpmmValueError",
+    "Model",
+    "__version__",
+    "build",
+    "data_dir",
+    "export_h5",
+    "import_h5",
+    "inspect",
+    "jsonable",
+    "kernels",
+    "load",
+    "load_image",
+    "model_from_bytes",
+    "read_pts",
+]
+
+def export_h5(model: Model, path: Union[str, PathLike[str]]) -> None: ...

@@ -1,20 +1,33 @@
 """Type stubs of gpmm's native module (gpmm._gpmm)."""
 
 from os import PathLike
-from typing import Any, Optional, Sequence, Tuple, Union
+from pathlib import Path
+from typing import Any, Mapping, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
 
-_Path = Union[str, PathLike]
+_Path = Union[str, PathLike[str]]
 _Light = Union[str, Sequence[Sequence[float]]]
 
+__all__ = [
+    "LIGHT_PRESETS",
+    "Model",
+    "__version__",
+    "build",
+    "data_dir",
+    "import_h5",
+    "inspect",
+    "kernels",
+    "load",
+    "load_image",
+    "model_from_bytes",
+    "read_pts",
+]
 __version__: str
 LIGHT_PRESETS: list[str]
 
-class GpmmError(ValueError):
-    """An error of gpmm; the message is the one the gpmm program prints."""
-
+@final
 class Model:
     """A morphable model: shape (mm) and albedo (linear RGB), bases, triangles, landmarks, metadata.
 
@@ -27,12 +40,31 @@ class Model:
     @staticmethod
     def from_bytes(data: bytes) -> Model:
         """A model from the bytes of a model file."""
+    @staticmethod
+    def from_arrays(
+        shape_mean: npt.ArrayLike,
+        triangles: npt.ArrayLike,
+        *,
+        shape_basis: Optional[npt.ArrayLike] = None,
+        shape_eigenvalues: Optional[npt.ArrayLike] = None,
+        shape_directions: Optional[npt.ArrayLike] = None,
+        shape_fields: Optional[npt.ArrayLike] = None,
+        color_mean: Optional[npt.ArrayLike] = None,
+        color_basis: Optional[npt.ArrayLike] = None,
+        color_eigenvalues: Optional[npt.ArrayLike] = None,
+        color_directions: Optional[npt.ArrayLike] = None,
+        color_fields: Optional[npt.ArrayLike] = None,
+        landmarks: Optional[npt.ArrayLike] = None,
+        metadata: Optional[Mapping[str, Any]] = None,
+    ) -> Model:
+        """A model from numpy arrays (mean, dense or factored bases, eigenvalues, triangles, colours,
+        landmarks, metadata); a wrong array is named in the error (docs/python.md)."""
     def save(self, path: _Path) -> None:
         """Writes the model file (safetensors, docs/model-format.md)."""
     def to_bytes(self) -> bytes:
         """The model file's bytes."""
     def __reduce__(self) -> Tuple[Any, Tuple[bytes]]: ...
-    def __eq__(self, other: object) -> bool: ...
+    def __eq__(self, other: object, /) -> bool: ...
     @property
     def vertices(self) -> int:
         """Number of vertices N."""
@@ -75,7 +107,7 @@ class Model:
     def info(self) -> dict[str, Any]:
         """The key figures `gpmm info` prints."""
     def instance(
-        self, shape: Optional[Sequence[float]] = None, color: Optional[Sequence[float]] = None
+        self, shape: Optional[npt.ArrayLike] = None, color: Optional[npt.ArrayLike] = None
     ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
         """Positions and colours (clamped to [0, 1]) for the given coefficients (missing ones zero)."""
     def sample(
@@ -84,8 +116,8 @@ class Model:
         """n random instances, drawn as `gpmm sample --seed` draws them."""
     def render(
         self,
-        shape: Optional[Sequence[float]] = None,
-        color: Optional[Sequence[float]] = None,
+        shape: Optional[npt.ArrayLike] = None,
+        color: Optional[npt.ArrayLike] = None,
         yaw: float = 0.0,
         pitch: float = 0.0,
         roll: float = 0.0,
@@ -98,7 +130,7 @@ class Model:
         """Renders as `gpmm render` does: an H x W x 4 uint8 image."""
     def fit(
         self,
-        image: npt.NDArray[np.uint8],
+        image: npt.ArrayLike,
         landmarks: npt.ArrayLike,
         *,
         seed: Optional[int] = None,
@@ -112,7 +144,8 @@ class Model:
         set: Optional[Sequence[str]] = None,
         landmark_calibration: Optional[Union[str, PathLike[str]]] = None,
     ) -> dict[str, Any]:
-        """Fits the model to a photo as `gpmm fit` does; fit.json's fields plus 'overlay', 'render', 'working_image'."""
+        """Fits the model to a photo (H x W x 3 uint8 RGB, or RGBA: alpha dropped) as `gpmm fit` does;
+        fit.json's fields plus 'overlay', 'render', 'working_image'."""
     def quantize(
         self,
         profile: str = "m4f",
@@ -166,3 +199,6 @@ def load_image(path: _Path) -> npt.NDArray[np.uint8]:
 
 def read_pts(path: _Path, one_based: bool = False) -> npt.NDArray[np.float32]:
     """Reads an iBUG .pts file as L x 2 float32."""
+
+def data_dir() -> Path:
+    """The data directory: $GPMM_DATA if set, else ../shared/data (FileNotFoundError if absent)."""

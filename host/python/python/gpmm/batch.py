@@ -6,8 +6,11 @@
 ...     results = gpmm.batch.fit_folder("face.gpmm", "photos/", client=client, image_steps=300)
 
 Every image ``NAME.png`` / ``.jpg`` / ``.jpeg`` / ``.ppm`` is fitted with the landmark file
-``NAME.pts`` beside it (an image without one is an error, see :func:`find_photos`). Each fit is the same deterministic fit as ``gpmm fit`` with the
-same settings and seed, so the results equal sequential fits (``client=None``).
+``NAME.pts`` beside it (an image without one is an error, see :func:`find_photos`). Each fit is
+the same deterministic fit as ``gpmm fit`` with the same settings and seed, so the results equal
+sequential fits (``client=None``). Each result names its photo: ``name`` (the file name),
+``path`` and ``image`` (its path), ``landmarks_file``; :func:`gpmm.jsonable` makes the results
+what ``json.dumps`` takes.
 
 The model reaches the workers in one of two ways: a *path* (every worker loads it once, from a
 file system all workers see) or a :class:`gpmm.Model` (scattered once to every worker; it
@@ -64,11 +67,18 @@ def find_photos(folder: Union[str, os.PathLike]) -> list[tuple[str, str]]:
     return pairs
 
 
-def _summary(name: str, fit: dict[str, Any], keep_images: bool) -> dict[str, Any]:
-    out = {"image": name}
-    for k, v in fit.items():
-        if keep_images or k not in ("overlay", "render", "working_image"):
-            out[k] = v
+IMAGES = ("overlay", "render", "working_image")
+
+
+def _summary(name: str, path: Optional[str], landmarks: Optional[str], fit: dict[str, Any],
+             keep_images: bool) -> dict[str, Any]:
+    """A fit's fields (its images only with ``keep_images``) named after the photo: the fit of an
+    array calls its image and landmarks ``<array>``, which the photo's own names replace."""
+    out = {k: v for k, v in fit.items() if keep_images or k not in IMAGES}
+    out["name"] = name
+    out["path"] = path
+    out["image"] = path if path is not None else name
+    out["landmarks_file"] = landmarks
     return out
 
 
@@ -77,7 +87,7 @@ def fit_file(model: Union[str, Model], image: str, landmarks: str, pts_one_based
     """Fits one photo (on whichever process runs it); ``model`` is a path (cached per process) or a Model."""
     m = worker_model(model) if isinstance(model, str) else model
     fit = m.fit(load_image(image), read_pts(landmarks, pts_one_based), **settings)
-    return _summary(os.path.basename(image), fit, keep_images)
+    return _summary(os.path.basename(image), image, landmarks, fit, keep_images)
 
 
 def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os.PathLike],
@@ -88,8 +98,8 @@ def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os
     ``client``: a ``distributed.Client`` (a ``LocalCluster`` here, a scheduler address in
     production); ``None`` fits sequentially in this process. Results come back in file-name
     order: fit.json's fields (pose, coefficients, light, fitted landmarks, log-likelihood,
-    acceptance, ...) plus ``image`` (the file name); the images (``overlay`` ...) only with
-    ``keep_images=True``.
+    acceptance, ...) with ``name`` (the photo's file name), ``path`` and ``image`` (its path)
+    and ``landmarks_file``; the images (``overlay`` ...) only with ``keep_images=True``.
     """
     pairs = find_photos(folder)
     model: Union[str, Model] = model_path if isinstance(model_path, Model) else os.fspath(model_path)
@@ -106,14 +116,15 @@ def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os
 
 def fit_arrays(model: Model, items: Iterable[tuple[str, Any, Any]], client: Optional[Any] = None,
                **settings: Any) -> list[dict[str, Any]]:
-    """Fits (name, image array, landmarks array) items: for photos that are not files the workers see."""
+    """Fits (name, image array, landmarks array) items: for photos that are not files the workers
+    see. Each result has ``name`` and ``image`` set to the item's name (``path`` is ``None``)."""
     items = list(items)
     if client is None:
-        return [_summary(n, model.fit(img, pts, **settings), False) for n, img, pts in items]
+        return [_fit_array(model, n, img, pts, **settings) for n, img, pts in items]
     shared = client.scatter(model, broadcast=True)
     futures = [client.submit(_fit_array, shared, n, img, pts, pure=False, **settings) for n, img, pts in items]
     return client.gather(futures)
 
 
 def _fit_array(model: Model, name: str, image: Any, landmarks: Any, **settings: Any) -> dict[str, Any]:
-    return _summary(name, model.fit(image, landmarks, **settings), False)
+    return _summary(name, None, None, model.fit(image, landmarks, **settings), False)
