@@ -140,7 +140,7 @@ pub struct StartSettings {
     pub color_iterations: u32,
     /// Rounds of the start's shape solve (after the colour rounds): each moves the leading shape
     /// components by Gauss–Newton on the image ([`crate::fit::solve::shape`]), then solves the light and
-    /// (with colour rounds) the colour again. Needs the host's solve scratch; 0 on the device.
+    /// (with colour rounds) the colour again.
     pub shape_rounds: u32,
     /// Leading shape components the shape solve moves (at most [`crate::fit::solve::shape::MAX_SHAPE_SOLVE`]).
     pub shape_components: usize,
