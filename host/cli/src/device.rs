@@ -59,7 +59,7 @@ pub struct DeviceFitArgs {
     #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
     #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N",
-        help = crate::fit::landmark_steps_help(&FitSettings::DEFAULT.without_shape_solve()))]
+        help = crate::fit::landmark_steps_help(&FitSettings::DEFAULT))]
     pub landmark_steps: u32,
     /// Image-chain steps.
     #[arg(long, default_value_t = FitSettings::DEFAULT.image.steps, value_name = "N")]
@@ -279,6 +279,8 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
             "log_likelihood": fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood),
             "landmarks_px": lm,
             "landmarks_original_px": lm.iter().map(|q| prepared.crop.to_original(*q, size)).collect::<Vec<_>>(),
+            "shape": p.shape_coeffs(),
+            "color": p.color_coeffs(),
         });
         println!("{}", serde_json::to_string_pretty(&json)?);
         return Ok(());

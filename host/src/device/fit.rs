@@ -75,15 +75,14 @@ pub enum DeviceFitError {
 }
 
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
-/// of both the device and the host's run of it, and no shape solve at the start (it needs the
-/// host's scratch: about 3 × 65 floats a sampled vertex, 1 MB with the template model): the
-/// chains fit the shape instead ([`FitSettings::without_shape_solve`]).
+/// of both the device and the host's run of it; the rest (the start's shape solve included, which
+/// runs in fixed stack memory) as given.
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
     let ranks = RankSettings {
         shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),
         color: settings.ranks.color.min(profile.color_capacity).min(DEVICE_KC),
     };
-    FitSettings { ranks, ..settings.without_shape_solve() }
+    FitSettings { ranks, ..*settings }
 }
 
 /// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and
