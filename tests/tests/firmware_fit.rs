@@ -73,7 +73,7 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let (q, blob) = models();
     let face = &faces(1, 11)[1];
     let prep = prepared(face);
-    // The device's settings (device_settings: the ranks capped): the float fit compares like with like.
+    // The device runs no shape solve (device_settings): the float fit compares like with like.
     let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
     let settings = FitOptions { fit, ..FitOptions::DEFAULT };
 
@@ -122,7 +122,7 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
 #[test]
 fn float_model_and_blob_fit_the_same_landmarks() {
     let (q, blob) = models();
-    // The device's settings (device_settings: the ranks capped): the float fit compares like with like.
+    // The device runs no shape solve (device_settings): the float fit compares like with like.
     let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
     let settings = FitOptions { fit, ..FitOptions::DEFAULT };
     let (mut worst, mut same, mut worst_quality) = (0.0f32, 0, 0.0f32);
@@ -179,13 +179,15 @@ fn firmware_fit_uses_every_setting() {
         },
         image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02, color_polish_rounds: 1, landmark_sigma_factor: 2.0 },
         ranks: RankSettings { shape: 30, color: 20 },
+        // The shape solve's stack (about 45 KB) does not fit the m4f's beside the statics: the
+        // firmware refuses it, so its rounds stay 0 here and only the settings' wire form is exercised.
         start: StartSettings {
             nominal_distance_mm: 600.0,
             color_rounds: 2,
             color_stride: 3,
             color_weight: 0.5,
             color_iterations: 12,
-            shape_rounds: 1,
+            shape_rounds: 0,
             shape_components: 12,
             shape_iterations: 2,
             shape_stride: 3,
@@ -207,8 +209,9 @@ fn firmware_fit_uses_every_setting() {
         },
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
-    // Every top-level field and group differs from the default. A new field must be added here;
-    // 97 fields counting the groups' own.
+    // Every top-level field and group differs from the default except `start.shape_rounds`
+    // (the firmware refuses the shape solve; see above). A new field must be added here; 97 fields
+    // counting the groups' own.
     let fields = format!("{settings:?}");
     assert_eq!(fields.matches(": ").count(), 97, "update this test for the new settings: {fields}");
     let seed = 99;

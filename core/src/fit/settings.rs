@@ -16,8 +16,8 @@ use crate::render::ShLight;
 /// "Landmark-free start").
 pub const INIT_LANDMARK_SIGMA: f32 = 0.015;
 
-/// The landmark chain's pose share where the chains fit the shape themselves (no start solve,
-/// for the smallest parts; [`FitSettings::without_shape_solve`]): 40 % pose, 60 % shape.
+/// The landmark chain's pose share where the chains fit the shape themselves (no start solve:
+/// a device; [`FitSettings::without_shape_solve`]): 40 % pose, 60 % shape.
 pub const CHAIN_SHAPE_POSE_SHARE: f32 = 0.4;
 
 /// Settings of [`crate::fit::standard_fit`] (defaults: the documented default fit), in groups: the
@@ -165,7 +165,7 @@ pub struct StartSettings {
 impl StartSettings {
     /// Start at 500 mm; no colour solve; two shape-solve rounds (64 components, weight 0.05, the
     /// landmark term, the pose held, vertices facing the camera within ~37° (cosine 0.8): see
-    /// docs/evaluation.md for what each did on the test set).
+    /// docs/evaluation.md for what each did on the test set). A device turns them off.
     pub const DEFAULT: Self = Self {
         nominal_distance_mm: 500.0,
         color_rounds: 0,
@@ -187,7 +187,7 @@ impl FitSettings {
     /// The default fit: 5000 landmark steps on the pose (contour σ × 3), the start's shape solve
     /// (the shape), 600 image steps without shape moves, 200 shape and 50 colour components,
     /// landmark σ 0.5 % of the image side, pixel σ 0.043, background floor 0.01, start at 500 mm;
-    /// the default mixtures and light; the same on a device. Without the solve see [`Self::without_shape_solve`].
+    /// the default mixtures and light. Without the solve (a device) see [`Self::without_shape_solve`].
     pub const DEFAULT: Self = Self {
         landmarks: LandmarkSettings {
             steps: 5000,
@@ -220,8 +220,8 @@ impl FitSettings {
         s
     }
 
-    /// These settings without the start's shape solve (`start.shape_rounds = 0`, for parts too
-    /// small for its stack: about 45 KB), the chains fitting the shape instead: a landmark chain that fits the pose only gets
+    /// These settings without the start's shape solve (`start.shape_rounds = 0`, as a device runs
+    /// them: its stack, about 45 KB, does not fit the m4f's), the chains fitting the shape instead: a landmark chain that fits the pose only gets
     /// [`CHAIN_SHAPE_POSE_SHARE`], an image chain without shape moves gets [`MixtureShares::IMAGE`]'s
     /// shape share; shares that already fit the shape are kept.
     pub const fn without_shape_solve(self) -> Self {

@@ -59,7 +59,7 @@ pub struct DeviceFitArgs {
     #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
     #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N",
-        help = crate::fit::landmark_steps_help(&FitSettings::DEFAULT))]
+        help = crate::fit::landmark_steps_help(&FitSettings::DEFAULT.without_shape_solve()))]
     pub landmark_steps: u32,
     /// Image-chain steps.
     #[arg(long, default_value_t = FitSettings::DEFAULT.image.steps, value_name = "N")]

@@ -75,14 +75,15 @@ pub enum DeviceFitError {
 }
 
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
-/// of both the device and the host's run of it; the rest (the start's shape solve included, which
-/// runs in fixed stack memory) as given.
+/// of both the device and the host's run of it, and no shape solve at the start (it runs in fixed
+/// memory, but its stack, about 45 KB, overflows the m4f's beside the fit's statics): the chains
+/// fit the shape instead ([`FitSettings::without_shape_solve`]).
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
     let ranks = RankSettings {
         shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),
         color: settings.ranks.color.min(profile.color_capacity).min(DEVICE_KC),
     };
-    FitSettings { ranks, ..*settings }
+    FitSettings { ranks, ..settings.without_shape_solve() }
 }
 
 /// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image and

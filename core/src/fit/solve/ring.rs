@@ -11,7 +11,7 @@ pub(super) const RING: usize = 16;
 /// Most distinct vertices of one ring: the centre and two more per triangle.
 pub(super) const RING_VERTICES: usize = 2 * RING + 1;
 /// Samples whose rings one pass over the triangles gathers.
-const CHUNK: usize = 64;
+const CHUNK: usize = 32;
 
 /// Up to [`CHUNK`] samples (ascending vertex ids) with their base residuals and the triangles
 /// around each, in mesh order.

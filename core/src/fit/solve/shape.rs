@@ -17,7 +17,8 @@
 //! Visibility: a back-facing test (as in the colour and light solves) and an occlusion test on a
 //! coarse depth grid of the instance's vertices (`DepthGrid`).
 //!
-//! Memory, all on the stack and fixed: the normal equations (`MAX_COLUMNS²` floats), the depth
+//! Memory, all on the stack and fixed: the normal equations (`56²` floats, `70²` past 50 components
+//! and the pose), the depth
 //! grid, one chunk of sampled vertices with their rings and the landmarks' positions; the same
 //! code runs on the host and on a device.
 
@@ -37,8 +38,6 @@ use crate::render::{Camera, Pose, ShLight};
 pub const MAX_SHAPE_SOLVE: usize = 64;
 /// Forward-difference step of the Jacobian (coefficient units: prior standard deviations).
 const DIFFERENCE_STEP: f32 = 0.05;
-/// Most shape coefficients a parameter vector has (the landmark residuals' coefficient copy).
-const KS_MAX: usize = 512;
 /// Damping tries per iteration (each multiplies the damping by 10).
 const DAMPING_TRIES: usize = 4;
 
@@ -192,7 +191,12 @@ pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
         let scene = Scene { pose: params.pose, camera: params.camera(width, height), light: params.light, image };
         let coeffs = params.shape_coeffs();
         let current = (instance.positions(), instance.normals(), instance.albedos());
-        let step = iterate(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?;
+        // The smaller system where it is enough: a device's stack holds it, the larger one not.
+        let step = if columns.len() <= SMALL_COLUMNS {
+            iterate::<I, KS, SMALL_COLUMNS>(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?
+        } else {
+            iterate::<I, KS, MAX_COLUMNS>(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?
+        };
         report.samples = step.samples;
         if iteration == 0 {
             report.objective_before = step.before;
@@ -218,6 +222,8 @@ const POSE_PARAMS: usize = 6;
 const POSE_STEPS: [f32; POSE_PARAMS] = [0.002, 0.002, 0.002, 0.2, 0.2, 1.0];
 /// Columns of the Jacobian at most: shape components and pose parameters.
 const MAX_COLUMNS: usize = MAX_SHAPE_SOLVE + POSE_PARAMS;
+/// Columns of the smaller normal equations (50 components and the pose, as a device fits them).
+const SMALL_COLUMNS: usize = 56;
 
 /// The unknowns of a solve: the leading `shape` components, then `pose` pose parameters.
 #[derive(Clone, Copy)]
@@ -296,25 +302,20 @@ fn landmark_term<I: TriIndex>(
 /// The normal equations of an iteration in fixed memory: `w JᵀJ` plus the landmarks' (its strict
 /// lower triangle kept transposed above the diagonal, so that the Cholesky factor of a damped
 /// copy fills the lower triangle), its diagonal, and the gradient `−w Jᵀ r`.
-struct NormalEquations {
-    matrix: [[f32; MAX_COLUMNS]; MAX_COLUMNS],
-    diagonal: [f32; MAX_COLUMNS],
-    gradient: [f32; MAX_COLUMNS],
+struct NormalEquations<const N: usize> {
+    matrix: [[f32; N]; N],
+    diagonal: [f32; N],
+    gradient: [f32; N],
     columns: usize,
 }
 
-impl NormalEquations {
+impl<const N: usize> NormalEquations<N> {
     fn new(columns: usize) -> Self {
-        Self {
-            matrix: [[0.0; MAX_COLUMNS]; MAX_COLUMNS],
-            diagonal: [0.0; MAX_COLUMNS],
-            gradient: [0.0; MAX_COLUMNS],
-            columns: columns.min(MAX_COLUMNS),
-        }
+        Self { matrix: [[0.0; N]; N], diagonal: [0.0; N], gradient: [0.0; N], columns: columns.min(N) }
     }
 
     /// Adds one residual's row: `jacobian[i]` its derivatives (`dot` their product), `residual` its value.
-    fn add<T: Copy>(&mut self, jacobian: &[T; MAX_COLUMNS], residual: T, dot: impl Fn(T, T) -> f32, w: f32) {
+    fn add<T: Copy>(&mut self, jacobian: &[T], residual: T, dot: impl Fn(T, T) -> f32, w: f32) {
         for i in 0..self.columns {
             let Some(&ji) = jacobian.get(i) else { continue };
             if let Some(gi) = self.gradient.get_mut(i) {
@@ -346,7 +347,16 @@ impl NormalEquations {
                 *e = d * (1.0 + damping) + if i < shape { 1.0 } else { 1e-6 };
             }
         }
-        cholesky_solve(&mut self.matrix, &self.gradient, self.columns)
+        let x = super::cholesky::solve(&mut self.matrix, &self.gradient, self.columns)?;
+        let mut delta = [0.0f32; MAX_COLUMNS];
+        for (d, v) in delta.iter_mut().zip(x) {
+            *d = v;
+        }
+        if delta.iter().all(|v| v.is_finite()) {
+            Ok(delta)
+        } else {
+            Err(FitError::Singular)
+        }
     }
 }
 
@@ -408,7 +418,8 @@ fn moved_ring(ring: &Ring, positions: &[Vec3], moved: impl Fn(usize, Vec3) -> Ve
 
 /// Samples, the normal equations accumulated a sample at a time, and the tries of one iteration.
 #[allow(clippy::too_many_arguments)]
-fn iterate<I: TriIndex>(
+#[inline(never)]
+fn iterate<I: TriIndex, const KS: usize, const N: usize>(
     model: &MorphableModel<'_, I>,
     (positions, normals, albedos): (&[Vec3], &[Vec3], &[Vec3]),
     scene: &Scene<'_, '_>,
@@ -427,7 +438,7 @@ fn iterate<I: TriIndex>(
     let grid = DepthGrid::new(&frame, positions, scene.image.width(), scene.image.height());
     let sampling = Sampling { positions, normals, albedos, frame: &frame, grid: &grid, stride: config.stride, min_cos: config.min_cos };
     let mut chunk = Chunk::new();
-    let mut equations = NormalEquations::new(m);
+    let mut equations = NormalEquations::<N>::new(m);
     // The samples' rows: a shape column moves the ring (the normal recomputed from it, as over the
     // whole mesh), a pose column the frame.
     let mut data = 0.0f32;
@@ -460,7 +471,7 @@ fn iterate<I: TriIndex>(
     }
     // The landmarks' rows: a shape column bumps its coefficient (and takes it back: the next
     // column sees `(c + h) − h`), a pose column the frame.
-    let mut full = [0.0f32; KS_MAX];
+    let mut full = [0.0f32; KS];
     let full = full.get_mut(..coeffs.len()).ok_or(FitError::BadConfig)?;
     let mut lm_term = 0.0f32;
     if let Some(target) = landmarks {
@@ -557,17 +568,6 @@ fn objective_at<I: TriIndex>(
         Ok(())
     })?;
     Ok(if finite { sum } else { f32::INFINITY })
-}
-
-/// Solves `M x = b` for the leading `n × n` block of a symmetric positive-definite `M` (lower
-/// triangle given; overwritten by its Cholesky factor); a non-finite solution is refused.
-fn cholesky_solve(m: &mut [[f32; MAX_COLUMNS]; MAX_COLUMNS], b: &[f32; MAX_COLUMNS], n: usize) -> Result<[f32; MAX_COLUMNS], FitError> {
-    let x = super::cholesky::solve(m, b, n)?;
-    if x.iter().all(|v| v.is_finite()) {
-        Ok(x)
-    } else {
-        Err(FitError::Singular)
-    }
 }
 
 #[cfg(test)]
