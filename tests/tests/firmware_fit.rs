@@ -182,8 +182,8 @@ fn firmware_fit_uses_every_setting() {
         },
         image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02, color_polish_rounds: 1, landmark_sigma_factor: 2.0 },
         ranks: RankSettings { shape: 30, color: 20 },
-        // The shape solve needs the host's scratch (about 1 MB): the device refuses it, so its
-        // rounds stay 0 here and only the settings' wire form is exercised.
+        // The shape solve's stack (about 45 KB) does not fit the m4f's beside the statics: the
+        // firmware refuses it, so its rounds stay 0 here and only the settings' wire form is exercised.
         start: StartSettings {
             nominal_distance_mm: 600.0,
             color_rounds: 2,
@@ -213,7 +213,7 @@ fn firmware_fit_uses_every_setting() {
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
     // Every top-level field and group differs from the default except `start.shape_rounds`
-    // (the device refuses the shape solve; see above). A new field must be added here; 97 fields
+    // (the firmware refuses the shape solve; see above). A new field must be added here; 97 fields
     // counting the groups' own.
     let fields = format!("{settings:?}");
     assert_eq!(fields.matches(": ").count(), 97, "update this test for the new settings: {fields}");

@@ -179,7 +179,7 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
 /// let mut raster = TileRasterizer::<16, 16, 64>::new();
 /// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
 ///
-/// // A short fit: few steps, no start shape solve (it needs the host's scratch buffers).
+/// // A short fit: few steps, no start shape solve.
 /// let settings = FitSettings::DEFAULT.with_steps(400, 40).without_shape_solve().with_ranks(1, 0);
 /// let mut progress = |_: Stage, _: u32, _: u32| {};
 /// let fit = standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut rng, &mut progress)?;
@@ -367,8 +367,7 @@ fn color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
 /// [`StartSettings::shape_rounds`](crate::fit::settings::StartSettings) shape-and-light rounds on
 /// `start` (step 3 of [`standard_fit`]): the leading shape components by Gauss–Newton on the
 /// image, then the light (and, with colour rounds, one colour round). A failed solve ends the
-/// rounds and keeps what was found before it; without the solve scratch the fit is refused
-/// ([`FitError::BadConfig`]). `instance` must hold `start`.
+/// rounds and keeps what was found before it. `instance` must hold `start`.
 #[inline(never)]
 #[allow(clippy::too_many_arguments)]
 fn shape_rounds<I: TriIndex, const KS: usize, const KC: usize>(
@@ -384,9 +383,6 @@ fn shape_rounds<I: TriIndex, const KS: usize, const KC: usize>(
     let s = &settings.start;
     if s.shape_rounds == 0 {
         return Ok(());
-    }
-    if instance.solver_view().is_none() {
-        return Err(FitError::BadConfig);
     }
     let config = ShapeSolveConfig {
         stride: s.shape_stride,

@@ -140,7 +140,7 @@ pub struct StartSettings {
     pub color_iterations: u32,
     /// Rounds of the start's shape solve (after the colour rounds): each moves the leading shape
     /// components by Gauss–Newton on the image ([`crate::fit::solve::shape`]), then solves the light and
-    /// (with colour rounds) the colour again. Needs the host's solve scratch; 0 on the device.
+    /// (with colour rounds) the colour again.
     pub shape_rounds: u32,
     /// Leading shape components the shape solve moves (at most [`crate::fit::solve::shape::MAX_SHAPE_SOLVE`]).
     pub shape_components: usize,
@@ -221,7 +221,7 @@ impl FitSettings {
     }
 
     /// These settings without the start's shape solve (`start.shape_rounds = 0`, as a device runs
-    /// them), the chains fitting the shape instead: a landmark chain that fits the pose only gets
+    /// them: its stack, about 45 KB, does not fit the m4f's), the chains fitting the shape instead: a landmark chain that fits the pose only gets
     /// [`CHAIN_SHAPE_POSE_SHARE`], an image chain without shape moves gets [`MixtureShares::IMAGE`]'s
     /// shape share; shares that already fit the shape are kept.
     pub const fn without_shape_solve(self) -> Self {

@@ -44,34 +44,6 @@ fn serial_of<const K: usize>(key: &Option<(heapless::Vec<f32, K>, u64)>, coeffs:
     key.as_ref().filter(|(k, _)| k == coeffs).map(|(_, s)| *s)
 }
 
-/// Caller-provided room for a solver of the fit's start (see [`crate::fit::solve::shape`]).
-#[derive(Debug)]
-pub struct SolveScratch<'b> {
-    /// Sampled vertex ids.
-    pub samples: &'b mut [u32],
-    /// Residuals and Jacobian rows of the samples.
-    pub values: &'b mut [f32],
-}
-
-/// The current instance beside room to work in: the spare shape buffers and the solve scratch.
-#[derive(Debug)]
-pub struct SolverView<'v> {
-    /// Model-space positions of the current instance.
-    pub positions: &'v [Vec3],
-    /// Its normals.
-    pub normals: &'v [Vec3],
-    /// Its albedos.
-    pub albedos: &'v [Vec3],
-    /// Free positions buffer (one per vertex).
-    pub spare_positions: &'v mut [Vec3],
-    /// Free normals buffer (one per vertex).
-    pub spare_normals: &'v mut [Vec3],
-    /// Free sample ids.
-    pub samples: &'v mut [u32],
-    /// Free values.
-    pub values: &'v mut [f32],
-}
-
 /// A shape instance's coefficients and serial number (the serial names the positions in keys).
 type ShapeKey<const KS: usize> = Option<(heapless::Vec<f32, KS>, u64)>;
 /// A colour instance's coefficients and serial number.
@@ -109,7 +81,6 @@ pub struct Instance<'b, const KS: usize, const KC: usize> {
     serial: u64,
     frames: Option<FrameCache<'b>>,
     shading_cache: Option<ShadingCache<'b>>,
-    solve: Option<SolveScratch<'b>>,
     /// Shape instances computed so far (positions and normals).
     pub shape_updates: u32,
     /// Colour instances computed so far.
@@ -134,7 +105,6 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
             serial: 0,
             frames: None,
             shading_cache: None,
-            solve: None,
             shape_updates: 0,
             color_updates: 0,
         })
@@ -162,28 +132,6 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
     pub fn with_shading_cache(mut self, cache: ShadingCache<'b>) -> Self {
         self.shading_cache = Some(cache);
         self
-    }
-
-    /// Gives a solver of the start room to work in (see [`Instance::solver_view`]).
-    pub fn with_solve_scratch(mut self, scratch: SolveScratch<'b>) -> Self {
-        self.solve = Some(scratch);
-        self
-    }
-
-    /// The current instance beside the spare shape buffers and the solve scratch (`None` without
-    /// both); the spare's instance is forgotten, since the solver overwrites it.
-    pub fn solver_view(&mut self) -> Option<SolverView<'_>> {
-        let (Some(spare), Some(solve)) = (self.spare.as_mut(), self.solve.as_mut()) else { return None };
-        spare.shape = None;
-        Some(SolverView {
-            positions: self.bufs.positions,
-            normals: self.bufs.normals,
-            albedos: self.bufs.albedos,
-            spare_positions: spare.bufs.positions,
-            spare_normals: spare.bufs.normals,
-            samples: solve.samples,
-            values: solve.values,
-        })
     }
 
     /// Brings the buffers up to date with `params` for a `width × height` image.

@@ -12,6 +12,6 @@ pub mod morphable;
 pub mod params;
 
 pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis};
-pub use instance::{Instance, InstanceBuffers, SolveScratch, SolverView, SpareBuffers};
+pub use instance::{Instance, InstanceBuffers, SpareBuffers};
 pub use morphable::{MorphableModel, MAX_LANDMARKS};
 pub use params::FitParams;

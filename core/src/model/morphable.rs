@@ -203,15 +203,33 @@ impl<'a, I: TriIndex> MorphableModel<'a, I> {
     /// `out[..landmarks]`; returns the number written.
     pub fn landmark_positions(&self, coeffs: &[f32], out: &mut [Vec3]) -> Result<usize, FitError> {
         let n = self.landmarks.len();
-        let out = out.get_mut(..n).ok_or(FitError::LengthMismatch)?;
-        for (o, &l) in out.iter_mut().zip(self.landmarks) {
+        self.landmarks_into(coeffs, 0..n, out.get_mut(..n).ok_or(FitError::LengthMismatch)?)?;
+        Ok(n)
+    }
+
+    /// Instance position of landmark `i` alone (`rank` multiply-adds): the same bits as
+    /// [`Self::landmark_positions`] gives it.
+    pub fn landmark_position(&self, coeffs: &[f32], i: usize) -> Result<Vec3, FitError> {
+        let mut out = [[0.0f32; 3]];
+        self.landmarks_into(coeffs, i..i + 1, &mut out)?;
+        Ok(out[0])
+    }
+
+    /// The positions of landmarks `range` into `out` (one per landmark; each sum is independent
+    /// of the others, so any range gives the same bits).
+    fn landmarks_into(&self, coeffs: &[f32], range: core::ops::Range<usize>, out: &mut [Vec3]) -> Result<(), FitError> {
+        let ids = self.landmarks.get(range.clone()).ok_or(FitError::IndexOutOfRange)?;
+        if out.len() != ids.len() {
+            return Err(FitError::LengthMismatch);
+        }
+        for (o, &l) in out.iter_mut().zip(ids) {
             *o = self.shape_mean.get(l as usize).copied().ok_or(FitError::IndexOutOfRange)?;
         }
-        match (self.landmark_basis, IN_ORDER.get(..n)) {
+        match (self.landmark_basis, IN_ORDER.get(range)) {
             // The same components in the same order, from contiguous fields: the same sums.
-            (Some(b), Some(ids)) => Basis::Factored(b).add_vertices(coeffs, ids, out)?,
-            _ => self.shape.add_vertices(coeffs, self.landmarks, out)?,
+            (Some(b), Some(rows)) => Basis::Factored(b).add_vertices(coeffs, rows, out)?,
+            _ => self.shape.add_vertices(coeffs, ids, out)?,
         }
-        Ok(n)
+        Ok(())
     }
 }

@@ -77,7 +77,7 @@ pub fn vertex_normals<I: TriIndex>(positions: &[Vec3], triangles: &[[I; 3]], nor
         let (Some(&a), Some(&b), Some(&c)) = (positions.get(ia), positions.get(ib), positions.get(ic)) else {
             continue;
         };
-        let f = cross(sub(b, a), sub(c, a));
+        let f = face_normal(a, b, c);
         for i in [ia, ib, ic] {
             if let Some(nv) = normals.get_mut(i) {
                 nv[0] += f[0];
@@ -87,15 +87,26 @@ pub fn vertex_normals<I: TriIndex>(positions: &[Vec3], triangles: &[[I; 3]], nor
         }
     }
     for nv in normals.iter_mut() {
-        let len2 = nv[0] * nv[0] + nv[1] * nv[1] + nv[2] * nv[2];
-        if len2 > 0.0 && len2.is_finite() {
-            let inv = 1.0 / libm::sqrtf(len2);
-            *nv = [nv[0] * inv, nv[1] * inv, nv[2] * inv];
-        } else {
-            *nv = [0.0; 3];
-        }
+        *nv = unit_or_zero(*nv);
     }
     Ok(())
+}
+
+/// A triangle's unnormalized normal `(b − a) × (c − a)`: twice its area times its unit normal,
+/// what [`vertex_normals`] adds to each of its corners.
+pub(crate) fn face_normal(a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    cross(sub(b, a), sub(c, a))
+}
+
+/// A summed vertex normal made unit, as [`vertex_normals`] does (zero when it is zero or not finite).
+pub(crate) fn unit_or_zero(v: Vec3) -> Vec3 {
+    let len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if len2 > 0.0 && len2.is_finite() {
+        let inv = 1.0 / libm::sqrtf(len2);
+        [v[0] * inv, v[1] * inv, v[2] * inv]
+    } else {
+        [0.0; 3]
+    }
 }
 
 /// Sets `out[i].color = albedo[i] ⊙ light.irradiance(R · normal[i])` (R: the pose rotation).

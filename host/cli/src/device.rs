@@ -279,6 +279,8 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
             "log_likelihood": fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood),
             "landmarks_px": lm,
             "landmarks_original_px": lm.iter().map(|q| prepared.crop.to_original(*q, size)).collect::<Vec<_>>(),
+            "shape": p.shape_coeffs(),
+            "color": p.color_coeffs(),
         });
         println!("{}", serde_json::to_string_pretty(&json)?);
         return Ok(());

@@ -75,9 +75,9 @@ pub enum DeviceFitError {
 }
 
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
-/// of both the device and the host's run of it, and no shape solve at the start (it needs the
-/// host's scratch: about 3 × 65 floats a sampled vertex, 1 MB with the template model): the
-/// chains fit the shape instead ([`FitSettings::without_shape_solve`]).
+/// of both the device and the host's run of it, and no shape solve at the start (it runs in fixed
+/// memory, but its stack, about 45 KB, overflows the m4f's beside the fit's statics): the chains
+/// fit the shape instead ([`FitSettings::without_shape_solve`]).
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
     let ranks = RankSettings {
         shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),

@@ -4,9 +4,8 @@
 
 use crate::render::FrameMemory;
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{FitSettings, MAX_SHAPE_SOLVE};
 use gpmm_core::geometry::Vec3;
-use gpmm_core::model::{Instance, InstanceBuffers, SolveScratch, SpareBuffers};
+use gpmm_core::model::{Instance, InstanceBuffers, SpareBuffers};
 use gpmm_core::render::frame_cache::{CompactBuffers, FrameCache};
 use gpmm_core::render::light::SH_COEFFS;
 use gpmm_core::render::shading::{ShadingBuffers, ShadingCache};
@@ -33,8 +32,6 @@ pub struct FitBuffers {
     spare: Option<[Vec<Vec3>; 3]>,
     /// The shading cache's Lambert bases and irradiances.
     shading: Option<(Vec<[f32; SH_COEFFS]>, Vec<Vec3>)>,
-    /// The start's shape solve: sampled vertex ids, their residuals and Jacobian rows.
-    solve: Option<(Vec<u32>, Vec<f32>)>,
     frames: Frames,
 }
 
@@ -48,22 +45,16 @@ impl FitBuffers {
             projected: vec![ProjectedVertex::INVALID; vertices],
             spare: None,
             shading: None,
-            solve: None,
             frames,
         }
     }
 
     /// The host's fit of a model of `vertices` vertices to a `width × height` image: a spare
-    /// instance, the shading cache, two full cached frames, and room for the start's shape solve
-    /// as `settings` run it (none without its rounds).
-    pub fn host(vertices: usize, width: u32, height: u32, settings: &FitSettings) -> Self {
-        let start = &settings.start;
-        let samples = if start.shape_rounds > 0 { vertices.div_ceil(start.shape_stride.max(1)) } else { 0 };
-        let row = 3 * (start.shape_components.min(MAX_SHAPE_SOLVE) + 1);
+    /// instance, the shading cache and two full cached frames.
+    pub fn host(vertices: usize, width: u32, height: u32) -> Self {
         Self {
             spare: Some([vec![[0.0; 3]; vertices], vec![[0.0; 3]; vertices], vec![[0.0; 3]; vertices]]),
             shading: Some((vec![[0.0; SH_COEFFS]; vertices], vec![[0.0; 3]; vertices])),
-            solve: Some((vec![0; samples], vec![0.0; samples * row])),
             ..Self::instance_only(vertices, Frames::Full(FrameMemory::new(width, height)))
         }
     }
@@ -94,9 +85,6 @@ impl FitBuffers {
         });
         if let Some((basis, irradiance)) = &mut self.shading {
             inst = inst.with_shading_cache(ShadingCache::new(ShadingBuffers { basis, irradiance }, n)?);
-        }
-        if let Some((samples, values)) = &mut self.solve {
-            inst = inst.with_solve_scratch(SolveScratch { samples, values });
         }
         Ok(inst)
     }

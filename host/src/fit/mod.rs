@@ -209,7 +209,7 @@ pub fn fit_prepared(
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
     let target = TargetImage::new(&pixels, w, h).and_then(|t| t.with_covered(prepared.covered)).map_err(core("target image"))?;
     let valid = vec![true; n_lm];
-    let mut buffers = FitBuffers::host(mm.vertices(), w, h, &core_settings);
+    let mut buffers = FitBuffers::host(mm.vertices(), w, h);
     let mut inst = buffers.instance::<KS, KC>().map_err(core("instance"))?;
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(settings.seed);

@@ -5,4 +5,5 @@
 mod cholesky;
 pub mod color;
 pub mod light;
+mod ring;
 pub mod shape;

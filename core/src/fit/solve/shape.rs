@@ -8,34 +8,36 @@
 //! the position (where the vertex looks in the image: edges, the nose's side) and through the
 //! normal (shading). The objective is the posterior's, `w Σ |r_v|² + |α|²` with `w =
 //! weight / σ²`, over the leading `components` coefficients (the others are held).
-//! Its Jacobian is taken by forward differences, one component at a time: the instance is linear
-//! in the coefficients (`x + h U_k`), the normals are recomputed over the whole mesh. A damped
-//! (Levenberg–Marquardt) step is kept only if the objective on the same samples falls.
+//! Its Jacobian is taken by forward differences (the instance is linear in the coefficients, `x +
+//! h U_k`) a sample at a time, for all moved components at once: a vertex normal depends on its
+//! one-ring only, so a sample's normal under a moved shape is recomputed from the triangles
+//! around it ([`crate::fit::solve::ring`]; the same sums as over the whole mesh). Each sample's
+//! row goes straight into the normal equations `JᵀJ`, `Jᵀr`: nothing is stored per sample. A
+//! damped (Levenberg–Marquardt) step is kept only if the objective on the same samples falls.
 //! Visibility: a back-facing test (as in the colour and light solves) and an occlusion test on a
 //! coarse depth grid of the instance's vertices (`DepthGrid`).
 //!
-//! Memory: the caller's spare shape buffers and solve scratch ([`Instance::with_solve_scratch`]:
-//! `3 (components + 1)` values a sample) and two `MAX_SHAPE_SOLVE²` matrices on the stack; it runs
-//! where the caller gives that room (the host), and refuses to run without it.
+//! Memory, all on the stack and fixed: the normal equations (`56²` floats, `70²` past 50 components
+//! and the pose), the depth
+//! grid, one chunk of sampled vertices with their rings and the landmarks' positions; the same
+//! code runs on the host and on a device.
 
 use crate::error::FitError;
 use crate::fit::likelihood::image::TargetImage;
 use crate::fit::likelihood::landmarks::LandmarkTarget;
+use crate::fit::solve::ring::{Chunk, Ring, RING_VERTICES};
 use crate::geometry::mat_vec;
 use crate::geometry::{TriIndex, Vec3};
-use crate::model::instance::{Instance, SolverView};
+use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
 use crate::model::morphable::MAX_LANDMARKS;
 use crate::model::params::FitParams;
-use crate::render::shading::vertex_normals;
 use crate::render::{Camera, Pose, ShLight};
 
 /// Most shape components one solve moves.
 pub const MAX_SHAPE_SOLVE: usize = 64;
 /// Forward-difference step of the Jacobian (coefficient units: prior standard deviations).
 const DIFFERENCE_STEP: f32 = 0.05;
-/// Most shape coefficients a parameter vector has (the landmark residuals' coefficient copy).
-const KS_MAX: usize = 512;
 /// Damping tries per iteration (each multiplies the damping by 10).
 const DAMPING_TRIES: usize = 4;
 
@@ -157,18 +159,10 @@ fn dot3(a: Vec3, b: Vec3) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// The three values at `at` (zero past the end).
-fn triple(values: &[f32], at: usize) -> Vec3 {
-    match values.get(at..at + 3) {
-        Some(&[a, b, c]) => [a, b, c],
-        _ => [0.0; 3],
-    }
-}
-
 /// Moves the leading shape coefficients of `params` (and with [`ShapeSolveConfig::pose`] the
 /// pose) toward the mode of the image term times the prior (focal length, light and colour held).
-/// `instance` must carry a spare and a solve scratch; it holds `params`' instance on return.
-/// Errors on a bad configuration, missing room ([`FitError::BadConfig`]) or fewer than 16
+/// `instance` holds `params`' instance on return.
+/// Errors on a bad configuration ([`FitError::BadConfig`]) or fewer than 16
 /// samples ([`FitError::Singular`]); a failed step leaves `params` as it was.
 #[inline(never)]
 pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
@@ -196,8 +190,13 @@ pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
         instance.update(model, params, width, height)?;
         let scene = Scene { pose: params.pose, camera: params.camera(width, height), light: params.light, image };
         let coeffs = params.shape_coeffs();
-        let view = instance.solver_view().ok_or(FitError::BadConfig)?;
-        let step = iterate(model, view, &scene, landmarks, config, w, coeffs, columns, &mut damping)?;
+        let current = (instance.positions(), instance.normals(), instance.albedos());
+        // The smaller system where it is enough: a device's stack holds it, the larger one not.
+        let step = if columns.len() <= SMALL_COLUMNS {
+            iterate::<I, KS, SMALL_COLUMNS>(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?
+        } else {
+            iterate::<I, KS, MAX_COLUMNS>(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?
+        };
         report.samples = step.samples;
         if iteration == 0 {
             report.objective_before = step.before;
@@ -223,6 +222,8 @@ const POSE_PARAMS: usize = 6;
 const POSE_STEPS: [f32; POSE_PARAMS] = [0.002, 0.002, 0.002, 0.2, 0.2, 1.0];
 /// Columns of the Jacobian at most: shape components and pose parameters.
 const MAX_COLUMNS: usize = MAX_SHAPE_SOLVE + POSE_PARAMS;
+/// Columns of the smaller normal equations (50 components and the pose, as a device fits them).
+const SMALL_COLUMNS: usize = 56;
 
 /// The unknowns of a solve: the leading `shape` components, then `pose` pose parameters.
 #[derive(Clone, Copy)]
@@ -276,87 +277,151 @@ struct Iteration {
     delta: Option<[f32; MAX_COLUMNS]>,
 }
 
-/// Writes the landmark residuals `(target − projection) / σ` of shape coefficients `coeffs` into
-/// `out` (two per landmark, zero for invalid or unprojectable ones); returns their count.
-fn landmark_residuals<I: TriIndex>(
+/// The landmark residual `(target − projection) / σ` of landmark `i` at model-space point `p`
+/// (zero if it is invalid or does not project).
+fn landmark_residual(frame: &Frame<'_, '_>, target: &LandmarkTarget<'_>, i: usize, p: Vec3) -> [f32; 2] {
+    let (Some(t), Some(true), Some(s)) = (target.points().get(i), target.valid().get(i), frame.camera.project(frame.to_camera(p))) else {
+        return [0.0; 2];
+    };
+    let sigma = target.sigma() * target.sigma_factor(i);
+    [(t[0] - s.x) / sigma, (t[1] - s.y) / sigma]
+}
+
+/// The landmark term `Σ |r|²` of shape coefficients `coeffs` seen through `frame`.
+fn landmark_term<I: TriIndex>(
     model: &MorphableModel<'_, I>,
     frame: &Frame<'_, '_>,
     target: &LandmarkTarget<'_>,
     coeffs: &[f32],
-    out: &mut [[f32; 2]; MAX_LANDMARKS],
-) -> Result<usize, FitError> {
+) -> Result<f32, FitError> {
     let mut lm = [[0.0f32; 3]; MAX_LANDMARKS];
     let n = model.landmark_positions(coeffs, &mut lm)?.min(target.len());
-    for (i, (o, p)) in out.iter_mut().zip(lm.iter()).enumerate().take(n) {
-        let (Some(t), Some(true), Some(s)) = (target.points().get(i), target.valid().get(i), frame.camera.project(frame.to_camera(*p)))
-        else {
-            *o = [0.0; 2];
-            continue;
-        };
-        let sigma = target.sigma() * target.sigma_factor(i);
-        *o = [(t[0] - s.x) / sigma, (t[1] - s.y) / sigma];
+    Ok(lm.iter().take(n).enumerate().map(|(i, p)| landmark_residual(frame, target, i, *p)).map(|r| r[0] * r[0] + r[1] * r[1]).sum())
+}
+
+/// The normal equations of an iteration in fixed memory: `w JᵀJ` plus the landmarks' (its strict
+/// lower triangle kept transposed above the diagonal, so that the Cholesky factor of a damped
+/// copy fills the lower triangle), its diagonal, and the gradient `−w Jᵀ r`.
+struct NormalEquations<const N: usize> {
+    matrix: [[f32; N]; N],
+    diagonal: [f32; N],
+    gradient: [f32; N],
+    columns: usize,
+}
+
+impl<const N: usize> NormalEquations<N> {
+    fn new(columns: usize) -> Self {
+        Self { matrix: [[0.0; N]; N], diagonal: [0.0; N], gradient: [0.0; N], columns: columns.min(N) }
     }
-    Ok(n)
-}
 
-/// The landmark residuals and their forward differences per column.
-struct LandmarkRows {
-    count: usize,
-    base: [[f32; 2]; MAX_LANDMARKS],
-    jacobian: [[[f32; 2]; MAX_LANDMARKS]; MAX_COLUMNS],
-}
-
-impl LandmarkRows {
-    #[allow(clippy::too_many_arguments)]
-    fn new<I: TriIndex>(
-        model: &MorphableModel<'_, I>,
-        scene: &Scene<'_, '_>,
-        target: Option<&LandmarkTarget<'_>>,
-        full: &mut [f32],
-        columns: Columns,
-    ) -> Result<Self, FitError> {
-        let mut rows = Self { count: 0, base: [[0.0; 2]; MAX_LANDMARKS], jacobian: [[[0.0; 2]; MAX_LANDMARKS]; MAX_COLUMNS] };
-        let Some(target) = target else { return Ok(rows) };
-        let frame = scene.frame(&scene.pose);
-        rows.count = landmark_residuals(model, &frame, target, full, &mut rows.base)?;
-        let mut moved = [[0.0f32; 2]; MAX_LANDMARKS];
-        for j in 0..columns.len() {
-            let step = if j < columns.shape {
-                if let Some(c) = full.get_mut(j) {
-                    *c += DIFFERENCE_STEP;
+    /// Adds one residual's row: `jacobian[i]` its derivatives (`dot` their product), `residual` its value.
+    fn add<T: Copy>(&mut self, jacobian: &[T], residual: T, dot: impl Fn(T, T) -> f32, w: f32) {
+        for i in 0..self.columns {
+            let Some(&ji) = jacobian.get(i) else { continue };
+            if let Some(gi) = self.gradient.get_mut(i) {
+                *gi -= w * dot(ji, residual);
+            }
+            for (l, &jl) in jacobian.iter().enumerate().take(i) {
+                if let Some(e) = self.matrix.get_mut(l).and_then(|r| r.get_mut(i)) {
+                    *e += w * dot(ji, jl);
                 }
-                landmark_residuals(model, &frame, target, full, &mut moved)?;
-                if let Some(c) = full.get_mut(j) {
-                    *c -= DIFFERENCE_STEP;
-                }
-                DIFFERENCE_STEP
-            } else {
-                let i = j - columns.shape;
-                landmark_residuals(model, &scene.frame(&nudged_pose(&scene.pose, i)), target, full, &mut moved)?;
-                POSE_STEPS.get(i).copied().unwrap_or(1.0)
-            };
-            let Some(col) = rows.jacobian.get_mut(j) else { continue };
-            for ((d, m), b) in col.iter_mut().zip(moved.iter()).zip(rows.base.iter()).take(rows.count) {
-                *d = [(m[0] - b[0]) / step, (m[1] - b[1]) / step];
+            }
+            if let Some(d) = self.diagonal.get_mut(i) {
+                *d += w * dot(ji, ji);
             }
         }
-        Ok(rows)
     }
 
-    fn term(&self, r: &[[f32; 2]; MAX_LANDMARKS]) -> f32 {
-        r.iter().take(self.count).map(|r| r[0] * r[0] + r[1] * r[1]).sum()
-    }
-
-    fn column(&self, j: usize, l: usize) -> [f32; 2] {
-        self.jacobian.get(j).and_then(|c| c.get(l)).copied().unwrap_or([0.0; 2])
+    /// The step of the damped equations `(A (1 + damping on the diagonal) + P) δ = g` (`P`: 1 on
+    /// the first `shape` columns, the prior's precision, 1e-6 on the pose's).
+    fn step(&mut self, shape: usize, damping: f32) -> Result<[f32; MAX_COLUMNS], FitError> {
+        for i in 0..self.columns {
+            for l in 0..i {
+                let v = self.matrix.get(l).and_then(|r| r.get(i)).copied().unwrap_or(0.0);
+                if let Some(e) = self.matrix.get_mut(i).and_then(|r| r.get_mut(l)) {
+                    *e = v;
+                }
+            }
+            let d = self.diagonal.get(i).copied().unwrap_or(0.0);
+            if let Some(e) = self.matrix.get_mut(i).and_then(|r| r.get_mut(i)) {
+                *e = d * (1.0 + damping) + if i < shape { 1.0 } else { 1e-6 };
+            }
+        }
+        let x = super::cholesky::solve(&mut self.matrix, &self.gradient, self.columns)?;
+        let mut delta = [0.0f32; MAX_COLUMNS];
+        for (d, v) in delta.iter_mut().zip(x) {
+            *d = v;
+        }
+        if delta.iter().all(|v| v.is_finite()) {
+            Ok(delta)
+        } else {
+            Err(FitError::Singular)
+        }
     }
 }
 
-/// Samples, the Jacobian, the damped normal equations and the tries of one iteration.
+/// What an iteration's samples are taken from: the instance seen through the frame, the depth
+/// grid, the stride and the facing threshold.
+struct Sampling<'a, 's, 'i> {
+    positions: &'a [Vec3],
+    normals: &'a [Vec3],
+    albedos: &'a [Vec3],
+    frame: &'a Frame<'s, 'i>,
+    grid: &'a DepthGrid,
+    stride: usize,
+    min_cos: f32,
+}
+
+impl Sampling<'_, '_, '_> {
+    /// The residual of vertex `v` if it is a sample: facing the camera, not hidden, in the image.
+    fn residual(&self, v: usize) -> Option<Vec3> {
+        let (p, n, a) = (*self.positions.get(v)?, *self.normals.get(v)?, *self.albedos.get(v)?);
+        if !self.frame.faces(p, n, self.min_cos) || !self.grid.seen(self.frame, p) {
+            return None;
+        }
+        self.frame.residual(p, n, a)
+    }
+
+    /// Visits the samples in vertex order with their residual and ring, a chunk at a time
+    /// (`chunk`: the room); returns their count.
+    fn visit<I: TriIndex>(
+        &self,
+        triangles: &[[I; 3]],
+        chunk: &mut Chunk,
+        mut visit: impl FnMut(usize, Vec3, &Ring) -> Result<(), FitError>,
+    ) -> Result<usize, FitError> {
+        let (mut v, mut count) = (0usize, 0usize);
+        while v < self.positions.len() {
+            chunk.clear();
+            while v < self.positions.len() && !chunk.is_full() {
+                if let Some(r) = self.residual(v) {
+                    chunk.push(v, r);
+                }
+                v += self.stride;
+            }
+            chunk.gather(triangles);
+            for (s, r, ring) in chunk.samples(triangles) {
+                visit(s, r, &ring)?;
+                count += 1;
+            }
+        }
+        Ok(count)
+    }
+}
+
+/// The ring's vertices of the current instance `positions`, each moved by `moved(vertex, position)`.
+fn moved_ring(ring: &Ring, positions: &[Vec3], moved: impl Fn(usize, Vec3) -> Vec3, out: &mut [Vec3; RING_VERTICES]) {
+    for (q, &u) in out.iter_mut().zip(ring.vertices()) {
+        *q = moved(u as usize, positions.get(u as usize).copied().unwrap_or([0.0; 3]));
+    }
+}
+
+/// Samples, the normal equations accumulated a sample at a time, and the tries of one iteration.
 #[allow(clippy::too_many_arguments)]
-fn iterate<I: TriIndex>(
+#[inline(never)]
+fn iterate<I: TriIndex, const KS: usize, const N: usize>(
     model: &MorphableModel<'_, I>,
-    view: SolverView<'_>,
+    (positions, normals, albedos): (&[Vec3], &[Vec3], &[Vec3]),
     scene: &Scene<'_, '_>,
     landmarks: Option<&LandmarkTarget<'_>>,
     config: &ShapeSolveConfig,
@@ -365,216 +430,144 @@ fn iterate<I: TriIndex>(
     columns: Columns,
     damping: &mut f32,
 ) -> Result<Iteration, FitError> {
-    let SolverView { positions, normals, albedos, spare_positions, spare_normals, samples, values } = view;
     let k = columns.shape;
     let m = columns.len();
     let alpha = coeffs.get(..k).ok_or(FitError::BadConfig)?;
-    let row = 3 * (m + 1);
-    let cap = samples.len().min(values.len() / row);
     let frame = scene.frame(&scene.pose);
-    let mut full = [0.0f32; KS_MAX];
-    let full = full.get_mut(..coeffs.len()).ok_or(FitError::BadConfig)?;
-    full.copy_from_slice(coeffs);
-    let lm = LandmarkRows::new(model, scene, landmarks, full, columns)?;
-    let at = |v: usize| (positions.get(v).copied(), normals.get(v).copied(), albedos.get(v).copied());
-    // The samples and their residuals: vertices facing the camera and not hidden by the face.
+    let nudged: [Frame<'_, '_>; POSE_PARAMS] = core::array::from_fn(|i| scene.frame(&nudged_pose(&scene.pose, i)));
     let grid = DepthGrid::new(&frame, positions, scene.image.width(), scene.image.height());
-    let mut count = 0usize;
-    for v in (0..positions.len()).step_by(config.stride) {
-        if count >= cap {
-            break;
+    let sampling = Sampling { positions, normals, albedos, frame: &frame, grid: &grid, stride: config.stride, min_cos: config.min_cos };
+    let mut chunk = Chunk::new();
+    let mut equations = NormalEquations::<N>::new(m);
+    // The samples' rows: a shape column moves the ring (the normal recomputed from it, as over the
+    // whole mesh), a pose column the frame.
+    let mut data = 0.0f32;
+    let samples = sampling.visit(model.triangles(), &mut chunk, |v, base, ring| {
+        data += w * dot3(base, base);
+        let (p, n, a) = (positions.get(v).copied(), normals.get(v).copied(), albedos.get(v).copied());
+        let (Some(p), Some(n), Some(a)) = (p, n, a) else { return Ok(()) };
+        let mut row = [[0.0f32; 3]; MAX_COLUMNS];
+        let mut moved = [[0.0f32; 3]; RING_VERTICES];
+        for (j, d) in row.iter_mut().enumerate().take(m) {
+            let (r, h) = if j < k {
+                let h = DIFFERENCE_STEP;
+                let step = |u: usize, p: Vec3| {
+                    let c = model.shape_component(j, u);
+                    [p[0] + h * c[0], p[1] + h * c[1], p[2] + h * c[2]]
+                };
+                moved_ring(ring, positions, step, &mut moved);
+                (frame.residual(moved[0], ring.normal(&moved), a), h)
+            } else {
+                let i = j - k;
+                (nudged.get(i).and_then(|f| f.residual(p, n, a)), POSE_STEPS.get(i).copied().unwrap_or(1.0))
+            };
+            *d = r.map_or([0.0; 3], |r| [(r[0] - base[0]) / h, (r[1] - base[1]) / h, (r[2] - base[2]) / h]);
         }
-        let (Some(p), Some(n), Some(a)) = at(v) else { continue };
-        if !frame.faces(p, n, config.min_cos) || !grid.seen(&frame, p) {
-            continue;
-        }
-        let Some(r) = frame.residual(p, n, a) else { continue };
-        if let (Some(id), Some(slot)) = (samples.get_mut(count), values.get_mut(count * row..count * row + 3)) {
-            *id = v as u32;
-            slot.copy_from_slice(&r);
-            count += 1;
-        }
-    }
-    if count < 16 {
+        equations.add(&row, base, dot3, w);
+        Ok(())
+    })?;
+    if samples < 16 {
         return Err(FitError::Singular);
     }
+    // The landmarks' rows: a shape column bumps its coefficient (and takes it back: the next
+    // column sees `(c + h) − h`), a pose column the frame.
+    let mut full = [0.0f32; KS];
+    let full = full.get_mut(..coeffs.len()).ok_or(FitError::BadConfig)?;
+    let mut lm_term = 0.0f32;
+    if let Some(target) = landmarks {
+        let n = model.landmarks().len().min(target.len());
+        for i in 0..n {
+            full.copy_from_slice(coeffs);
+            let base = landmark_residual(&frame, target, i, model.landmark_position(full, i)?);
+            lm_term += base[0] * base[0] + base[1] * base[1];
+            let mut row = [[0.0f32; 2]; MAX_COLUMNS];
+            for (j, d) in row.iter_mut().enumerate().take(k) {
+                let c = full.get_mut(j).ok_or(FitError::BadConfig)?;
+                *c += DIFFERENCE_STEP;
+                let r = landmark_residual(&frame, target, i, model.landmark_position(full, i)?);
+                let c = full.get_mut(j).ok_or(FitError::BadConfig)?;
+                *c -= DIFFERENCE_STEP;
+                *d = [(r[0] - base[0]) / DIFFERENCE_STEP, (r[1] - base[1]) / DIFFERENCE_STEP];
+            }
+            let p = model.landmark_position(full, i)?;
+            for (j, d) in row.iter_mut().enumerate().take(m).skip(k) {
+                let (f, h) = (nudged.get(j - k).ok_or(FitError::BadConfig)?, POSE_STEPS.get(j - k).copied().unwrap_or(1.0));
+                let r = landmark_residual(f, target, i, p);
+                *d = [(r[0] - base[0]) / h, (r[1] - base[1]) / h];
+            }
+            equations.add(&row, base, |a: [f32; 2], b: [f32; 2]| a[0] * b[0] + a[1] * b[1], 1.0);
+        }
+    }
+    for (gi, a) in equations.gradient.iter_mut().zip(alpha) {
+        *gi -= a;
+    }
     let prior: f32 = alpha.iter().map(|a| a * a).sum();
-    let data = |values: &[f32]| -> f32 { (0..count).map(|s| triple(values, s * row)).map(|r| w * dot3(r, r)).sum() };
-    let before = data(values) + prior + lm.term(&lm.base);
-    // The Jacobian, a column at a time: shape components (normals recomputed), then the pose.
-    for j in 0..m {
-        let (moved_frame, h) = if j < k {
-            for (v, (sp, p)) in spare_positions.iter_mut().zip(positions.iter()).enumerate() {
-                let u = model.shape_component(j, v);
-                *sp = [p[0] + DIFFERENCE_STEP * u[0], p[1] + DIFFERENCE_STEP * u[1], p[2] + DIFFERENCE_STEP * u[2]];
-            }
-            vertex_normals(spare_positions, model.triangles(), spare_normals)?;
-            (None, DIFFERENCE_STEP)
-        } else {
-            let i = j - k;
-            (Some(scene.frame(&nudged_pose(&scene.pose, i))), POSE_STEPS.get(i).copied().unwrap_or(1.0))
-        };
-        for s in 0..count {
-            let v = samples.get(s).map_or(0, |&v| v as usize);
-            let r = match &moved_frame {
-                None => match (spare_positions.get(v), spare_normals.get(v), albedos.get(v)) {
-                    (Some(p), Some(n), Some(a)) => frame.residual(*p, *n, *a),
-                    _ => None,
-                },
-                Some(f) => match at(v) {
-                    (Some(p), Some(n), Some(a)) => f.residual(p, n, a),
-                    _ => None,
-                },
-            };
-            let base = triple(values, s * row);
-            let d = r.map_or([0.0; 3], |r| [(r[0] - base[0]) / h, (r[1] - base[1]) / h, (r[2] - base[2]) / h]);
-            if let Some(slot) = values.get_mut(s * row + 3 + 3 * j..s * row + 6 + 3 * j) {
-                slot.copy_from_slice(&d);
-            }
-        }
-    }
-    // Normal equations: (w JᵀJ + P) δ = −w Jᵀ r − P x (P: the prior's precision, 1 on the
-    // shape components, 0 on the pose, whose prior is broad).
-    let mut a = [[0.0f32; MAX_COLUMNS]; MAX_COLUMNS];
-    let mut g = [0.0f32; MAX_COLUMNS];
-    for s in 0..count {
-        let base = triple(values, s * row);
-        for i in 0..m {
-            let ji = triple(values, s * row + 3 + 3 * i);
-            if let Some(gi) = g.get_mut(i) {
-                *gi -= w * dot3(ji, base);
-            }
-            let Some(ai) = a.get_mut(i) else { continue };
-            for (l, ail) in ai.iter_mut().enumerate().take(i + 1) {
-                *ail += w * dot3(ji, triple(values, s * row + 3 + 3 * l));
-            }
-        }
-    }
-    for l in 0..lm.count {
-        let b = lm.base.get(l).copied().unwrap_or([0.0; 2]);
-        for i in 0..m {
-            let ji = lm.column(i, l);
-            if let Some(gi) = g.get_mut(i) {
-                *gi -= ji[0] * b[0] + ji[1] * b[1];
-            }
-            let Some(ai) = a.get_mut(i) else { continue };
-            for (q, aiq) in ai.iter_mut().enumerate().take(i + 1) {
-                let jq = lm.column(q, l);
-                *aiq += ji[0] * jq[0] + ji[1] * jq[1];
-            }
-        }
-    }
-    for (i, gi) in g.iter_mut().enumerate().take(k) {
-        *gi -= alpha.get(i).copied().unwrap_or(0.0);
-    }
+    let before = data + prior + lm_term;
     // Tries: a damped step, kept if the objective on these samples falls.
+    full.copy_from_slice(coeffs);
     for _ in 0..DAMPING_TRIES {
-        let mut mm = [[0.0f32; MAX_COLUMNS]; MAX_COLUMNS];
-        for i in 0..m {
-            for l in 0..=i {
-                let v = a.get(i).and_then(|r| r.get(l)).copied().unwrap_or(0.0);
-                let v = if i == l { v * (1.0 + *damping) + if i < k { 1.0 } else { 1e-6 } } else { v };
-                if let Some(e) = mm.get_mut(i).and_then(|r| r.get_mut(l)) {
-                    *e = v;
-                }
-            }
-        }
-        let Ok(delta) = cholesky_solve(&mut mm, &g, m) else {
+        let Ok(delta) = equations.step(k, *damping) else {
             *damping *= 10.0;
             continue;
         };
-        let after = objective_at(
-            model,
-            &delta,
-            columns,
-            alpha,
-            full,
-            scene,
-            landmarks,
-            &lm,
-            positions,
-            albedos,
-            spare_positions,
-            spare_normals,
-            samples,
-            values,
-            count,
-            row,
-            w,
-        )?;
+        let after = objective_at(model, &delta, columns, full, scene, landmarks, &sampling, &mut chunk, w)?;
         if after < before {
             *damping = (*damping * 0.3).max(1e-6);
-            return Ok(Iteration { samples: count, before, after, delta: Some(delta) });
+            return Ok(Iteration { samples, before, after, delta: Some(delta) });
         }
         *damping *= 10.0;
     }
-    Ok(Iteration { samples: count, before, after: before, delta: None })
+    Ok(Iteration { samples, before, after: before, delta: None })
 }
 
 /// The objective at the trial step `delta` on the same samples (a sample that leaves the image
-/// counts as the residual it had).
+/// counts as the residual it had). `full`: the shape coefficients, restored on return.
 #[allow(clippy::too_many_arguments)]
 fn objective_at<I: TriIndex>(
     model: &MorphableModel<'_, I>,
     delta: &[f32; MAX_COLUMNS],
     columns: Columns,
-    alpha: &[f32],
     full: &mut [f32],
     scene: &Scene<'_, '_>,
     landmarks: Option<&LandmarkTarget<'_>>,
-    lm: &LandmarkRows,
-    positions: &[Vec3],
-    albedos: &[Vec3],
-    spare_positions: &mut [Vec3],
-    spare_normals: &mut [Vec3],
-    samples: &[u32],
-    values: &[f32],
-    count: usize,
-    row: usize,
+    sampling: &Sampling<'_, '_, '_>,
+    chunk: &mut Chunk,
     w: f32,
 ) -> Result<f32, FitError> {
     let k = columns.shape;
     let pose = if columns.pose > 0 { moved_pose(&scene.pose, delta.get(k..).unwrap_or(&[])) } else { scene.pose };
     let frame = scene.frame(&pose);
-    for (v, (sp, p)) in spare_positions.iter_mut().zip(positions.iter()).enumerate() {
-        let mut q = *p;
-        for (j, d) in delta.iter().enumerate().take(k) {
-            let u = model.shape_component(j, v);
-            q = [q[0] + d * u[0], q[1] + d * u[1], q[2] + d * u[2]];
-        }
-        *sp = q;
-    }
+    let alpha = full.get(..k).ok_or(FitError::BadConfig)?;
     let mut sum: f32 = alpha.iter().zip(delta.iter()).map(|(a, d)| (a + d) * (a + d)).sum();
     if let Some(target) = landmarks {
-        for (c, (a, d)) in full.iter_mut().zip(alpha.iter().zip(delta.iter())) {
+        let mut kept = [0.0f32; MAX_SHAPE_SOLVE];
+        let kept = kept.get_mut(..k).ok_or(FitError::BadConfig)?;
+        kept.copy_from_slice(alpha);
+        for (c, (a, d)) in full.iter_mut().zip(kept.iter().zip(delta.iter())) {
             *c = a + d;
         }
-        let mut moved = [[0.0f32; 2]; MAX_LANDMARKS];
-        landmark_residuals(model, &frame, target, full, &mut moved)?;
-        full.get_mut(..k).ok_or(FitError::BadConfig)?.copy_from_slice(alpha);
-        sum += lm.term(&moved);
+        let term = landmark_term(model, &frame, target, full);
+        full.get_mut(..k).ok_or(FitError::BadConfig)?.copy_from_slice(kept);
+        sum += term?;
     }
-    if vertex_normals(spare_positions, model.triangles(), spare_normals).is_err() {
-        return Ok(f32::INFINITY);
-    }
-    for s in 0..count {
-        let v = samples.get(s).map_or(0, |&v| v as usize);
-        let (Some(p), Some(n), Some(al)) = (spare_positions.get(v), spare_normals.get(v), albedos.get(v)) else { continue };
-        let r = frame.residual(*p, *n, *al).unwrap_or_else(|| triple(values, s * row));
+    let offset = |u: usize, mut q: Vec3| {
+        for (j, d) in delta.iter().enumerate().take(k) {
+            let c = model.shape_component(j, u);
+            q = [q[0] + d * c[0], q[1] + d * c[1], q[2] + d * c[2]];
+        }
+        q
+    };
+    let mut moved = [[0.0f32; 3]; RING_VERTICES];
+    let mut finite = true;
+    sampling.visit(model.triangles(), chunk, |v, base, ring| {
+        moved_ring(ring, sampling.positions, offset, &mut moved);
+        finite &= moved.iter().take(ring.vertices().len()).all(|p| p.iter().all(|c| c.is_finite()));
+        let Some(&a) = sampling.albedos.get(v) else { return Ok(()) };
+        let r = frame.residual(moved[0], ring.normal(&moved), a).unwrap_or(base);
         sum += w * dot3(r, r);
-    }
-    Ok(sum)
-}
-
-/// Solves `M x = b` for the leading `n × n` block of a symmetric positive-definite `M` (lower
-/// triangle given; overwritten by its Cholesky factor); a non-finite solution is refused.
-fn cholesky_solve(m: &mut [[f32; MAX_COLUMNS]; MAX_COLUMNS], b: &[f32; MAX_COLUMNS], n: usize) -> Result<[f32; MAX_COLUMNS], FitError> {
-    let x = super::cholesky::solve(m, b, n)?;
-    if x.iter().all(|v| v.is_finite()) {
-        Ok(x)
-    } else {
-        Err(FitError::Singular)
-    }
+        Ok(())
+    })?;
+    Ok(if finite { sum } else { f32::INFINITY })
 }
 
 #[cfg(test)]
