@@ -8,6 +8,7 @@ mod detect;
 mod device;
 mod device_frame;
 mod eval;
+mod eval_reconstruction;
 mod fit;
 mod h5;
 mod progress;
