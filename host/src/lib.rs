@@ -17,6 +17,7 @@ pub mod device;
 pub mod eval;
 pub mod fit;
 pub mod gp;
+pub mod learn;
 pub mod mesh;
 pub mod photo;
 pub mod process;

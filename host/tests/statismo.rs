@@ -52,6 +52,7 @@ fn grid_model() -> GpModel {
             template: Provenance { source: "grid".into(), scale_mm_per_unit: 1.0, ..Default::default() },
             units: "mm".into(),
             created_by: "test".into(),
+            learning: None,
         },
     }
 }

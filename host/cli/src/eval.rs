@@ -61,6 +61,17 @@ pub enum EvalCommand {
     /// positives per face-free photo and the landmark error of the faces found; --draw-dir writes
     /// each photo with its faces found (green), missed (red) and false positives (orange).
     Detect(DetectEvalArgs),
+    /// The 3D error of fits against the true faces of a set with known truth, as NoW measures it.
+    ///
+    /// Every image of a `gpmm synth` directory (or an independent renderer's set made from one: its
+    /// truth.json names the identities) is fitted like `gpmm fit`; the fit's shape is aligned to the
+    /// image's true face (a similarity on the inner landmarks, refined on closest points) and every
+    /// vertex of the true face, cut to the face region, is measured to the fitted surface (mm). Writes
+    /// OUT/reconstruction.{md,csv,json,png}: median / mean / std per |yaw| and over the set, per model,
+    /// beside each model's own mean shape; fits go to OUT/fits (shared with `gpmm eval recognition`
+    /// when model, settings and images agree). Models as for recognition (default: symmetric-full built
+    /// from the template).
+    Reconstruction(Box<crate::eval_reconstruction::ReconstructionArgs>),
 }
 
 /// Arguments of `gpmm eval detect`.
@@ -139,6 +150,55 @@ pub struct EvalModelArgs {
     pub quick: bool,
 }
 
+/// Fit settings of the evaluations that fit every image of a set (`recognition`, `reconstruction`).
+#[derive(Debug, Args)]
+pub struct EvalFitArgs {
+    /// Working image side of the fits (pixels).
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.size, value_parser = clap::value_parser!(u32).range(16..=1024))]
+    pub size: u32,
+    /// Landmark-chain steps per fit (default 5000; 1500 with --quick).
+    #[arg(long, value_name = "N")]
+    pub landmark_steps: Option<u32>,
+    /// Image-chain steps per fit (default 600; 40 with --quick).
+    #[arg(long, value_name = "N")]
+    pub image_steps: Option<u32>,
+    /// Shape components fitted (and compared by recognition): 50, as the paper's fit script (`gpmm fit` fits 200
+    /// for the best landmark fit, but components past ~50 are not determined by a 128-pixel
+    /// image and add noise to the cosine).
+    #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
+    pub shape_rank: usize,
+    /// Colour components fitted.
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K")]
+    pub color_rank: usize,
+    /// Parallel fits (default: all cores).
+    #[arg(long, value_name = "J")]
+    pub jobs: Option<usize>,
+    /// Any other fit setting by its path in fit.json's `settings` (repeatable), as on `gpmm fit`,
+    /// e.g. `--set landmarks.student_t=4` (part of the fit cache's key).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub overrides: Vec<String>,
+}
+
+impl EvalFitArgs {
+    /// The fit's flags (--quick shortens only the chains it is not told about).
+    pub fn flags(&self, quick: bool) -> gpmm_host::fit::FitFlags {
+        gpmm_host::fit::FitFlags {
+            size: Some(self.size),
+            landmark_steps: self.landmark_steps.or(quick.then_some(1500)),
+            image_steps: self.image_steps.or(quick.then_some(40)),
+            shape_rank: Some(self.shape_rank),
+            color_rank: Some(self.color_rank),
+            overrides: self.overrides.clone(),
+            ..gpmm_host::fit::FitFlags::default()
+        }
+    }
+
+    /// Parallel fits: --jobs, else all cores.
+    pub fn jobs(&self) -> usize {
+        self.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1)
+    }
+}
+
 /// Arguments of `gpmm eval recognition`.
 #[derive(Debug, Args)]
 pub struct RecognitionArgs {
@@ -165,26 +225,12 @@ pub struct RecognitionArgs {
     /// Use the first N identities of the directory (default: all; 4 with --quick).
     #[arg(long, value_name = "N")]
     pub identities: Option<usize>,
-    /// Working image side of the fits (pixels).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.size, value_parser = clap::value_parser!(u32).range(16..=1024))]
-    pub size: u32,
-    /// Landmark-chain steps per fit (default 5000; 1500 with --quick).
-    #[arg(long, value_name = "N")]
-    pub landmark_steps: Option<u32>,
-    /// Image-chain steps per fit (default 600; 40 with --quick).
-    #[arg(long, value_name = "N")]
-    pub image_steps: Option<u32>,
+    /// Fit settings.
+    #[command(flatten)]
+    pub fit: EvalFitArgs,
     /// Image-chain steps per fit of a KDE component (default: as --image-steps).
     #[arg(long, value_name = "N")]
     pub kde_image_steps: Option<u32>,
-    /// Shape components fitted and compared: 50, as the paper's fit script (`gpmm fit` fits 200
-    /// for the best landmark fit, but components past ~50 are not determined by a 128-pixel
-    /// image and add noise to the cosine).
-    #[arg(long, default_value_t = RECOGNITION_SHAPE_RANK, value_name = "K")]
-    pub shape_rank: usize,
-    /// Colour components fitted.
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.ranks.color, value_name = "K")]
-    pub color_rank: usize,
     /// Seed of the fitting chains; several (`--fit-seed 0,1,2,3`) run the evaluation once per
     /// seed into OUT/seed-N and write the pooled accuracies per seed, their mean and spread to
     /// OUT/seeds.{md,json} (one seed's figure moves by several points with the chains' path).
@@ -196,13 +242,6 @@ pub struct RecognitionArgs {
     /// sample (the fit `gpmm fit` draws).
     #[arg(long, value_name = "posterior-mean|best", default_value = "posterior-mean", value_parser = Coefficients::parse)]
     pub coefficients: Coefficients,
-    /// Parallel fits (default: all cores).
-    #[arg(long, value_name = "J")]
-    pub jobs: Option<usize>,
-    /// Any other fit setting by its path in fit.json's `settings` (repeatable), as on `gpmm fit`,
-    /// e.g. `--set landmarks.student_t=4` (part of the fit cache's key).
-    #[arg(long = "set", value_name = "PATH=VALUE")]
-    pub overrides: Vec<String>,
     /// Output directory.
     #[arg(short, long, value_name = "OUT")]
     pub output: PathBuf,
@@ -242,7 +281,7 @@ pub fn command_line() -> String {
     std::env::args().map(|a| if a.contains(' ') { format!("'{a}'") } else { a }).collect::<Vec<_>>().join(" ")
 }
 
-fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::synth::SynthOptions) -> gpmm_host::eval::models::ModelFactory {
+pub(crate) fn eval_factory(m: &EvalModelArgs, out: &Path, world: gpmm_host::synth::SynthOptions) -> gpmm_host::eval::models::ModelFactory {
     use gpmm_host::eval::models::{GpBuild, ModelFactory};
     let q = m.quick;
     let build = GpBuild {
@@ -268,7 +307,7 @@ fn kernel_list(list: Option<&str>) -> Result<Vec<ModelKernel>> {
     })
 }
 
-fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSelection> {
+pub(crate) fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSelection> {
     Ok(gpmm_host::eval::models::ModelSelection {
         files: m.models.clone(),
         kernels: kernel_list(m.kernels.as_deref())?,
@@ -279,7 +318,7 @@ fn eval_selection(m: &EvalModelArgs) -> Result<gpmm_host::eval::models::ModelSel
     })
 }
 
-fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> gpmm_host::synth::SynthOptions {
+pub(crate) fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usize>) -> gpmm_host::synth::SynthOptions {
     let data = data.map(Path::to_path_buf).unwrap_or_else(gpmm_host::data::default_data_dir);
     gpmm_host::synth::SynthOptions { seed, identity_scale: scale, modes, ..gpmm_host::synth::SynthOptions::with_data_dir(&data) }
 }
@@ -312,17 +351,8 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     })?;
     pb.finish_and_clear();
     // The one resolution of a fit's settings; --quick only shortens the chains it is not told about.
-    let base = gpmm_host::fit::FitFlags {
-        size: Some(a.size),
-        landmark_steps: a.landmark_steps.or(q.then_some(1500)),
-        image_steps: a.image_steps.or(q.then_some(40)),
-        shape_rank: Some(a.shape_rank),
-        color_rank: Some(a.color_rank),
-        overrides: a.overrides.clone(),
-        ..gpmm_host::fit::FitFlags::default()
-    }
-    .resolve()?;
-    let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
+    let base = a.fit.flags(q).resolve()?;
+    let jobs = a.fit.jobs();
     let mut seeds: Vec<u64> = Vec::new();
     for s in &a.fit_seed {
         if !seeds.contains(s) {
@@ -483,6 +513,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         EvalCommand::Recognition(r) => eval_recognition(*r),
         EvalCommand::Specgen(s) => eval_specgen(*s),
         EvalCommand::Detect(d) => eval_detect(d),
+        EvalCommand::Reconstruction(r) => crate::eval_reconstruction::run(*r),
     }
 }
 

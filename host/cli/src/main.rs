@@ -8,8 +8,10 @@ mod detect;
 mod device;
 mod device_frame;
 mod eval;
+mod eval_reconstruction;
 mod fit;
 mod h5;
+mod learn;
 mod progress;
 mod register;
 mod render;
@@ -81,6 +83,16 @@ pub enum Command {
     CalibrateLandmarks(calibrate::CalibrateArgs),
     /// Evaluate models like the paper: recognition across yaw, specificity / generalization / compactness.
     Eval(eval::EvalArgs),
+    /// Learn a model from unlabelled images: no landmark files, labels or poses.
+    ///
+    /// Each iteration starts every image (and its mirror image with --mirror) with the init file's
+    /// finder and initializer, fits the current model like `gpmm fit --init`, keeps the fits whose
+    /// silhouette overlaps their start's by at least --min-iou (the rest ran off the face), and
+    /// makes the next model from the kept fits' shapes and albedos by PCA: DIR/model_N.gpmm, usable
+    /// by every command, with the iteration's inputs and counts in its metadata, and
+    /// DIR/iteration_N/ with every image's record and pictures of the model and the fits. Images that
+    /// cannot be read or show no face are recorded and skipped. Deterministic for a --seed.
+    Learn(Box<learn::LearnArgs>),
     /// Register a model to a mesh (3D-to-3D fit): landmark alignment, then closest points with the model's prior.
     ///
     /// Writes OUTDIR/registered.ply (the fitted instance on the model's topology, in the mesh's frame) and
@@ -192,6 +204,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::BenchFit(a) => fit::bench_fit(a),
         Command::CalibrateLandmarks(a) => calibrate::calibrate(a),
         Command::Eval(a) => eval::eval(a),
+        Command::Learn(a) => learn::learn(*a),
         Command::Register(a) => register::register_mesh(a),
         Command::Quantize(a) => device::quantize(a),
         Command::Inspect(a) => device::inspect(a),

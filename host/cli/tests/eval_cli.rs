@@ -204,6 +204,34 @@ fn specgen_quick_writes_curves_that_behave() {
 }
 
 #[test]
+fn reconstruction_quick_measures_every_fit_against_its_true_face() {
+    let Some(f) = fixture() else { return };
+    let out = f.dir.path().join("reconstruction");
+    let args = ["eval", "reconstruction", "--synth", s(&f.synth), "--quick", "--data", s(&f.data), "--model", s(&f.model), "-o", s(&out)];
+    ok(&gpmm(&args));
+    for name in ["reconstruction.md", "reconstruction.csv", "reconstruction.json", "reconstruction.png", "fits/tiny.json"] {
+        assert!(out.join(name).is_file(), "{name} missing");
+    }
+    let report = read_json(&out.join("reconstruction.json"));
+    let row = &report["rows"][0];
+    // --quick: the first two identities, each at yaw 0 and 30.
+    assert_eq!(row["fits"], 4, "{row}");
+    let yaws: Vec<serde_json::Value> = row["pooled"].as_array().unwrap().iter().map(|p| p["abs_yaw_deg"].clone()).collect();
+    assert_eq!(yaws, [serde_json::json!(0), serde_json::json!(30), serde_json::Value::Null]);
+    let all = &row["pooled"][2];
+    let mm = |v: &serde_json::Value| v.as_f64().unwrap();
+    // A face of another person lies millimetres away, never zero and never centimetres.
+    for d in [&all["fit"], &all["mean_shape"]] {
+        assert!(mm(&d["median_mm"]) > 0.3 && mm(&d["median_mm"]) < 10.0, "{d}");
+        assert!(mm(&d["mean_mm"]) >= mm(&d["median_mm"]) * 0.5 && mm(&d["std_mm"]) > 0.0, "{d}");
+    }
+    // The CSV has a line per image; the fits are reused on a second run with the same figures.
+    assert_eq!(csv_rows(&out.join("reconstruction.csv")).len(), 4);
+    ok(&gpmm(&args));
+    assert_eq!(read_json(&out.join("reconstruction.json"))["rows"][0]["pooled"], row["pooled"]);
+}
+
+#[test]
 fn register_recovers_a_moved_instance_of_the_model() {
     let Some(f) = fixture() else { return };
     let model = gpmm_host::gp::model_io::load(&f.model).unwrap();

@@ -14,6 +14,7 @@ pub mod model_frame;
 pub mod models;
 pub mod plot;
 pub mod recognition;
+pub mod reconstruction;
 pub mod specgen;
 
 use std::path::{Path, PathBuf};

@@ -148,7 +148,7 @@ impl PreparedTarget {
     }
 
     /// The closest surface point to `q`: (point, colour, whether its nearest vertex is on the border).
-    fn closest(&self, q: [f64; 3]) -> ([f64; 3], [f64; 3], bool) {
+    pub fn closest(&self, q: [f64; 3]) -> ([f64; 3], [f64; 3], bool) {
         let Some(v) = self.grid.nearest(&self.mesh.positions, q) else {
             return (q, [0.0; 3], true);
         };

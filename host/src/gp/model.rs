@@ -100,6 +100,32 @@ pub struct ModelMetadata {
     pub units: String,
     /// The program that wrote the file.
     pub created_by: String,
+    /// How `gpmm learn` made the model from images (absent for every other model).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub learning: Option<LearningRecord>,
+}
+
+/// What a learned model was learned from: the iteration, its inputs and its quality control.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LearningRecord {
+    /// Iteration of the loop that made the model (1 for the first learned model).
+    pub iteration: u32,
+    /// The model the iteration started from.
+    pub previous_model: String,
+    /// The init file whose finder and initializer started every fit.
+    pub init: String,
+    /// Images given (mirror images counted when fitted).
+    pub images: usize,
+    /// Images whose fit was accepted into the model.
+    pub accepted: usize,
+    /// Images rejected because the fit's silhouette left its start's (overlap below `min_iou`).
+    pub rejected_overlap: usize,
+    /// Images that could not be fitted (unreadable, no face found, fit error).
+    pub failed: usize,
+    /// The silhouette overlap a fit needed.
+    pub min_iou: f64,
+    /// Seed of the fits.
+    pub seed: u64,
 }
 
 /// The current model file format version.
@@ -253,6 +279,7 @@ pub fn build_model(template: &Template, opts: &BuildOptions, mut progress: impl 
             template: template.provenance.clone(),
             units: "mm".into(),
             created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION")).into(),
+            learning: None,
         },
     }
 }

@@ -469,6 +469,7 @@ pub fn import_bytes(bytes: Vec<u8>, name: &str, opts: &ImportOptions) -> Result<
             },
             units: "mm".into(),
             created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION"), " import-h5").into(),
+            learning: None,
         },
     };
     let report = ImportReport {

@@ -84,6 +84,7 @@ pub fn learned_metadata(kernel: &str, shape_trace: f64, color_trace: f64, source
         },
         units: "mm".into(),
         created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION")).into(),
+        learning: None,
     }
 }
 

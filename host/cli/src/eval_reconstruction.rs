@@ -1,0 +1,93 @@
+//! `gpmm eval reconstruction`: the 3D error of fits against a set's true faces.
+
+use crate::eval::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalModelArgs};
+use crate::progress::{bar_style, note, spinner};
+use anyhow::{bail, Result};
+use clap::Args;
+use gpmm_host::eval::reconstruction::report::{evaluate, markdown, write_report, Progress, ReconstructionReport};
+use gpmm_host::gp::kernel::ModelKernel;
+use indicatif::ProgressBar;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `gpmm eval reconstruction`.
+#[derive(Debug, Args)]
+pub struct ReconstructionArgs {
+    /// A `gpmm synth` directory (or a set made from one, with its truth.json).
+    #[arg(long, value_name = "DIR")]
+    pub synth: PathBuf,
+    /// Fit with the landmark files of DIR (same names as the set's `.pts`, e.g. a detector's).
+    #[arg(long, value_name = "DIR")]
+    pub landmarks_dir: Option<PathBuf>,
+    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`) before fitting.
+    #[arg(long, value_name = "FILE")]
+    pub landmark_calibration: Option<PathBuf>,
+    /// Models (default: symmetric-full built from the template).
+    #[command(flatten)]
+    pub models: EvalModelArgs,
+    /// Use the first N identities of the directory (default: all; 2 with --quick).
+    #[arg(long, value_name = "N")]
+    pub identities: Option<usize>,
+    /// Fit settings.
+    #[command(flatten)]
+    pub fit: EvalFitArgs,
+    /// Seed of the fitting chains.
+    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed, value_name = "SEED")]
+    pub fit_seed: u64,
+    /// Output directory.
+    #[arg(short, long, value_name = "OUT")]
+    pub output: PathBuf,
+}
+
+/// Runs `gpmm eval reconstruction`.
+pub fn run(a: ReconstructionArgs) -> Result<()> {
+    use gpmm_host::eval::recognition::SynthSet;
+    let t0 = Instant::now();
+    let q = a.models.quick;
+    if !a.synth.is_dir() {
+        bail!("synth directory {} not found (make one with `gpmm synth --count 20 --seed 1 -o DIR`)", a.synth.display());
+    }
+    let landmarks = gpmm_host::eval::LandmarkSource::new(a.landmarks_dir.clone(), a.landmark_calibration.as_deref())?;
+    let describe = landmarks.describe();
+    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(2)))?.with_landmarks(landmarks);
+    let mut sel = eval_selection(&a.models)?;
+    if sel.is_empty() {
+        sel.kernels = vec![ModelKernel::SymmetricFull];
+    }
+    let world_options = eval_world(a.models.data.as_deref(), set.options.seed, set.options.identity_scale, set.options.modes);
+    let mut factory = eval_factory(&a.models, &a.output, world_options);
+    eprintln!("{}: {} identities, {} images", a.synth.display(), set.identities.len(), set.images.len());
+    let pb = spinner("preparing models and true faces");
+    let rows = factory.rows(&sel, &mut |label, built| {
+        note(&pb, format!("model {label}: {}", if built { "built" } else { "reused" }));
+    })?;
+    let world = factory.world()?.clone();
+    pb.finish_and_clear();
+    let settings = gpmm_host::fit::FitOptions { seed: a.fit_seed, ..a.fit.flags(q).resolve()? };
+    settings.validate()?;
+    let bar = ProgressBar::new(0);
+    bar.set_style(bar_style("{bar:30} {pos}/{len} {msg} [{elapsed}]"));
+    let progress = |p: Progress<'_>| {
+        let (what, label, done, total) = match p {
+            Progress::Fitting(l, d, t) => ("fits", l, d, t),
+            Progress::Measuring(l, d, t) => ("measured", l, d, t),
+        };
+        bar.set_message(format!("{what} ({label})"));
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let rows = evaluate(&rows, &set, &world, &settings, a.fit.jobs(), &a.output, &progress)?;
+    bar.finish_and_clear();
+    let report = ReconstructionReport {
+        synth_dir: a.synth.display().to_string(),
+        landmarks: describe,
+        settings,
+        command: command_line(),
+        rows,
+        total_seconds: t0.elapsed().as_secs_f64(),
+    };
+    write_report(&report, &a.output)?;
+    println!("{}", markdown(&report));
+    eprintln!("wrote reconstruction.md, .csv, .json and .png to {}", a.output.display());
+    Ok(())
+}

@@ -1,0 +1,138 @@
+//! `gpmm learn`: a model learned from unlabelled images.
+
+use crate::fit::FitSettingsArgs;
+use crate::progress::{bar_style, note};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use gpmm_host::learn::run::{run, RunEvent, RunPlan};
+use gpmm_host::learn::{LearnSettings, MIN_IOU};
+use indicatif::ProgressBar;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `gpmm learn`.
+#[derive(Debug, Args)]
+pub struct LearnArgs {
+    /// The model to start from (e.g. `gpmm build`'s).
+    pub model: PathBuf,
+    /// Images, or directories of images (.png, .jpg, .jpeg, .ppm; not searched recursively).
+    #[arg(required = true, num_args = 1..)]
+    pub images: Vec<PathBuf>,
+    /// Init file (`gpmm train-init`): its finder and initializer start every fit.
+    #[arg(long, value_name = "INIT")]
+    pub init: PathBuf,
+    /// Output directory: model_N.gpmm and iteration_N/ (records.json, samples.png,
+    /// reconstructions.png) per iteration; a rerun continues after the last complete iteration.
+    #[arg(short, long, value_name = "DIR")]
+    pub output: PathBuf,
+    /// Iterations in all (default 5; 1 with --quick).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub iterations: Option<u32>,
+    /// Also fit each image's mirror image (twice the examples; the learned model leans less to one side).
+    #[arg(long)]
+    pub mirror: bool,
+    /// The least overlap (intersection over union) of a fit's silhouette with its start's for the
+    /// fit to be used.
+    #[arg(long, value_name = "IOU", default_value_t = MIN_IOU)]
+    pub min_iou: f64,
+    /// Landmark σ of the initializer's landmarks (fraction of the fit's image side).
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA)]
+    pub init_landmark_sigma: f32,
+    /// Parallel fits (default: all cores).
+    #[arg(long, value_name = "J")]
+    pub jobs: Option<usize>,
+    /// A smoke run: one iteration of short fits (1500 landmark, 40 image steps unless given).
+    #[arg(long)]
+    pub quick: bool,
+    /// Fit settings (as `gpmm fit`'s).
+    #[command(flatten)]
+    pub settings: FitSettingsArgs,
+}
+
+/// Image files named on the command line, directories expanded (sorted).
+fn image_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let is_image = |p: &Path| {
+        p.extension().and_then(|e| e.to_str()).is_some_and(|e| ["png", "jpg", "jpeg", "ppm"].contains(&e.to_ascii_lowercase().as_str()))
+    };
+    let mut files = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
+                .with_context(|| format!("cannot list {}", input.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_file() && is_image(p))
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                bail!("{}: no .png, .jpg or .ppm images in this directory", input.display());
+            }
+            files.extend(found);
+        } else if input.is_file() {
+            files.push(input.clone());
+        } else {
+            bail!("{}: no such image or directory", input.display());
+        }
+    }
+    Ok(files)
+}
+
+/// Runs `gpmm learn`.
+pub fn learn(a: LearnArgs) -> Result<()> {
+    if !(a.min_iou.is_finite() && (0.0..=1.0).contains(&a.min_iou)) {
+        bail!("--min-iou {}: an overlap is between 0 and 1", a.min_iou);
+    }
+    let images = image_files(&a.images)?;
+    let mut flags = a.settings.flags();
+    flags.initializer_sigma = Some(a.init_landmark_sigma);
+    if a.quick {
+        if a.settings.landmark_steps == gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps {
+            flags.landmark_steps = Some(1500);
+        }
+        if a.settings.image_steps == gpmm_host::fit::FitOptions::DEFAULT.fit.image.steps {
+            flags.image_steps = Some(40);
+        }
+    }
+    let fit = flags.resolve()?;
+    let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
+    let plan = RunPlan {
+        model: a.model.clone(),
+        init: a.init.clone(),
+        images,
+        out: a.output.clone(),
+        iterations: a.iterations.unwrap_or(if a.quick { 1 } else { 5 }),
+        settings: LearnSettings { fit, min_iou: a.min_iou, mirror: a.mirror },
+        jobs,
+    };
+    eprintln!(
+        "{} images{}, {} iterations, {} threads -> {}",
+        plan.images.len(),
+        if a.mirror { " and their mirror images" } else { "" },
+        plan.iterations,
+        jobs,
+        plan.out.display()
+    );
+    let bar = ProgressBar::new(0);
+    bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
+    let events = |e: RunEvent<'_>| match e {
+        RunEvent::Reused(f) => {
+            note(&bar, format!("iteration {}: complete on disk ({} of {} accepted), kept", f.iteration, f.accepted, f.images))
+        }
+        RunEvent::Fitting { iteration, done, total } => {
+            bar.set_message(format!("iteration {iteration}"));
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        }
+        RunEvent::Finished(f) => note(
+            &bar,
+            format!(
+                "iteration {}: {} of {} fits accepted, {} rejected by their silhouette, {} failed ({:.0} s) -> {}",
+                f.iteration, f.accepted, f.images, f.rejected_overlap, f.failed, f.seconds, f.model
+            ),
+        ),
+    };
+    let files = run(&plan, &events)?;
+    bar.finish_and_clear();
+    if let Some(last) = files.last() {
+        println!("{}", last.model);
+    }
+    Ok(())
+}

@@ -1,0 +1,241 @@
+//! A learning run on disk: `DIR/model_N.gpmm` and `DIR/iteration_N/` per iteration, resumable
+//! after the last complete iteration.
+//!
+//! `DIR/iteration_N/records.json` holds every image's record and the iteration's counts; it is
+//! written last, after `model_N.gpmm` and the pictures, so an iteration with a records file is
+//! complete and a rerun continues after it.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::{counts, learned_model, wake, ImageRecord, LearnError, LearnSettings, Wake};
+use crate::gp::model::{GpModel, LearningRecord};
+use crate::gp::model_io;
+use crate::render::figure::{sample_grid, save_png, shape_light};
+use crate::render::{RenderSettings, View};
+
+/// One iteration's summary and records (`records.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IterationFile {
+    /// The iteration (1-based).
+    pub iteration: u32,
+    /// The model it started from.
+    pub previous_model: String,
+    /// The model it wrote.
+    pub model: String,
+    /// Images fitted (mirror images included).
+    pub images: usize,
+    /// Fits accepted.
+    pub accepted: usize,
+    /// Fits rejected by the silhouette overlap.
+    pub rejected_overlap: usize,
+    /// Images that could not be fitted.
+    pub failed: usize,
+    /// Wall-clock seconds of the iteration.
+    pub seconds: f64,
+    /// Every image.
+    pub records: Vec<ImageRecord>,
+}
+
+/// What a run is given.
+#[derive(Debug, Clone)]
+pub struct RunPlan {
+    /// The model the first iteration starts from.
+    pub model: PathBuf,
+    /// The init file (finder and initializer).
+    pub init: PathBuf,
+    /// The images.
+    pub images: Vec<PathBuf>,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Iterations in all (a rerun with more continues).
+    pub iterations: u32,
+    /// Fit settings and quality control.
+    pub settings: LearnSettings,
+    /// Parallel fits.
+    pub jobs: usize,
+}
+
+/// What a run reports as it goes.
+#[derive(Debug)]
+pub enum RunEvent<'a> {
+    /// An iteration was complete on disk and is kept.
+    Reused(&'a IterationFile),
+    /// Images of an iteration fitted so far.
+    Fitting {
+        /// The iteration.
+        iteration: u32,
+        /// Images fitted.
+        done: usize,
+        /// Images in all.
+        total: usize,
+    },
+    /// An iteration finished.
+    Finished(&'a IterationFile),
+}
+
+/// Why a run stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A file could not be read or written.
+    #[error("{}: {error}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        error: std::io::Error,
+    },
+    /// A model could not be read or written.
+    #[error(transparent)]
+    Model(#[from] model_io::ModelIoError),
+    /// An iteration's records could not be read back.
+    #[error("{}: {error}", path.display())]
+    Records {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        error: serde_json::Error,
+    },
+    /// An iteration made no model.
+    #[error(transparent)]
+    Learn(#[from] LearnError),
+    /// A picture could not be drawn or written.
+    #[error("{}: {error}", path.display())]
+    Picture {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        error: String,
+    },
+    /// The worker threads could not start.
+    #[error("cannot start {jobs} threads: {error}")]
+    Threads {
+        /// Threads asked for.
+        jobs: usize,
+        /// Why.
+        error: rayon::ThreadPoolBuildError,
+    },
+}
+
+/// `DIR/model_N.gpmm`.
+pub fn model_path(out: &Path, iteration: u32) -> PathBuf {
+    out.join(format!("model_{iteration}.gpmm"))
+}
+
+/// `DIR/iteration_N`.
+pub fn iteration_dir(out: &Path, iteration: u32) -> PathBuf {
+    out.join(format!("iteration_{iteration}"))
+}
+
+/// Runs the loop: every complete iteration on disk is kept, the others are run. Returns the
+/// iterations' files in order.
+pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec<IterationFile>, RunError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |error| RunError::Io { path, error }
+    };
+    std::fs::create_dir_all(&plan.out).map_err(io(&plan.out))?;
+    let init = std::fs::read(&plan.init).map_err(io(&plan.init))?;
+    let mut previous_path = plan.model.clone();
+    let mut model = model_io::load(&plan.model)?;
+    let mut done = Vec::new();
+    for iteration in 1..=plan.iterations {
+        let dir = iteration_dir(&plan.out, iteration);
+        let records_path = dir.join("records.json");
+        let next_path = model_path(&plan.out, iteration);
+        if records_path.is_file() && next_path.is_file() {
+            let text = std::fs::read_to_string(&records_path).map_err(io(&records_path))?;
+            let file: IterationFile =
+                serde_json::from_str(&text).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
+            events(RunEvent::Reused(&file));
+            model = model_io::load(&next_path)?;
+            previous_path = next_path;
+            done.push(file);
+            continue;
+        }
+        let t0 = std::time::Instant::now();
+        let progress = |d, t| events(RunEvent::Fitting { iteration, done: d, total: t });
+        let wakes = wake(&model, &init, &plan.images, &plan.settings, plan.jobs, &progress)
+            .map_err(|error| RunError::Threads { jobs: plan.jobs, error })?;
+        let records: Vec<ImageRecord> = wakes.iter().map(|w| w.record.clone()).collect();
+        let (accepted, rejected_overlap, failed) = counts(&records);
+        let record = LearningRecord {
+            iteration,
+            previous_model: previous_path.display().to_string(),
+            init: plan.init.display().to_string(),
+            images: records.len(),
+            accepted,
+            rejected_overlap,
+            failed,
+            min_iou: plan.settings.min_iou,
+            seed: plan.settings.fit.seed,
+        };
+        std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+        let next = learned_model(&model, &wakes, record)?;
+        model_io::save(&next, &next_path)?;
+        write_samples(&next, &dir.join("samples.png"))?;
+        write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
+        let file = IterationFile {
+            iteration,
+            previous_model: previous_path.display().to_string(),
+            model: next_path.display().to_string(),
+            images: records.len(),
+            accepted,
+            rejected_overlap,
+            failed,
+            seconds: t0.elapsed().as_secs_f64(),
+            records,
+        };
+        let text = serde_json::to_string_pretty(&file).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
+        std::fs::write(&records_path, text + "\n").map_err(io(&records_path))?;
+        events(RunEvent::Finished(&file));
+        model = next;
+        previous_path = next_path;
+        done.push(file);
+    }
+    Ok(done)
+}
+
+/// Picture settings of the learning run's figures: small cells, light that shows shape.
+fn figure_settings() -> RenderSettings {
+    RenderSettings { width: 112, height: 112, light: shape_light(), ..RenderSettings::default() }
+}
+
+/// The model's mean and samples at ±2σ of its first components, frontal and at 45°.
+fn write_samples(model: &GpModel, path: &Path) -> Result<(), RunError> {
+    let picture_error = |error: String| RunError::Picture { path: path.to_path_buf(), error };
+    let rank = model.shape.rank();
+    let mut meshes = vec![model.instance(&[], &[]).map_err(|e| picture_error(e.to_string()))?];
+    let mut labels = vec!["mean".to_string()];
+    for k in 0..rank.min(3) {
+        for sign in [2.0f32, -2.0] {
+            let mut c = vec![0.0; k + 1];
+            c[k] = sign;
+            meshes.push(model.instance(&c, &[]).map_err(|e| picture_error(e.to_string()))?);
+            labels.push(format!("{}:{sign:+}", k + 1));
+        }
+    }
+    let views = [View::FRONTAL, View::yaw(45.0)];
+    let grid = sample_grid(model, &meshes, &labels, &views, &figure_settings()).map_err(|e| picture_error(e.to_string()))?;
+    save_png(&grid, path).map_err(|e| picture_error(e.to_string()))
+}
+
+/// The first eight accepted reconstructions (shape and albedo), frontal and at 45° (which images
+/// were rejected, and why, is in the records).
+fn write_reconstructions(model: &GpModel, wakes: &[Wake], path: &Path) -> Result<(), RunError> {
+    let picture_error = |error: String| RunError::Picture { path: path.to_path_buf(), error };
+    let accepted: Vec<&Wake> = wakes.iter().filter(|w| w.reconstruction.is_some()).take(8).collect();
+    let meshes: Vec<crate::mesh::Mesh> = accepted.iter().filter_map(|w| w.reconstruction.clone()).collect();
+    // Cells are numbered in the records' order (an "m" marks a mirror image): names do not fit.
+    let labels: Vec<String> = wakes
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| w.reconstruction.is_some())
+        .take(8)
+        .map(|(i, w)| format!("#{}{}", i + 1, if w.record.mirrored { "m" } else { "" }))
+        .collect();
+    let views = [View::FRONTAL, View::yaw(45.0)];
+    let grid = sample_grid(model, &meshes, &labels, &views, &figure_settings()).map_err(|e| picture_error(e.to_string()))?;
+    save_png(&grid, path).map_err(|e| picture_error(e.to_string()))
+}
