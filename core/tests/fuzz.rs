@@ -71,7 +71,9 @@ fn seeds() -> Vec<(&'static str, &'static str, Vec<u8>)> {
     let pixels: Vec<[u8; 3]> = (0..w * h).map(|i| [(i * 9) as u8, (200 - i) as u8, 77]).collect();
     let landmarks = [[1.5f32, 2.5], [3.25, 0.5], [4.0, 4.0]];
     let mut input = vec![0u8; fit_input::buffer_len(w, h, landmarks.len())];
-    let n = fit_input::write(&mut input, w, h, 42, &settings, &landmarks, &pixels).unwrap();
+    // The top row left out, as for a crop that leaves the photo.
+    let covered = gpmm_core::geometry::CoveredPixels { x0: 0, y0: 1, x1: w, y1: h };
+    let n = fit_input::write(&mut input, w, h, 42, covered, &settings, &landmarks, &pixels).unwrap();
     input.truncate(n);
     let mut job = vec![0u8; frame_fit::buffer_len()];
     let n = frame_fit::write(&mut job, 64, 7, &settings).unwrap();

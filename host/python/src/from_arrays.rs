@@ -181,6 +181,7 @@ fn metadata(given: Option<&Bound<'_, PyAny>>, shape: &ModelPart, color: &ModelPa
         template: Provenance { source: "<arrays>".into(), scale_mm_per_unit: 1.0, source_vertices: n, ..Provenance::default() },
         units: "mm".into(),
         created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION"), " python from_arrays").into(),
+        learning: None,
     };
     let Some(given) = given.filter(|g| !g.is_none()) else { return Ok(defaults) };
     let py = given.py();

@@ -33,7 +33,7 @@ pub fn render_params(model: &GpModel, params: &Params, settings: &FitOptions) ->
     let mm = morphable(model)?;
     let (w, h) = (settings.size, settings.size);
     let core_error = |stage: &'static str| move |error| FitRunError::Core { stage, error };
-    let mut buffers = FitBuffers::host(mm.vertices(), w, h, &settings.core());
+    let mut buffers = FitBuffers::host(mm.vertices(), w, h);
     let mut inst = buffers.instance::<{ crate::fit::KS }, { crate::fit::KC }>().map_err(core_error("instance"))?;
     inst.update(&mm, params, w, h).map_err(core_error("silhouette"))?;
     let mut raster: Box<HostRasterizer> = Box::new(HostRasterizer::new());
