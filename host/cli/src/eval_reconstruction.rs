@@ -1,6 +1,6 @@
 //! `gpmm eval reconstruction`: the 3D error of fits against a set's true faces.
 
-use crate::eval::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalModelArgs};
+use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalModelArgs};
 use crate::progress::{bar_style, note, spinner};
 use anyhow::{bail, Result};
 use clap::Args;

@@ -9,6 +9,7 @@ mod device;
 mod device_frame;
 mod eval;
 mod eval_reconstruction;
+mod eval_setup;
 mod fit;
 mod h5;
 mod learn;
