@@ -1,6 +1,6 @@
 //! `gpmm eval recognition` and `gpmm eval specgen`: the paper's evaluation.
 
-use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalModelArgs};
+use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalLandmarkArgs, EvalModelArgs};
 use crate::progress::{bar_style, note, spinner};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -118,14 +118,9 @@ pub struct RecognitionArgs {
     /// A `gpmm synth` directory rendered with yaw 0 among its yaws (e.g. --yaws 0,15,30,45).
     #[arg(long, value_name = "DIR")]
     pub synth: PathBuf,
-    /// Fit with the landmark files of DIR (same names as the set's `.pts`, e.g. a detector's)
-    /// instead of the exact ones; the identities and yaws stay the set's.
-    #[arg(long, value_name = "DIR")]
-    pub landmarks_dir: Option<PathBuf>,
-    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`: the
-    /// detector's systematic, view-dependent offsets learned on renders) before fitting.
-    #[arg(long, value_name = "FILE")]
-    pub landmark_calibration: Option<PathBuf>,
+    /// Landmarks.
+    #[command(flatten)]
+    pub landmarks: EvalLandmarkArgs,
     /// Models.
     #[command(flatten)]
     pub models: EvalModelArgs,
@@ -195,7 +190,7 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     if !a.synth.is_dir() {
         bail!("synth directory {} not found (make one with `gpmm synth --count 50 --seed 1 -o DIR`)", a.synth.display());
     }
-    let landmarks = gpmm_host::eval::LandmarkSource::new(a.landmarks_dir.clone(), a.landmark_calibration.as_deref())?;
+    let landmarks = a.landmarks.source()?;
     let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?.with_landmarks(landmarks);
     let mut sel = eval_selection(&a.models)?;
     sel.kde = a.kde.map(|n| n as usize);

@@ -1,6 +1,6 @@
 //! `gpmm eval reconstruction`: the 3D error of fits against a set's true faces.
 
-use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalModelArgs};
+use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalLandmarkArgs, EvalModelArgs};
 use crate::progress::{bar_style, note, spinner};
 use anyhow::{bail, Result};
 use clap::Args;
@@ -16,12 +16,9 @@ pub struct ReconstructionArgs {
     /// A `gpmm synth` directory (or a set made from one, with its truth.json).
     #[arg(long, value_name = "DIR")]
     pub synth: PathBuf,
-    /// Fit with the landmark files of DIR (same names as the set's `.pts`, e.g. a detector's).
-    #[arg(long, value_name = "DIR")]
-    pub landmarks_dir: Option<PathBuf>,
-    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`) before fitting.
-    #[arg(long, value_name = "FILE")]
-    pub landmark_calibration: Option<PathBuf>,
+    /// Landmarks.
+    #[command(flatten)]
+    pub landmarks: EvalLandmarkArgs,
     /// Models (default: symmetric-full built from the template).
     #[command(flatten)]
     pub models: EvalModelArgs,
@@ -47,7 +44,7 @@ pub fn run(a: ReconstructionArgs) -> Result<()> {
     if !a.synth.is_dir() {
         bail!("synth directory {} not found (make one with `gpmm synth --count 20 --seed 1 -o DIR`)", a.synth.display());
     }
-    let landmarks = gpmm_host::eval::LandmarkSource::new(a.landmarks_dir.clone(), a.landmark_calibration.as_deref())?;
+    let landmarks = a.landmarks.source()?;
     let describe = landmarks.describe();
     let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(2)))?.with_landmarks(landmarks);
     let mut sel = eval_selection(&a.models)?;

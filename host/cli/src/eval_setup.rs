@@ -6,6 +6,26 @@ use clap::Args;
 use gpmm_host::gp::kernel::ModelKernel;
 use std::path::{Path, PathBuf};
 
+/// Where the fits of a set's images take their landmarks from.
+#[derive(Debug, Args)]
+pub struct EvalLandmarkArgs {
+    /// Fit with the landmark files of DIR (same names as the set's `.pts`, e.g. a detector's)
+    /// instead of the exact ones; the identities and yaws stay the set's.
+    #[arg(long, value_name = "DIR")]
+    pub landmarks_dir: Option<PathBuf>,
+    /// Correct the landmarks with this detector calibration (`gpmm calibrate-landmarks`: the
+    /// detector's systematic, view-dependent offsets learned on renders) before fitting.
+    #[arg(long, value_name = "FILE")]
+    pub landmark_calibration: Option<PathBuf>,
+}
+
+impl EvalLandmarkArgs {
+    /// The landmark source these name (the calibration read and checked).
+    pub fn source(&self) -> Result<gpmm_host::eval::LandmarkSource> {
+        Ok(gpmm_host::eval::LandmarkSource::new(self.landmarks_dir.clone(), self.landmark_calibration.as_deref())?)
+    }
+}
+
 /// Model selection and building options shared by the evaluations.
 #[derive(Debug, Args)]
 pub struct EvalModelArgs {
