@@ -26,6 +26,7 @@ pub mod report;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::eval::model_frame::ALIGNED_LANDMARKS;
 use crate::eval::models::scans::{EvalWorld, Scan};
 use crate::eval::recognition::fits::ImageFit;
 use crate::eval::EvalError;
@@ -37,8 +38,6 @@ use crate::mesh::Mesh;
 
 /// Closest-point refinement rounds after the landmark alignment.
 pub const ALIGNMENT_ITERATIONS: usize = 10;
-/// The iBUG-68 points of the landmark alignment: all but the jaw contour (0–16).
-const ALIGNED_LANDMARKS: std::ops::Range<usize> = 17..68;
 
 /// Distance statistics (mm).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -92,7 +91,7 @@ pub fn scan_to_mesh(fitted: &Mesh, landmarks: &[u32], truth: &Scan) -> Result<Sc
     let dst = ALIGNED_LANDMARKS.map(|k| point(&truth.mesh, truth.landmarks[k])).collect::<Result<Vec<_>, _>>()?;
     let mut align = Similarity::fit(&src, &dst).ok_or_else(|| bad("the landmarks cannot be aligned"))?;
     let mut moved = fitted.clone();
-    for _ in 0..=ALIGNMENT_ITERATIONS {
+    for _ in 0..ALIGNMENT_ITERATIONS {
         moved.positions = fitted.positions.iter().map(|p| align.apply(*p)).collect();
         let target = PreparedTarget::new(moved.clone(), None)?;
         let hits: Vec<([f64; 3], bool)> = truth
