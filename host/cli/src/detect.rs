@@ -17,7 +17,8 @@ pub struct DetectArgs {
     #[arg(long, value_name = "INIT")]
     pub init: PathBuf,
     /// Write the 68 landmarks of one face (the largest, or --face) as an iBUG .pts file (0-based,
-    /// pixel centres at +0.5, as `gpmm fit` reads; points past the image's edge moved onto it).
+    /// pixel centres at +0.5, as `gpmm fit` reads; a point beyond the margin a fit accepts outside
+    /// the image is moved onto its edge).
     #[arg(short, long, value_name = "PTS")]
     pub output: Option<PathBuf>,
     /// Which face --output writes: its place in the printed list (from 0; faces are listed by the
@@ -119,14 +120,17 @@ pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: 
 /// Smallest finder score `gpmm fit --init` accepts as a face.
 pub const DEFAULT_MIN_SCORE: f32 = 0.05;
 
-/// Writes the initializer's landmarks as an iBUG .pts file for a `width × height` image. Points
-/// past the image's edge (a face cut by the frame) are moved onto it, since a fit refuses them in
-/// a landmark file; the move is reported.
+/// Writes the initializer's landmarks as an iBUG .pts file for a `width × height` image. Points a
+/// little past the image's edge (a face cut by the frame) are written as read; one beyond the
+/// margin a fit accepts is moved onto the edge, and the move is reported.
 pub fn write_pts(path: &Path, points: &[[f32; 2]], width: u32, height: u32) -> Result<()> {
-    let (inside, moved) = gpmm_host::photo::pts::clamp_to_image(points, width, height);
+    let (inside, moved) = gpmm_host::photo::pts::within_margin(points, width, height);
     std::fs::write(path, gpmm_host::photo::pts::pts_string(&inside)).with_context(|| format!("cannot write {}", path.display()))?;
     if moved > 0 {
-        eprintln!("{}: {moved} landmarks lay outside the {width}x{height} image and were moved onto its edge", path.display());
+        eprintln!(
+            "{}: {moved} landmarks lay beyond the margin around the {width}x{height} image and were moved onto its edge",
+            path.display()
+        );
     }
     Ok(())
 }

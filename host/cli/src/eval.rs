@@ -92,8 +92,8 @@ pub struct DetectEvalArgs {
     /// Do not write DIR/detect.json.
     #[arg(long)]
     pub no_write: bool,
-    /// Write each detection's 68 landmarks to PTS_DIR/NAME.pts (0-based; points past the image's
-    /// edge moved onto it, as `gpmm fit --init` does), e.g. for `gpmm bench-fit --landmarks-dir
+    /// Write each detection's 68 landmarks to PTS_DIR/NAME.pts (0-based; a point beyond the
+    /// margin a fit accepts outside the image moved onto its edge, as `gpmm fit --init` does), e.g. for `gpmm bench-fit --landmarks-dir
     /// PTS_DIR` or `gpmm eval recognition --landmarks-dir PTS_DIR`.
     #[arg(long, value_name = "PTS_DIR")]
     pub pts_dir: Option<PathBuf>,

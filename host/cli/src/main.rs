@@ -60,7 +60,7 @@ pub enum Command {
     /// Fit a model to a photo with 68 landmarks: pose, shape, colour and light by MCMC.
     ///
     /// The photo is cropped to a square around the landmarks (side 1.8x the landmarks' larger
-    /// extent, lifted by 0.1x so the forehead fits; border pixels repeated past the image edge) and
+    /// extent, lifted by 0.1x so the forehead fits; pixels past the image's edge left out of the likelihood) and
     /// resampled to --size. Then a landmark-only chain on the pose (--landmark-steps, the jaw
     /// contour down-weighted; no rendering), a closed-form SH light, a Gauss-Newton solve of the
     /// leading shape components against the landmarks and the image, and an image chain on pose,

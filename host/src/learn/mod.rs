@@ -127,7 +127,7 @@ fn fit_and_check(
     let detection = detector.detect(&photo, MIN_SCORE, Reading::DEFAULT).map_err(|e| e.to_string())?;
     let Some(det) = detection else { return Err("no face found".into()) };
     record.score = Some(det.face.score);
-    let (points, _) = crate::photo::pts::clamp_to_image(&det.landmarks, photo.width(), photo.height());
+    let (points, _) = crate::photo::pts::within_margin(&det.landmarks, photo.width(), photo.height());
     let prepared = prepare(&photo, &points, settings.fit.size).map_err(|e| e.to_string())?;
     let outcome = fit_prepared(model, &prepared, &settings.fit, &mut |_, _, _| {}).map_err(|e| e.to_string())?;
     let start = silhouette::render_params(model, &outcome.landmark_params, &settings.fit).map_err(|e| e.to_string())?;

@@ -175,14 +175,21 @@ impl Pts {
     }
 }
 
-/// The points moved onto the `width × height` image (border included) where they lie outside it,
-/// and how many were moved: a detector's reading of a face cut by the frame (a chin past the
-/// bottom edge) made fit for [`Pts::check`]. Non-finite points are left as they are.
-pub fn clamp_to_image(points: &[[f32; 2]], width: u32, height: u32) -> (Vec<[f32; 2]>, usize) {
+/// A detector's points made fit for [`Pts::check`], and how many were moved: points within the
+/// margin ([`gpmm_core::fit::LANDMARK_MARGIN`]) outside the `width × height` image stay where the
+/// detector put them (a chin past the bottom edge is data); a point beyond it is moved onto the
+/// image's edge, repeated until none is beyond (moving one shrinks the landmarks' box, and so the
+/// margin). Non-finite points are left as they are.
+pub fn within_margin(points: &[[f32; 2]], width: u32, height: u32) -> (Vec<[f32; 2]>, usize) {
     let (w, h) = (width as f32, height as f32);
-    let finite = |p: &[f32; 2]| p.iter().all(|v| v.is_finite());
-    let out: Vec<[f32; 2]> = points.iter().map(|p| if finite(p) { [p[0].clamp(0.0, w), p[1].clamp(0.0, h)] } else { *p }).collect();
-    let moved = out.iter().zip(points).filter(|(q, p)| finite(p) && q != p).count();
+    let mut out = points.to_vec();
+    let mut moved = 0;
+    // Each round moves one finite point into the image, where it is never beyond the margin.
+    while let Some(i) = first_beyond_margin(&out, w, h) {
+        let Some(p) = out.get_mut(i).filter(|p| p.iter().all(|v| v.is_finite())) else { break };
+        *p = [p[0].clamp(0.0, w), p[1].clamp(0.0, h)];
+        moved += 1;
+    }
     (out, moved)
 }
 
@@ -242,18 +249,25 @@ mod tests {
     }
 
     #[test]
-    fn points_past_the_edge_are_moved_onto_it() {
-        let points = [[5.0, 128.017], [-1.5, 40.0], [64.0, 64.0], [128.0, 0.0], [f32::NAN, 3.0]];
-        let (inside, moved) = clamp_to_image(&points, 128, 128);
-        assert_eq!(moved, 2);
-        assert_eq!(inside[..4], [[5.0, 128.0], [0.0, 40.0], [64.0, 64.0], [128.0, 0.0]]);
-        assert!(inside[4][0].is_nan());
-        // Both pass the check: the points lay within the margin.
+    fn points_within_the_margin_stay_and_far_ones_are_moved_onto_the_edge() {
+        // A 100 px landmark box (margin 20 px) in a 128 x 128 image.
+        let mut points = vec![[20.0, 30.0], [120.0, 130.0], [70.0, 80.0], [-1.5, 60.0]];
+        let (same, moved) = within_margin(&points, 128, 128);
+        assert_eq!((moved, &same), (0, &points), "a chin 2 px below and a jaw point 1.5 px left stay");
+        // A point 60 px past the right edge is moved onto it; the others stay.
+        points.push([188.0, 70.0]);
+        let (inside, moved) = within_margin(&points, 128, 128);
+        assert_eq!(moved, 1);
+        assert_eq!(inside[4], [128.0, 70.0]);
+        assert_eq!(inside[..4], points[..4]);
         let p = Path::new("detected.pts");
-        let before = Pts { points: points[..4].to_vec(), lines: vec![4, 5, 6, 7] };
-        assert!(before.check(p, 4, "ibug68", 128, 128, false).is_ok());
-        let after = Pts { points: inside[..4].to_vec(), lines: vec![4, 5, 6, 7] };
-        assert!(after.check(p, 4, "ibug68", 128, 128, false).is_ok());
+        let before = Pts { points: points.clone(), lines: vec![4, 5, 6, 7, 8] };
+        assert!(before.check(p, 5, "ibug68", 128, 128, false).is_err());
+        let after = Pts { points: inside, lines: vec![4, 5, 6, 7, 8] };
+        assert!(after.check(p, 5, "ibug68", 128, 128, false).is_ok());
+        // A non-finite point is left alone (the check names it) and the loop ends.
+        let (nan, moved) = within_margin(&[[f32::NAN, 3.0], [10.0, 10.0]], 128, 128);
+        assert!(nan[0][0].is_nan() && moved == 0);
     }
 
     #[test]
