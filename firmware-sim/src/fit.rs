@@ -108,11 +108,6 @@ pub(crate) fn fit_and_log(
     sizes: Sizes,
     (parse, t_origin): (u64, u64),
 ) {
-    // The start's shape solve needs about 45 KB of stack, more than is left beside the statics:
-    // refused as a bad setting rather than run into a stack overflow.
-    if settings.start.shape_rounds > 0 {
-        fit_failed("settings (start.shape_rounds > 0: no stack for the shape solve)", FitError::BadConfig);
-    }
     let n = model.vertices();
     let (width, height) = (image.width(), image.height());
     let Buffers { pool, projected, raster, cache } = bufs;

@@ -15,6 +15,7 @@ use crate::clock::{self, instructions_now};
 use crate::fit::{self, fit_failed, Buffers, Sizes};
 use crate::{detect, fail, PROFILE};
 
+use gpmm_core::error::FitError;
 use gpmm_core::fit::{CoveredPixels, FitSettings, TargetImage};
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::detection::{DetectCounts, Frame};
@@ -118,6 +119,11 @@ fn crop_and_fit(
     sizes: Sizes,
     (parse, detection, t_origin): (u64, u64, u64),
 ) {
+    // The crop on this stack leaves no room for the start's shape solve beside the fit: refused
+    // as a bad setting rather than run into a stack overflow.
+    if job.settings.start.shape_rounds > 0 {
+        fit_failed("settings (start.shape_rounds > 0: the landmark-free fit has no stack for the shape solve)", FitError::BadConfig);
+    }
     let mut pixels = [[0u8; 3]; SIDE * SIDE];
     let mut working = [[0.0f32; 2]; MAX_INIT_LANDMARKS];
     let side = job.side as usize;

@@ -76,8 +76,9 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let (q, blob) = models();
     let face = &faces(1, 11)[1];
     let prep = prepared(face);
-    // The device runs no shape solve (device_settings): the float fit compares like with like.
+    // The device's settings (device_settings: the ranks capped), with the start's shape solve.
     let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
+    assert!(fit.start.shape_rounds > 0, "the device's default fit runs the shape solve");
     let settings = FitOptions { fit, ..FitOptions::DEFAULT };
 
     let device = device_settings(&settings.core(), &M4F);
@@ -118,17 +119,18 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     );
 }
 
-/// The int16 blob fits like the float model it was made from. Not bit for bit: the chains are
-/// chaotic, so a 1e-4 mm quantization difference may flip one accept decision, after which the
-/// two runs are two draws of the same posterior. Most faces do follow the same trajectory
-/// (identical landmarks), and every face fits the target landmarks equally well.
+/// The int16 blob fits like the float model it was made from. Not bit for bit: the start's shape
+/// solve carries a 1e-4 mm quantization difference into the coefficients, and the chains are
+/// chaotic (one accept decision flipped and the two runs are two draws of the same posterior).
+/// The fitted landmarks stay within a pixel of each other, and every face fits the target
+/// landmarks equally well.
 #[test]
 fn float_model_and_blob_fit_the_same_landmarks() {
     let (q, blob) = models();
-    // The device runs no shape solve (device_settings): the float fit compares like with like.
+    // The device's settings: the float fit compares like with like.
     let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
     let settings = FitOptions { fit, ..FitOptions::DEFAULT };
-    let (mut worst, mut same, mut worst_quality) = (0.0f32, 0, 0.0f32);
+    let (mut worst, mut worst_quality) = (0.0f32, 0.0f32);
     let faces = faces(3, 5);
     for face in &faces {
         let prep = prepared(face);
@@ -139,10 +141,8 @@ fn float_model_and_blob_fit_the_same_landmarks() {
         println!("{}: float vs blob landmarks differ by at most {d:.3} px; RMSE to the target {rf:.3} vs {rb:.3} px", face.truth.image);
         worst = worst.max(d);
         worst_quality = worst_quality.max((rf - rb).abs());
-        same += usize::from(d < 0.01);
     }
-    assert!(2 * same > faces.len(), "only {same} of {} faces kept the same trajectory", faces.len());
-    assert!(worst <= 3.0, "float model and blob fits differ by {worst} px");
+    assert!(worst <= 1.0, "float model and blob fits differ by {worst} px");
     assert!(worst_quality <= 0.25, "the blob fits the target landmarks worse or better by {worst_quality} px");
 }
 
@@ -182,15 +182,13 @@ fn firmware_fit_uses_every_setting() {
         },
         image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02, color_polish_rounds: 1, landmark_sigma_factor: 2.0 },
         ranks: RankSettings { shape: 30, color: 20 },
-        // The shape solve's stack (about 45 KB) does not fit the m4f's beside the statics: the
-        // firmware refuses it, so its rounds stay 0 here and only the settings' wire form is exercised.
         start: StartSettings {
             nominal_distance_mm: 600.0,
             color_rounds: 2,
             color_stride: 3,
             color_weight: 0.5,
             color_iterations: 12,
-            shape_rounds: 0,
+            shape_rounds: 1,
             shape_components: 12,
             shape_iterations: 2,
             shape_stride: 3,
@@ -212,9 +210,8 @@ fn firmware_fit_uses_every_setting() {
         },
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
     };
-    // Every top-level field and group differs from the default except `start.shape_rounds`
-    // (the firmware refuses the shape solve; see above). A new field must be added here; 97 fields
-    // counting the groups' own.
+    // Every top-level field and group differs from the default. A new field must be added here;
+    // 97 fields counting the groups' own.
     let fields = format!("{settings:?}");
     assert_eq!(fields.matches(": ").count(), 97, "update this test for the new settings: {fields}");
     let seed = 99;

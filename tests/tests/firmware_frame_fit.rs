@@ -23,7 +23,7 @@ use gpmm_core::profile::M4F;
 use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::detect::Detector;
 use gpmm_host::device::detect::camera_frame;
-use gpmm_host::device::fit::{device_settings, run_firmware};
+use gpmm_host::device::fit::{frame_fit_settings, run_firmware};
 use gpmm_host::device::frame_fit::{
     compare, frame_section, host_frame_fit, job_bytes, parse_report, partition_bytes, DeviceFrameFitReport, FrameFitParity,
 };
@@ -80,7 +80,7 @@ fn fixture() -> &'static Fixture {
         let mut fit = CoreSettings::DEFAULT.with_steps(STEPS.0, STEPS.1).with_ranks(view.rank_shape(), view.rank_color());
         fit.landmarks = fit.landmarks.for_initializer(INIT_LANDMARK_SIGMA);
         let options = FitOptions { size: M4F.frame_fit_side, seed: 5, fit };
-        let settings = device_settings(&options.core(), &M4F);
+        let settings = frame_fit_settings(&options.core(), &M4F);
         Fixture { blob, init, frame, settings }
     })
 }

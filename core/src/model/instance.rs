@@ -65,6 +65,17 @@ struct ShadingKey {
     light: [[u32; 3]; crate::render::light::SH_COEFFS],
 }
 
+/// An instance's model-space vertices of its last update, read together.
+#[derive(Debug, Clone, Copy)]
+pub struct Vertices<'v> {
+    /// Positions.
+    pub positions: &'v [Vec3],
+    /// Normals.
+    pub normals: &'v [Vec3],
+    /// Albedos.
+    pub albedos: &'v [Vec3],
+}
+
 /// The per-vertex stage of a parameter vector, cached (see the module docs).
 #[derive(Debug)]
 pub struct Instance<'b, const KS: usize, const KC: usize> {
@@ -290,6 +301,14 @@ impl<'b, const KS: usize, const KC: usize> Instance<'b, KS, KC> {
     /// The projected vertices and the frame cache, if one is attached (borrowed together).
     pub fn projected_and_frames(&mut self) -> (&[ProjectedVertex], Option<&mut FrameCache<'b>>) {
         (self.bufs.projected, self.frames.as_mut())
+    }
+
+    /// The last update's vertices, with the attached frame cache's memory lent as scratch
+    /// ([`FrameCache::scratch`]: `None` without a compact cache; the cache forgets its frames).
+    pub fn vertices_and_scratch(&mut self) -> (Vertices<'_>, Option<&mut [u16]>) {
+        let b = &self.bufs;
+        let vertices = Vertices { positions: b.positions, normals: b.normals, albedos: b.albedos };
+        (vertices, self.frames.as_mut().and_then(FrameCache::scratch))
     }
 
     /// The attached frame cache's counters, if one is attached.

@@ -157,6 +157,16 @@ impl<'c> FrameCache<'c> {
         }
     }
 
+    /// Lends the compact slot's triangle ids as scratch memory (`None` for a cache of full slots),
+    /// forgetting every frame first: nothing written there is ever read back as a frame.
+    pub fn scratch(&mut self) -> Option<&mut [u16]> {
+        self.clear();
+        self.slots.iter_mut().find_map(|s| match &mut s.store {
+            Store::Compact(c) => Some(&mut *c.triangles),
+            _ => None,
+        })
+    }
+
     /// Whether a frame of geometry `key` is kept.
     pub fn contains(&self, key: &GeometryKey) -> bool {
         self.slots.iter().any(|s| s.key.as_ref() == Some(key))

@@ -3,7 +3,7 @@
 use crate::device::{DeviceFitArgs, DeviceFitInputs};
 use anyhow::{Context, Result};
 use gpmm_host::device::detect::camera_frame;
-use gpmm_host::device::fit::{device_settings, run_firmware};
+use gpmm_host::device::fit::{frame_fit_settings, run_firmware};
 use gpmm_host::device::frame_fit::{self as ff, check_landmarks, check_side, host_frame_fit, job_bytes, HostFrameFit};
 use gpmm_host::fit::FitFlags;
 
@@ -33,7 +33,7 @@ pub fn device_fit_init(a: DeviceFitArgs) -> Result<()> {
     let (frame, mapping) = camera_frame(&photo, a.width, a.height);
     let options = FitFlags { initializer_sigma: Some(a.init_landmark_sigma), ..a.flags(ranks, side) }.resolve()?;
     options.validate()?;
-    let settings = device_settings(&options.core(), profile);
+    let settings = frame_fit_settings(&options.core(), profile);
     let host = |()| -> Result<HostFrameFit> { Ok(host_frame_fit(blob, &init, &frame, a.min_score, a.refine, side, &settings, a.seed)?) };
     let no_face = |score: f32| {
         anyhow::anyhow!(

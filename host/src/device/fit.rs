@@ -75,15 +75,22 @@ pub enum DeviceFitError {
 }
 
 /// `settings` as a device of `profile` runs them: the ranks capped at the coefficient capacities
-/// of both the device and the host's run of it, and no shape solve at the start (it runs in fixed
-/// memory, but its stack, about 45 KB, overflows the m4f's beside the fit's statics): the chains
-/// fit the shape instead ([`FitSettings::without_shape_solve`]).
+/// of both the device and the host's run of it. The start's shape solve runs as on the host (its
+/// depth grid in the frame cache's memory, [`gpmm_core::fit::solve::shape::DEPTH_CELLS`]).
 pub fn device_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
     let ranks = RankSettings {
         shape: settings.ranks.shape.min(profile.shape_capacity).min(DEVICE_KS),
         color: settings.ranks.color.min(profile.color_capacity).min(DEVICE_KC),
     };
-    FitSettings { ranks, ..settings.without_shape_solve() }
+    FitSettings { ranks, ..*settings }
+}
+
+/// `settings` as a device of `profile` runs them in the landmark-free fit (`gpmm device-fit
+/// --init`): [`device_settings`] without the start's shape solve, whose stack does not fit beside
+/// the camera frame's crop on the m4f; the chains fit the shape instead
+/// ([`FitSettings::without_shape_solve`]).
+pub fn frame_fit_settings(settings: &FitSettings, profile: &DeviceProfile) -> FitSettings {
+    device_settings(settings, profile).without_shape_solve()
 }
 
 /// The fit input section (`gpmm_core::format::fit_input`): `prepared`'s working image, the

@@ -17,9 +17,10 @@
 //! Visibility: a back-facing test (as in the colour and light solves) and an occlusion test on a
 //! coarse depth grid of the instance's vertices (`DepthGrid`).
 //!
-//! Memory, all on the stack and fixed: the normal equations (`56²` floats, `70²` past 50 components
-//! and the pose), the depth
-//! grid, one chunk of sampled vertices with their rings and the landmarks' positions; the same
+//! Memory, fixed: on the stack the normal equations (`56²` floats, `70²` past 50 components and
+//! the pose), one chunk of sampled vertices with their rings and the landmarks' positions; the
+//! depth grid ([`DEPTH_CELLS`] 16-bit cells) in the memory of the instance's compact frame cache
+//! when it has one (a device: its stack holds the solve only so), else on the stack. The same
 //! code runs on the host and on a device.
 
 use crate::error::FitError;
@@ -28,7 +29,7 @@ use crate::fit::likelihood::landmarks::LandmarkTarget;
 use crate::fit::solve::ring::{Chunk, Ring, RING_VERTICES};
 use crate::geometry::mat_vec;
 use crate::geometry::{TriIndex, Vec3};
-use crate::model::instance::Instance;
+use crate::model::instance::{Instance, Vertices};
 use crate::model::morphable::MorphableModel;
 use crate::model::morphable::MAX_LANDMARKS;
 use crate::model::params::FitParams;
@@ -106,33 +107,60 @@ impl Frame<'_, '_> {
 
 /// Cells per side of the solve's depth grid (its occlusion test).
 const DEPTH_GRID: usize = 64;
+/// Cells of the depth grid: the scratch memory a solve needs, 2 bytes each (a device lends its
+/// frame cache's, [`Instance::vertices_and_scratch`]; without one the solve keeps its own).
+pub const DEPTH_CELLS: usize = DEPTH_GRID * DEPTH_GRID;
+/// Depth steps per mm of a grid cell's 16-bit value: 1/16 mm over 4 m around the face's centre.
+const DEPTH_STEPS_PER_MM: f32 = 16.0;
+/// A cell no vertex falls in.
+const EMPTY: u16 = u16::MAX;
 /// How far (mm) behind the nearest vertex of its cell a sample may lie and still count as seen:
 /// the surface's own depth change across a cell at the samples' slopes stays below it, a nose in
 /// front of a cheek does not.
 const OCCLUSION_TOLERANCE_MM: f32 = 5.0;
 
 /// The nearest vertex depth in each cell of a coarse grid over the image (cells of
-/// `side / DEPTH_GRID` pixels, at least one): a z-buffer of vertex splats. A sample farther than
-/// [`OCCLUSION_TOLERANCE_MM`] behind its cell's nearest vertex is hidden by another part of the
-/// face (the nose, at 30–45° yaw, hides the far cheek's vertices that still face the camera).
-struct DepthGrid {
+/// `side / DEPTH_GRID` pixels, at least one): a z-buffer of vertex splats, in 16-bit steps of
+/// 1/16 mm (rounded toward the camera). A sample farther than [`OCCLUSION_TOLERANCE_MM`] behind
+/// its cell's nearest vertex is hidden by another part of the face (the nose, at 30–45° yaw,
+/// hides the far cheek's vertices that still face the camera).
+struct DepthGrid<'g> {
     cell: f32,
-    depth: [[f32; DEPTH_GRID]; DEPTH_GRID],
+    /// The depth (mm) of step 0: 2 m in front of the pose's centre.
+    origin_mm: f32,
+    /// [`DEPTH_CELLS`] cells, row by row.
+    depth: &'g mut [u16],
 }
 
-impl DepthGrid {
-    /// The grid of `positions` (model space) seen through `frame` in a `width × height` image.
-    fn new(frame: &Frame<'_, '_>, positions: &[Vec3], width: u32, height: u32) -> Self {
+impl<'g> DepthGrid<'g> {
+    /// The grid of `positions` (model space) seen through `frame` in a `width × height` image,
+    /// written over `depth` (at least [`DEPTH_CELLS`] cells) in place.
+    fn new(depth: &'g mut [u16], frame: &Frame<'_, '_>, positions: &[Vec3], width: u32, height: u32) -> Self {
         let cell = (width.max(height) as f32 / DEPTH_GRID as f32).max(1.0);
-        let mut grid = Self { cell, depth: [[f32::INFINITY; DEPTH_GRID]; DEPTH_GRID] };
+        depth.fill(EMPTY);
+        let origin_mm = -frame.translation[2] - f32::from(EMPTY) / DEPTH_STEPS_PER_MM / 2.0;
+        let grid = Self { cell, origin_mm, depth };
         for p in positions {
             if let Some((i, j, d)) = grid.locate(frame, *p) {
-                if let Some(c) = grid.depth.get_mut(j).and_then(|r| r.get_mut(i)) {
-                    *c = c.min(d);
+                let q = grid.steps(d);
+                if let Some(c) = grid.depth.get_mut(j * DEPTH_GRID + i) {
+                    *c = (*c).min(q);
                 }
             }
         }
         grid
+    }
+
+    /// Depth `d` (mm) in whole steps from the origin, rounded down, clamped below [`EMPTY`].
+    fn steps(&self, d: f32) -> u16 {
+        let q = (d - self.origin_mm) * DEPTH_STEPS_PER_MM;
+        let top = f32::from(EMPTY - 1);
+        // Saturating casts: a point past either end of the range clamps to it (NaN to 0).
+        if q >= top {
+            EMPTY - 1
+        } else {
+            q.max(0.0) as u16
+        }
     }
 
     /// The cell and depth (mm along the view axis) of model-space point `p`.
@@ -150,7 +178,11 @@ impl DepthGrid {
     /// Whether `p` is within the tolerance of its cell's nearest vertex.
     fn seen(&self, frame: &Frame<'_, '_>, p: Vec3) -> bool {
         self.locate(frame, p)
-            .and_then(|(i, j, d)| self.depth.get(j).and_then(|r| r.get(i)).map(|near| d <= near + OCCLUSION_TOLERANCE_MM))
+            .and_then(|(i, j, d)| {
+                let near = *self.depth.get(j * DEPTH_GRID + i)?;
+                let near_mm = self.origin_mm + f32::from(near) / DEPTH_STEPS_PER_MM;
+                Some(near == EMPTY || d <= near_mm + OCCLUSION_TOLERANCE_MM)
+            })
             .unwrap_or(false)
     }
 }
@@ -190,12 +222,13 @@ pub fn solve_shape<I: TriIndex, const KS: usize, const KC: usize>(
         instance.update(model, params, width, height)?;
         let scene = Scene { pose: params.pose, camera: params.camera(width, height), light: params.light, image };
         let coeffs = params.shape_coeffs();
-        let current = (instance.positions(), instance.normals(), instance.albedos());
-        // The smaller system where it is enough: a device's stack holds it, the larger one not.
-        let step = if columns.len() <= SMALL_COLUMNS {
-            iterate::<I, KS, SMALL_COLUMNS>(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?
-        } else {
-            iterate::<I, KS, MAX_COLUMNS>(model, current, &scene, landmarks, config, w, coeffs, columns, &mut damping)?
+        let (current, scratch) = instance.vertices_and_scratch();
+        let problem = Problem { model, vertices: current, scene: &scene, landmarks, config, w, coeffs, columns };
+        // The depth grid in the frame cache's memory where the instance lends it (a device's
+        // stack does not hold both), else in a frame of its own.
+        let step = match scratch.and_then(|s| s.get_mut(..DEPTH_CELLS)) {
+            Some(depth) => problem.iterate::<KS>(depth, &mut damping)?,
+            None => problem.iterate_own_grid::<KS>(&mut damping)?,
         };
         report.samples = step.samples;
         if iteration == 0 {
@@ -367,7 +400,7 @@ struct Sampling<'a, 's, 'i> {
     normals: &'a [Vec3],
     albedos: &'a [Vec3],
     frame: &'a Frame<'s, 'i>,
-    grid: &'a DepthGrid,
+    grid: &'a DepthGrid<'a>,
     stride: usize,
     min_cos: f32,
 }
@@ -416,26 +449,54 @@ fn moved_ring(ring: &Ring, positions: &[Vec3], moved: impl Fn(usize, Vec3) -> Ve
     }
 }
 
+/// What one Gauss–Newton iteration works on: the model, the current instance's vertices, where
+/// residuals are taken, the landmarks, the configuration, the data weight, the shape coefficients
+/// and the unknowns.
+struct Problem<'p, 'm, 's, 'i, I: TriIndex> {
+    model: &'p MorphableModel<'m, I>,
+    vertices: Vertices<'p>,
+    scene: &'p Scene<'s, 'i>,
+    landmarks: Option<&'p LandmarkTarget<'p>>,
+    config: &'p ShapeSolveConfig,
+    w: f32,
+    coeffs: &'p [f32],
+    columns: Columns,
+}
+
+impl<I: TriIndex> Problem<'_, '_, '_, '_, I> {
+    /// One iteration with the depth grid in `depth` ([`DEPTH_CELLS`] cells), in the smaller
+    /// system where it is enough (a device's stack holds it, the larger one not).
+    fn iterate<const KS: usize>(&self, depth: &mut [u16], damping: &mut f32) -> Result<Iteration, FitError> {
+        if self.columns.len() <= SMALL_COLUMNS {
+            iterate::<I, KS, SMALL_COLUMNS>(self, depth, damping)
+        } else {
+            iterate::<I, KS, MAX_COLUMNS>(self, depth, damping)
+        }
+    }
+
+    /// One iteration with a depth grid of its own (in this frame, only when it is called).
+    #[inline(never)]
+    fn iterate_own_grid<const KS: usize>(&self, damping: &mut f32) -> Result<Iteration, FitError> {
+        let mut depth = [EMPTY; DEPTH_CELLS];
+        self.iterate::<KS>(&mut depth, damping)
+    }
+}
+
 /// Samples, the normal equations accumulated a sample at a time, and the tries of one iteration.
-#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn iterate<I: TriIndex, const KS: usize, const N: usize>(
-    model: &MorphableModel<'_, I>,
-    (positions, normals, albedos): (&[Vec3], &[Vec3], &[Vec3]),
-    scene: &Scene<'_, '_>,
-    landmarks: Option<&LandmarkTarget<'_>>,
-    config: &ShapeSolveConfig,
-    w: f32,
-    coeffs: &[f32],
-    columns: Columns,
+    problem: &Problem<'_, '_, '_, '_, I>,
+    depth: &mut [u16],
     damping: &mut f32,
 ) -> Result<Iteration, FitError> {
+    let Problem { model, vertices, scene, landmarks, config, w, coeffs, columns } = *problem;
+    let Vertices { positions, normals, albedos } = vertices;
     let k = columns.shape;
     let m = columns.len();
     let alpha = coeffs.get(..k).ok_or(FitError::BadConfig)?;
     let frame = scene.frame(&scene.pose);
     let nudged: [Frame<'_, '_>; POSE_PARAMS] = core::array::from_fn(|i| scene.frame(&nudged_pose(&scene.pose, i)));
-    let grid = DepthGrid::new(&frame, positions, scene.image.width(), scene.image.height());
+    let grid = DepthGrid::new(depth, &frame, positions, scene.image.width(), scene.image.height());
     let sampling = Sampling { positions, normals, albedos, frame: &frame, grid: &grid, stride: config.stride, min_cos: config.min_cos };
     let mut chunk = Chunk::new();
     let mut equations = NormalEquations::<N>::new(m);
@@ -585,7 +646,8 @@ mod tests {
         // A nose tip 20 mm in front of a cheek point on the same line of sight, a lone point
         // elsewhere, and a point 3 mm behind the nose tip (the surface's own slope).
         let (nose, cheek, lone, slope) = ([0.0, 0.0, 20.0], [0.0, 0.0, 0.0], [30.0, 10.0, 0.0], [0.0, 0.0, 17.0]);
-        let grid = DepthGrid::new(&frame, &[nose, cheek, lone, slope], 64, 64);
+        let mut depth = [0u16; DEPTH_CELLS];
+        let grid = DepthGrid::new(&mut depth, &frame, &[nose, cheek, lone, slope], 64, 64);
         assert!(grid.seen(&frame, nose) && grid.seen(&frame, lone) && grid.seen(&frame, slope));
         assert!(!grid.seen(&frame, cheek), "the cheek lies 20 mm behind the nose in its cell");
         // Outside the image nothing is seen (no panic on any point).
