@@ -113,6 +113,11 @@ def main():
     os.makedirs(os.path.join(args.output, "host"), exist_ok=True)
     os.makedirs(os.path.join(args.output, "device"), exist_ok=True)
     pts_dir = args.landmarks_dir or args.set
+    # A detector that found no face wrote no .pts: such images are left out on both sides.
+    missing = [im["image"] for im in images if not os.path.isfile(os.path.join(pts_dir, os.path.splitext(im["image"])[0] + ".pts"))]
+    images = [im for im in images if im["image"] not in missing]
+    if missing:
+        print(f"{len(missing)} images without landmarks in {pts_dir} left out: {', '.join(missing)}", file=sys.stderr)
 
     def both(im):
         stem = os.path.splitext(im["image"])[0]
@@ -136,7 +141,9 @@ def main():
         rows.append((label, 100.0 * hits / max(n, 1), hits, n, median(err["yaw"]), median(err["pitch"]), median(err["roll"])))
     how = "device fits on the host core (bit-identical to QEMU)" if args.host_only else "device fits under QEMU"
     lines = [
-        f"{len(images)} images ({len({im['identity'] for im in images})} identities), landmarks from {pts_dir}; {how}",
+        f"{len(images)} images ({len({im['identity'] for im in images})} identities), landmarks from {pts_dir}"
+        + (f" ({len(missing)} without landmarks left out)" if missing else "")
+        + f"; {how}",
         "",
         "| fit | rank-1 | median \\|yaw\\| / \\|pitch\\| / \\|roll\\| error |",
         "|---|---|---|",

@@ -17,7 +17,7 @@ use crate::render::ShLight;
 pub const INIT_LANDMARK_SIGMA: f32 = 0.015;
 
 /// The landmark chain's pose share where the chains fit the shape themselves (no start solve:
-/// a device; [`FitSettings::without_shape_solve`]): 40 % pose, 60 % shape.
+/// the m4f's landmark-free fit; [`FitSettings::without_shape_solve`]): 40 % pose, 60 % shape.
 pub const CHAIN_SHAPE_POSE_SHARE: f32 = 0.4;
 
 /// Settings of [`crate::fit::standard_fit`] (defaults: the documented default fit), in groups: the
@@ -220,8 +220,9 @@ impl FitSettings {
         s
     }
 
-    /// These settings without the start's shape solve (`start.shape_rounds = 0`, as a device runs
-    /// them: its stack, about 45 KB, does not fit the m4f's), the chains fitting the shape instead: a landmark chain that fits the pose only gets
+    /// These settings without the start's shape solve (`start.shape_rounds = 0`, as the m4f's
+    /// landmark-free fit runs them: the solve does not fit beside its crop), the chains fitting
+    /// the shape instead: a landmark chain that fits the pose only gets
     /// [`CHAIN_SHAPE_POSE_SHARE`], an image chain without shape moves gets [`MixtureShares::IMAGE`]'s
     /// shape share; shares that already fit the shape are kept.
     pub const fn without_shape_solve(self) -> Self {

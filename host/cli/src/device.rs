@@ -59,7 +59,7 @@ pub struct DeviceFitArgs {
     #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
     #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N",
-        help = crate::fit::landmark_steps_help(&FitSettings::DEFAULT.without_shape_solve()))]
+        help = device_landmark_steps_help())]
     pub landmark_steps: u32,
     /// Image-chain steps.
     #[arg(long, default_value_t = FitSettings::DEFAULT.image.steps, value_name = "N")]
@@ -357,4 +357,16 @@ pub fn device_detect(a: DeviceDetectArgs) -> Result<()> {
     }
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
+}
+
+/// The help of `device-fit --landmark-steps`: the default fit's chain with landmarks; with --init
+/// the start has no shape solve ([`gpmm_host::device::fit::frame_fit_settings`]) and the chain
+/// fits the shape too.
+fn device_landmark_steps_help() -> String {
+    let frame = FitSettings::DEFAULT.without_shape_solve();
+    format!(
+        "{}. With --init (no room for the shape solve beside the crop): {} % on the pose, then the shape",
+        crate::fit::landmark_steps_help(&FitSettings::DEFAULT),
+        (frame.landmarks.pose_share * 100.0).round()
+    )
 }

@@ -68,15 +68,18 @@ fn bench_fit_help_states_the_defaults() {
 #[test]
 fn device_fit_help_states_the_defaults() {
     let text = help("device-fit");
-    // A device has no shape solve at the start: its landmark chain fits the shape too.
-    let device = FitSettings::default().without_shape_solve();
-    assert!(device.landmarks.pose_share < 1.0);
+    // With landmarks a device fits as the host does; with --init its start has no shape solve,
+    // and its landmark chain fits the shape too.
+    let device = FitSettings::default();
+    let frame = device.without_shape_solve();
+    assert!(frame.landmarks.pose_share < 1.0);
     let side = |n: u32| format!("{n}x{n}");
     states(
         "device-fit",
         &text,
         &[
-            format!("--landmark-steps <N> Landmark-chain steps: {}", pose_share(&device)),
+            format!("--landmark-steps <N> Landmark-chain steps, {}", pose_share(&device)),
+            format!("With --init (no room for the shape solve beside the crop): {}", pose_share(&frame)),
             format!("[default: {}] --image-steps", device.landmarks.steps),
             format!("--image-steps <N> Image-chain steps [default: {}]", device.image.steps),
             format!("--seed <SEED> Seed of the chains [default: {}]", FitOptions::DEFAULT.seed),
