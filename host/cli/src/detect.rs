@@ -22,7 +22,7 @@ pub struct DetectArgs {
     #[arg(short, long, value_name = "PTS")]
     pub output: Option<PathBuf>,
     /// Which face --output writes: its place in the printed list (from 0; faces are listed by the
-    /// finder's score, best first). Default: the largest.
+    /// finder's score, best first). Default: the largest of those scoring within 5 % of the best.
     #[arg(long, value_name = "N")]
     pub face: Option<usize>,
     /// Write the image with every face's box and landmarks drawn.
@@ -85,7 +85,7 @@ fn pick(image: &Path, faces: &[Detection], index: Option<usize>) -> Result<usize
 }
 
 /// Detects the faces in `image_path` with the init file `init_path` (default refinement and
-/// score), writes the chosen face's (the largest, or `face`) landmarks to OUTDIR/detected.pts and
+/// score), writes the chosen face's ([`gpmm_host::detect::choose_face`]) landmarks to OUTDIR/detected.pts and
 /// every face to OUTDIR/detected.png, and returns the .pts path.
 pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: Option<usize>) -> Result<PathBuf> {
     let mut detector = Detector::load(init_path)?;

@@ -23,8 +23,8 @@ pub struct FitArgs {
     /// face to OUTDIR/detected.png, then the fit runs as with --landmarks.
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
-    /// With --init: fit this face instead of the largest, by its place in the list `gpmm detect`
-    /// prints (from 0; by the finder's score, best first).
+    /// With --init: fit this face, by its place in the list `gpmm detect` prints (from 0; by the
+    /// finder's score, best first). Default: the largest of those scoring within 5 % of the best.
     #[arg(long, value_name = "N", requires = "init")]
     pub face: Option<usize>,
     /// With --init: the landmark σ (fraction of the image side) of the initializer's landmarks,
