@@ -19,6 +19,7 @@
 //! the span of its predecessor's leading components (its mean and covariance move, its span does not).
 
 pub mod run;
+pub mod shading;
 pub mod silhouette;
 
 use std::path::{Path, PathBuf};
