@@ -7,20 +7,22 @@
 //! an albedo offset `c_v` per vertex (linear RGB). Gradient descent (Adam, analytic gradients)
 //! minimizes
 //!
-//! `Σ_seen |t_v − (a_v + c_v) ⊙ E(R n_v(x + D))|² / σ²  +  P_shape(D) + P_albedo(c)  +  μ |L h|²`
+//! `Σ_seen |I(π(x_v + D_v)) − (a_v + c_v) ⊙ E(R n_v(x + D))|² / σ²  +  P_shape(D) + P_albedo(c)  +  μ |L h|²`
 //!
 //! - the image term over the vertices the image speaks about ([`visibility`]: facing the camera,
-//!   not hidden, projecting into the photo), `t_v` the image's colour where the fitted instance's
-//!   vertex projects (held: heights of a few mm move a projection by well under a pixel at the
-//!   fit's working size), `E` the fit's SH irradiance of the moved normal (recomputed from the
+//!   not hidden, projecting into the photo, and not far from the fit's colour: see
+//!   [`ShadingSettings::max_residual`]), `I(π(·))` the image's colour where the moved vertex projects (bilinear, its slope from half a pixel either side: a height of a few
+//!   mm moves a projection by a pixel or two at the fit's working size, which matters next to the
+//!   nose), `E` the fit's SH irradiance of the moved normal (recomputed from the
 //!   one-ring, as the core computes normals), `σ` the fit's pixel noise;
 //! - the paper's penalty of each part ([`subspace`]): the offsets' distance from the model's
 //!   subspace (the fit's components) over a per-vertex σ, plus the prior on their projection into it;
-//! - a mesh Laplacian of the heights: without it the per-vertex heights turn to noise (each
-//!   normal depends on a ring of heights, so the image alone leaves zig-zag patterns free).
+//! - a mesh Laplacian of the heights, keeping neighbours together: each normal depends on a ring
+//!   of heights, so the image alone leaves zig-zag patterns free.
 //!
-//! Vertices the image says nothing about keep only the penalties, whose minimum is zero: they
-//! stay at the model's instance. The result is deterministic (one thread, fixed order).
+//! Only the vertices the image speaks about move: the others keep the model's instance (left
+//! free, they would follow the in-span part of the seen vertices' offsets, the model's own
+//! extrapolation, and the Laplacian's reach). The result is deterministic (one thread, fixed order).
 
 pub mod subspace;
 pub mod surface;
@@ -44,6 +46,10 @@ pub struct ShadingSettings {
     pub min_cos: f32,
     /// Pixel noise σ of the image term (linear colour).
     pub pixel_sigma: f32,
+    /// Vertices whose residual at the fitted instance exceeds this (RMS over the channels, linear
+    /// colour) are left out: the image there shows something the fit does not (hair, an occluder,
+    /// background at the silhouette), not detail.
+    pub max_residual: f32,
     /// σ (mm) of a vertex's shape offset away from the model's shape subspace.
     pub shape_sigma_mm: f32,
     /// σ (linear colour) of a vertex's albedo offset away from the model's colour subspace.
@@ -63,9 +69,10 @@ impl ShadingSettings {
         steps: 300,
         min_cos: 0.3,
         pixel_sigma: gpmm_core::fit::DEFAULT_PIXEL_SIGMA,
-        shape_sigma_mm: 2.0,
-        albedo_sigma: 0.03,
-        smoothness: 200.0,
+        max_residual: 0.15,
+        shape_sigma_mm: 5.0,
+        albedo_sigma: 0.02,
+        smoothness: 0.5,
         shape_rate_mm: 0.1,
         albedo_rate: 0.004,
     };
@@ -154,8 +161,12 @@ impl Detail {
 
     /// The mean absolute height over the seen vertices (mm).
     pub fn mean_height(&self) -> f32 {
-        let (sum, count) =
-            self.heights.iter().zip(&self.seen).filter(|(_, s)| **s).fold((0.0f64, 0usize), |(s, c), (h, _)| (s + f64::from(h.abs()), c + 1));
+        let (sum, count) = self
+            .heights
+            .iter()
+            .zip(&self.seen)
+            .filter(|(_, s)| **s)
+            .fold((0.0f64, 0usize), |(s, c), (h, _)| (s + f64::from(h.abs()), c + 1));
         if count == 0 {
             0.0
         } else {
@@ -194,6 +205,9 @@ impl Detail {
 
 /// The fitted instance the detail is sought around, and what the image says about it.
 struct Problem<'a> {
+    image: &'a TargetImage<'a>,
+    camera: gpmm_core::render::Camera,
+    translation: Vec3,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     albedos: Vec<Vec3>,
@@ -208,24 +222,59 @@ struct Problem<'a> {
 }
 
 impl Problem<'_> {
+    /// The image's colour where model-space point `p` projects and its gradient in `p`
+    /// (`[channel][axis]`), if it projects into the covered pixels (the bilinear image's slope
+    /// from half a pixel either side).
+    fn sample(&self, p: Vec3) -> Option<(Vec3, [Vec3; 3])> {
+        let q = mat_vec(&self.rotation, p);
+        let pc = [q[0] + self.translation[0], q[1] + self.translation[1], q[2] + self.translation[2]];
+        let s = self.camera.project(pc)?;
+        let at = |dx: f32, dy: f32| self.image.sample_bilinear(s.x + dx, s.y + dy);
+        let (c, xp, xm, yp, ym) = (at(0.0, 0.0)?, at(0.5, 0.0), at(-0.5, 0.0), at(0.0, 0.5), at(0.0, -0.5));
+        let (Some(xp), Some(xm), Some(yp), Some(ym)) = (xp, xm, yp, ym) else { return Some((c, [[0.0; 3]; 3])) };
+        // ∂(x, y)/∂(camera point): x = cx + f X / w, y = cy − f Y / w, w = −Z.
+        let (f, inv_w) = (self.camera.focal, s.inv_w);
+        let dx = [f * inv_w, 0.0, f * pc[0] * inv_w * inv_w];
+        let dy = [0.0, -f * inv_w, -f * pc[1] * inv_w * inv_w];
+        let r = &self.rotation;
+        let mut grad = [[0.0f32; 3]; 3];
+        for (ch, g) in grad.iter_mut().enumerate() {
+            let (ix, iy) = (xp[ch] - xm[ch], yp[ch] - ym[ch]);
+            let camera = [ix * dx[0] + iy * dy[0], ix * dx[1] + iy * dy[1], ix * dx[2] + iy * dy[2]];
+            // Back to model space: Rᵀ.
+            *g = [0, 1, 2].map(|j| r[0][j] * camera[0] + r[1][j] * camera[1] + r[2][j] * camera[2]);
+        }
+        Some((c, grad))
+    }
+
     /// The objective at heights `h` and albedo offsets `c`, and its gradients (added to `gh`, `gc`).
     fn evaluate(&self, h: &[f32], c: &[Vec3], gh: &mut [f32], gc: &mut [Vec3]) -> f64 {
         let tri = &self.sm.model.triangles;
-        let moved: Vec<Vec3> =
-            self.positions.iter().zip(&self.normals).zip(h).map(|((p, n), h)| [p[0] + h * n[0], p[1] + h * n[1], p[2] + h * n[2]]).collect();
+        let moved: Vec<Vec3> = self
+            .positions
+            .iter()
+            .zip(&self.normals)
+            .zip(h)
+            .map(|((p, n), h)| [p[0] + h * n[0], p[1] + h * n[1], p[2] + h * n[2]])
+            .collect();
         let m = surface::summed_normals(&moved, tri);
         let mut g_normal = vec![[0.0f32; 3]; moved.len()];
         let mut value = 0.0f64;
         let w = self.weight;
+        let mut g_position = vec![[0.0f32; 3]; moved.len()];
         for s in &self.seen {
             let v = s.vertex;
+            let (target, d_target) = self.sample(moved[v]).unwrap_or((s.target, [[0.0; 3]; 3]));
             let nc = mat_vec(&self.rotation, surface::unit(m[v]));
             let (e, de) = surface::irradiance_and_gradient(&self.light, nc);
             let albedo = [self.albedos[v][0] + c[v][0], self.albedos[v][1] + c[v][1], self.albedos[v][2] + c[v][2]];
             let mut g_nc = [0.0f32; 3];
             for ch in 0..3 {
-                let r = s.target[ch] - albedo[ch] * e[ch];
+                let r = target[ch] - albedo[ch] * e[ch];
                 value += f64::from(w * r * r);
+                for (g, d) in g_position[v].iter_mut().zip(d_target[ch]) {
+                    *g += 2.0 * w * r * d;
+                }
                 gc[v][ch] -= 2.0 * w * r * e[ch];
                 let g_e = -2.0 * w * r * albedo[ch];
                 for (g, d) in g_nc.iter_mut().zip(de[ch]) {
@@ -236,7 +285,6 @@ impl Problem<'_> {
             let r = &self.rotation;
             g_normal[v] = [0, 1, 2].map(|j| r[0][j] * g_nc[0] + r[1][j] * g_nc[1] + r[2][j] * g_nc[2]);
         }
-        let mut g_position = vec![[0.0f32; 3]; moved.len()];
         surface::normal_gradient(&moved, tri, &m, &g_normal, &mut g_position);
         for ((g, gp), n) in gh.iter_mut().zip(&g_position).zip(&self.normals) {
             *g += gp[0] * n[0] + gp[1] * n[1] + gp[2] * n[2];
@@ -310,7 +358,12 @@ impl Adam {
 
 /// The detail beyond the instance of `params` that explains `image` (the fit's working image,
 /// the size its camera assumes).
-pub fn shape_from_shading(sm: &ShadingModel<'_>, params: &Params, image: &TargetImage<'_>, settings: &ShadingSettings) -> Result<Detail, ShadingError> {
+pub fn shape_from_shading(
+    sm: &ShadingModel<'_>,
+    params: &Params,
+    image: &TargetImage<'_>,
+    settings: &ShadingSettings,
+) -> Result<Detail, ShadingError> {
     let model = sm.model;
     let mm = morphable(model)?;
     let (w, h) = (image.width(), image.height());
@@ -320,7 +373,14 @@ pub fn shape_from_shading(sm: &ShadingModel<'_>, params: &Params, image: &Target
     inst.update(&mm, params, w, h).map_err(core_error("shape from shading"))?;
     let (positions, normals, albedos) = (inst.positions().to_vec(), inst.normals().to_vec(), inst.albedos().to_vec());
     let camera = params.camera(w, h);
-    let seen = visibility::seen_vertices(&positions, &normals, &params.pose, &camera, image, settings.min_cos);
+    let mut seen = visibility::seen_vertices(&positions, &normals, &params.pose, &camera, image, settings.min_cos);
+    let rotation = params.pose.rotation();
+    seen.retain(|s| {
+        let e = params.light.irradiance(mat_vec(&rotation, normals[s.vertex]));
+        let a = albedos[s.vertex];
+        let r2: f32 = (0..3).map(|c| (s.target[c] - a[c] * e[c]).powi(2)).sum();
+        r2 <= 3.0 * settings.max_residual * settings.max_residual
+    });
     let n = positions.len();
     let k = sm.shape.rank();
     let mut along_normal = vec![0.0f32; n * k];
@@ -335,6 +395,9 @@ pub fn shape_from_shading(sm: &ShadingModel<'_>, params: &Params, image: &Target
         seen_mask[s.vertex] = true;
     }
     let problem = Problem {
+        image,
+        camera,
+        translation: params.pose.translation,
         positions,
         normals,
         albedos,
@@ -355,6 +418,13 @@ pub fn shape_from_shading(sm: &ShadingModel<'_>, params: &Params, image: &Target
         let (mut gh, mut gc) = (vec![0.0f32; n], vec![[0.0f32; 3]; n]);
         last = problem.evaluate(&heights, &albedo, &mut gh, &mut gc);
         before.get_or_insert(last);
+        // Only what the image speaks about moves (the rest keeps the instance).
+        for (v, free) in seen_mask.iter().enumerate() {
+            if !free {
+                gh[v] = 0.0;
+                gc[v] = [0.0; 3];
+            }
+        }
         let fall = 1.0 - 0.9 * t as f32 / settings.steps as f32;
         adam_h.step(&mut heights, &gh, settings.shape_rate_mm * fall, t as i32 + 1);
         let flat: Vec<f32> = gc.iter().flatten().copied().collect();

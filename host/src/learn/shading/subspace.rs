@@ -149,7 +149,7 @@ fn invert_spd(a: &[f64], n: usize) -> Option<Vec<f64>> {
         for j in 0..=i {
             let s: f64 = a[i * n + j] - (0..j).map(|k| l[i * n + k] * l[j * n + k]).sum::<f64>();
             if i == j {
-                if !(s > 1e-12 * a[i * n + i].abs().max(1e-300)) {
+                if s.is_nan() || s <= 1e-12 * a[i * n + i].abs().max(1e-300) {
                     return None;
                 }
                 l[i * n + i] = s.sqrt();

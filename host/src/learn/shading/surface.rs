@@ -74,7 +74,7 @@ pub fn normal_gradient(positions: &[Vec3], triangles: &[[u32; 3]], m: &[Vec3], g
         .zip(g)
         .map(|(m, g)| {
             let len = dot(*m, *m).sqrt();
-            if !(len > 0.0) || *g == [0.0; 3] {
+            if len.is_nan() || len <= 0.0 || *g == [0.0; 3] {
                 return [0.0; 3];
             }
             let n = [m[0] / len, m[1] / len, m[2] / len];
@@ -159,7 +159,8 @@ pub fn despike(values: &[f32], neighbours: &[Vec<u32>]) -> Vec<f32> {
         .iter()
         .zip(neighbours)
         .map(|(&x, nb)| {
-            let (lo, hi) = nb.iter().map(|&u| values[u as usize]).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), y| (lo.min(y), hi.max(y)));
+            let (lo, hi) =
+                nb.iter().map(|&u| values[u as usize]).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), y| (lo.min(y), hi.max(y)));
             if lo <= hi {
                 x.clamp(lo, hi)
             } else {
@@ -179,7 +180,19 @@ mod tests {
     fn gradients_agree_with_differences() {
         let positions = vec![[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.2, 0.1], [-1.0, 0.1, 0.0], [0.1, -1.0, 0.2]];
         let triangles = vec![[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1]];
-        let light = ShLight { coeffs: [[0.9, 0.8, 0.7], [0.1, 0.2, 0.0], [0.3, 0.2, 0.4], [-0.2, 0.1, 0.1], [0.05, 0.0, 0.1], [0.0, 0.1, 0.0], [0.1, 0.1, 0.1], [0.0, -0.1, 0.05], [0.02, 0.0, 0.0]] };
+        let light = ShLight {
+            coeffs: [
+                [0.9, 0.8, 0.7],
+                [0.1, 0.2, 0.0],
+                [0.3, 0.2, 0.4],
+                [-0.2, 0.1, 0.1],
+                [0.05, 0.0, 0.1],
+                [0.0, 0.1, 0.0],
+                [0.1, 0.1, 0.1],
+                [0.0, -0.1, 0.05],
+                [0.02, 0.0, 0.0],
+            ],
+        };
         // f(positions) = Σ_v weight_v · e_ch(n_v) for a fixed channel mix.
         let weights = [[1.0, 0.5, -0.3], [0.2, 0.1, 0.4], [-0.5, 0.3, 0.2], [0.3, 0.3, 0.3], [0.1, -0.2, 0.6]];
         let f = |p: &[Vec3]| -> f64 {

@@ -27,7 +27,14 @@ pub struct Seen {
 
 /// The vertices of `positions` (normals `normals`, model space) seen through `pose` and `camera`
 /// in `image` with a facing cosine of at least `min_cos`, in vertex order.
-pub fn seen_vertices(positions: &[Vec3], normals: &[Vec3], pose: &Pose, camera: &Camera, image: &TargetImage<'_>, min_cos: f32) -> Vec<Seen> {
+pub fn seen_vertices(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    pose: &Pose,
+    camera: &Camera,
+    image: &TargetImage<'_>,
+    min_cos: f32,
+) -> Vec<Seen> {
     let r = pose.rotation();
     let t = pose.translation;
     let to_camera = |p: Vec3| {
@@ -56,7 +63,7 @@ pub fn seen_vertices(positions: &[Vec3], normals: &[Vec3], pose: &Pose, camera: 
         let nc = mat_vec(&r, *n);
         let dist = (pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]).sqrt();
         let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
-        if !(cos >= min_cos) {
+        if cos.is_nan() || cos < min_cos {
             continue;
         }
         let Some((c, d, x, y)) = locate(*p) else { continue };
