@@ -5,7 +5,8 @@ use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_host::learn::run::{run, RunEvent, RunPlan};
-use gpmm_host::learn::{LearnSettings, MIN_IOU};
+use gpmm_host::learn::shading::ShadingSettings;
+use gpmm_host::learn::{albedo_change_limit, LearnSettings, MIN_IOU};
 use indicatif::ProgressBar;
 use std::path::{Path, PathBuf};
 
@@ -37,6 +38,10 @@ pub struct LearnArgs {
     /// Landmark σ of the initializer's landmarks (fraction of the fit's image side).
     #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA)]
     pub init_landmark_sigma: f32,
+    /// Use each fitted instance as it is: no shape from shading (per-vertex shape and albedo
+    /// beyond the model), and so no albedo-change check.
+    #[arg(long)]
+    pub no_shape_from_shading: bool,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -99,7 +104,13 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         images,
         out: a.output.clone(),
         iterations: a.iterations.unwrap_or(if a.quick { 1 } else { 5 }),
-        settings: LearnSettings { fit, min_iou: a.min_iou, mirror: a.mirror },
+        settings: LearnSettings {
+            fit,
+            min_iou: a.min_iou,
+            mirror: a.mirror,
+            shading: (!a.no_shape_from_shading).then_some(ShadingSettings::DEFAULT),
+            max_albedo_change: albedo_change_limit(0),
+        },
         jobs,
     };
     eprintln!(
@@ -112,7 +123,8 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     );
     let bar = ProgressBar::new(0);
     bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
-    let events = |e: RunEvent<'_>| match e {
+    let events = |e: RunEvent<'_>| {
+        match e {
         RunEvent::Reused(f) => {
             note(&bar, format!("iteration {}: complete on disk ({} of {} accepted), kept", f.iteration, f.accepted, f.images))
         }
@@ -124,10 +136,11 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         RunEvent::Finished(f) => note(
             &bar,
             format!(
-                "iteration {}: {} of {} fits accepted, {} rejected by their silhouette, {} failed ({:.0} s) -> {}",
-                f.iteration, f.accepted, f.images, f.rejected_overlap, f.failed, f.seconds, f.model
+                "iteration {}: {} of {} fits accepted, {} rejected by their silhouette, {} by their albedo change, {} failed ({:.0} s) -> {}",
+                f.iteration, f.accepted, f.images, f.rejected_overlap, f.rejected_albedo, f.failed, f.seconds, f.model
             ),
         ),
+    }
     };
     let files = run(&plan, &events)?;
     bar.finish_and_clear();

@@ -69,9 +69,15 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert!(broken.iter().all(|r| r["accepted"] == false && r["reason"].as_str().unwrap().contains("broken.png")), "{broken:?}");
     let accepted = records["accepted"].as_u64().unwrap();
     assert!(accepted >= 2, "{records}");
-    assert_eq!(accepted + records["rejected_overlap"].as_u64().unwrap() + records["failed"].as_u64().unwrap(), 10);
+    let rejected = records["rejected_overlap"].as_u64().unwrap() + records["rejected_albedo"].as_u64().unwrap();
+    assert_eq!(accepted + rejected + records["failed"].as_u64().unwrap(), 10);
+    // Shape from shading ran on every accepted fit, within the first iteration's albedo limit (8/255).
+    let limit = records["max_albedo_change"].as_f64().unwrap();
+    assert!((limit - 8.0 / 255.0).abs() < 1e-6, "{records}");
     for r in list.iter().filter(|r| r["accepted"] == true) {
         assert!(r["iou"].as_f64().unwrap() >= gpmm_host::learn::MIN_IOU, "{r}");
+        assert!(r["albedo_change"].as_f64().unwrap() <= limit, "{r}");
+        assert!(r["detail_vertices"].as_u64().unwrap() > 50 && r["detail_mm"].as_f64().unwrap() > 0.0, "{r}");
     }
     for name in ["samples.png", "reconstructions.png"] {
         assert!(out.join("iteration_1").join(name).is_file(), "{name} missing");
@@ -83,6 +89,7 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert!(m.shape.rank() >= 1 && m.shape.rank() < accepted as usize, "rank {}", m.shape.rank());
     let rec = m.metadata.learning.as_ref().expect("a learning record");
     assert_eq!((rec.iteration, rec.images, rec.accepted as u64), (1, 10, accepted));
+    assert!(rec.max_albedo_change.is_some_and(|m| (f64::from(m) - limit).abs() < 1e-6), "{rec:?}");
     assert_eq!(m.metadata.template.attribution, base.metadata.template.attribution);
     // Another command reads it: a fit with landmarks.
     let fit_dir = dir.path().join("fit");
@@ -107,6 +114,14 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     ok(&rerun);
     assert!(String::from_utf8_lossy(&rerun.stderr).contains("complete on disk"), "{}", String::from_utf8_lossy(&rerun.stderr));
     assert_eq!(std::fs::read(&learned).unwrap(), before);
+    // Without shape from shading: the fitted instances alone, no albedo change recorded, another model.
+    let plain = dir.path().join("plain");
+    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "--no-shape-from-shading", "-o", s(&plain)];
+    ok(&gpmm(&args));
+    let records = read_json(&plain.join("iteration_1/records.json"));
+    assert!(records.get("max_albedo_change").is_none(), "{records}");
+    assert!(records["records"].as_array().unwrap().iter().all(|r| r["albedo_change"].is_null()), "{records}");
+    assert_ne!(std::fs::read(plain.join("model_1.gpmm")).unwrap(), before);
 }
 
 #[test]

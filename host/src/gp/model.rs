@@ -120,10 +120,17 @@ pub struct LearningRecord {
     pub accepted: usize,
     /// Images rejected because the fit's silhouette left its start's (overlap below `min_iou`).
     pub rejected_overlap: usize,
+    /// Images rejected because shape from shading changed their albedo too much.
+    #[serde(default)]
+    pub rejected_albedo: usize,
     /// Images that could not be fitted (unreadable, no face found, fit error).
     pub failed: usize,
     /// The silhouette overlap a fit needed.
     pub min_iou: f64,
+    /// The largest mean per-vertex albedo change of shape from shading (linear 0–1 colour);
+    /// absent when the iteration ran without shape from shading.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_albedo_change: Option<f32>,
     /// Seed of the fits.
     pub seed: u64,
 }

@@ -10,15 +10,21 @@
 //!    must overlap by at least [`MIN_IOU`] (intersection over union, the paper's r₁ = 0.625, a
 //!    ratio of areas that needs no conversion): a fit that ran off its start explains something
 //!    other than the face the initializer saw and is rejected.
-//! 4. **Model** ([`learned_model`]): the accepted fits' shapes and albedos (the image chain's
-//!    posterior means, in the model's frame, so already aligned) are the examples of a PCA, the next
-//!    model, in the template's topology with its landmarks.
+//! 4. **Shape from shading** ([`shading`], unless turned off): per-vertex shape and albedo beyond
+//!    the fit's instance (the image chain's posterior mean), spikes removed against each vertex's
+//!    ring. Quality control (the paper's): the mean per-vertex albedo change must stay below
+//!    `r₂ − n·r₃` (r₂ = 8, r₃ = 0.5, n = iterations done) in the paper's 0–255 colour units, that
+//!    is [`albedo_change_limit`] `= (8 − 0.5 n) / 255` in this project's linear 0–1 albedo (the
+//!    images' 8-bit values map to 0–1 by dividing by 255, so one paper unit is 1/255 here): a fit
+//!    whose colours need more than that explains the image with something other than the face.
+//! 5. **Model** ([`learned_model`]): the accepted reconstructions (the instance plus its detail, in
+//!    the model's frame, so already aligned) are the examples of a PCA, the next model, in the
+//!    template's topology with its landmarks.
 //!
-//! Not yet part of the loop: shape from shading (per-vertex detail beyond the model's subspace) and
-//! retraining the initializer on the learned models; without the first, a learned model lies in
-//! the span of its predecessor's leading components (its mean and covariance move, its span does not).
+//! Not yet part of the loop: retraining the initializer on the learned models.
 
 pub mod run;
+pub mod shading;
 pub mod silhouette;
 
 use std::path::{Path, PathBuf};
@@ -32,10 +38,22 @@ use crate::eval::models::pca::pca_model;
 use crate::fit::{fit_prepared, prepare, FitOptions};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::mesh::Mesh;
+use gpmm_core::fit::TargetImage;
 use gpmm_core::net::face::Reading;
+use shading::{shape_from_shading, ShadingModel, ShadingSettings};
 
 /// The least silhouette overlap (intersection over union) of a fit with its start (the paper's r₁).
 pub const MIN_IOU: f64 = 0.625;
+/// The paper's albedo-change threshold r₂ and its fall per iteration r₃, in 0–255 colour units.
+pub const ALBEDO_CHANGE_PAPER: (f32, f32) = (8.0, 0.5);
+
+/// The largest mean per-vertex albedo change (linear 0–1 colour) accepted after `done`
+/// iterations: the paper's `r₂ − n·r₃` over 255 (never below zero).
+pub fn albedo_change_limit(done: u32) -> f32 {
+    let (r2, r3) = ALBEDO_CHANGE_PAPER;
+    ((r2 - done as f32 * r3) / 255.0).max(0.0)
+}
+
 /// The least finder score taken as a face.
 pub const MIN_SCORE: f32 = 0.05;
 
@@ -48,6 +66,11 @@ pub struct LearnSettings {
     pub min_iou: f64,
     /// Also fit each image's mirror image.
     pub mirror: bool,
+    /// Shape from shading after each accepted fit (`None`: the fitted instance alone).
+    pub shading: Option<ShadingSettings>,
+    /// The largest mean per-vertex albedo change of shape from shading an accepted image may have
+    /// (linear 0–1 colour; a run sets it to [`albedo_change_limit`] of the iterations done).
+    pub max_albedo_change: f32,
 }
 
 /// What became of one image in one iteration.
@@ -69,6 +92,16 @@ pub struct ImageRecord {
     pub pixel_rmse: Option<f32>,
     /// Fitted yaw, pitch, roll (degrees).
     pub angles_deg: Option<[f32; 3]>,
+    /// Shape from shading's mean per-vertex albedo change over the vertices it saw (linear 0–1
+    /// colour; ×255 for the paper's units).
+    #[serde(default)]
+    pub albedo_change: Option<f32>,
+    /// Shape from shading's mean absolute height over the vertices it saw (mm).
+    #[serde(default)]
+    pub detail_mm: Option<f32>,
+    /// Vertices shape from shading saw.
+    #[serde(default)]
+    pub detail_vertices: Option<usize>,
     /// Seconds for this image.
     pub seconds: f64,
 }
@@ -84,7 +117,15 @@ pub struct Wake {
 
 /// Starts, fits and checks one image (its mirror image with `mirrored`); every failure becomes a
 /// rejected record naming its cause, never an error of the run.
-pub fn wake_image(model: &GpModel, init: &[u8], image: &Path, mirrored: bool, settings: &LearnSettings) -> Wake {
+/// `shading`: the model prepared for shape from shading (when `settings.shading` is set).
+pub fn wake_image(
+    model: &GpModel,
+    shading: Option<&ShadingModel<'_>>,
+    init: &[u8],
+    image: &Path,
+    mirrored: bool,
+    settings: &LearnSettings,
+) -> Wake {
     let t0 = Instant::now();
     let mut record = ImageRecord {
         image: image.display().to_string(),
@@ -95,9 +136,12 @@ pub fn wake_image(model: &GpModel, init: &[u8], image: &Path, mirrored: bool, se
         score: None,
         pixel_rmse: None,
         angles_deg: None,
+        albedo_change: None,
+        detail_mm: None,
+        detail_vertices: None,
         seconds: 0.0,
     };
-    let reconstruction = match fit_and_check(model, init, image, mirrored, settings, &mut record) {
+    let reconstruction = match fit_and_check(model, shading, init, image, mirrored, settings, &mut record) {
         Ok(mesh) => mesh,
         Err(reason) => {
             record.reason = Some(reason);
@@ -113,6 +157,7 @@ pub fn wake_image(model: &GpModel, init: &[u8], image: &Path, mirrored: bool, se
 /// (the record says so), or the reason it could not be fitted.
 fn fit_and_check(
     model: &GpModel,
+    shading: Option<&ShadingModel<'_>>,
     init: &[u8],
     image: &Path,
     mirrored: bool,
@@ -142,7 +187,25 @@ fn fit_and_check(
     }
     let mean = outcome.posterior.mean_params(&outcome.params);
     let mesh = model.instance(mean.shape_coeffs(), mean.color_coeffs()).map_err(|e| e.to_string())?;
-    Ok(Some(mesh))
+    let (Some(sm), Some(sfs)) = (shading, settings.shading.as_ref()) else { return Ok(Some(mesh)) };
+    let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
+    let target = TargetImage::new(&pixels, settings.fit.size, settings.fit.size)
+        .and_then(|t| t.with_covered(prepared.covered))
+        .map_err(|e| format!("shape from shading: {e}"))?;
+    let detail = shape_from_shading(sm, &mean, &target, sfs).map_err(|e| format!("shape from shading: {e}"))?.despiked(sm.neighbours());
+    let change = detail.mean_albedo_change();
+    record.albedo_change = Some(change);
+    record.detail_mm = Some(detail.mean_height());
+    record.detail_vertices = Some(detail.seen_count());
+    if change > settings.max_albedo_change {
+        record.reason = Some(format!(
+            "shape from shading changed the albedo by {:.2}/255 per vertex on average, above {:.2}/255",
+            change * 255.0,
+            settings.max_albedo_change * 255.0
+        ));
+        return Ok(None);
+    }
+    Ok(Some(detail.applied_to(&mesh)))
 }
 
 /// Every image (and mirror image) of one iteration, in parallel on `jobs` threads, in input order;
@@ -155,6 +218,9 @@ pub fn wake(
     jobs: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<Wake>, rayon::ThreadPoolBuildError> {
+    let ranks = settings.fit.core().ranks;
+    // A model whose bases cannot be prepared fails every image alike, each record saying why.
+    let shading = settings.shading.as_ref().map(|sfs| ShadingModel::new(model, ranks.shape, ranks.color, sfs).map_err(|e| e.to_string()));
     let views: Vec<(&PathBuf, bool)> =
         images.iter().flat_map(|p| std::iter::once((p, false)).chain(settings.mirror.then_some((p, true)))).collect();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build()?;
@@ -163,12 +229,35 @@ pub fn wake(
         views
             .par_iter()
             .map(|(p, m)| {
-                let w = wake_image(model, init, p, *m, settings);
+                let w = match &shading {
+                    Some(Err(e)) => failed(p, *m, format!("shape from shading: {e}")),
+                    Some(Ok(sm)) => wake_image(model, Some(sm), init, p, *m, settings),
+                    None => wake_image(model, None, init, p, *m, settings),
+                };
                 progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, views.len());
                 w
             })
             .collect()
     }))
+}
+
+/// A record of an image that could not be fitted, for `reason`.
+fn failed(image: &Path, mirrored: bool, reason: String) -> Wake {
+    let record = ImageRecord {
+        image: image.display().to_string(),
+        mirrored,
+        accepted: false,
+        reason: Some(reason),
+        iou: None,
+        score: None,
+        pixel_rmse: None,
+        angles_deg: None,
+        albedo_change: None,
+        detail_mm: None,
+        detail_vertices: None,
+        seconds: 0.0,
+    };
+    Wake { record, reconstruction: None }
 }
 
 /// Why an iteration made no model.
@@ -206,18 +295,32 @@ pub fn learned_model(previous: &GpModel, wakes: &[Wake], record: LearningRecord)
     Ok(model)
 }
 
-/// Counts of an iteration's records: (accepted, rejected by overlap, failed).
-pub fn counts(records: &[ImageRecord]) -> (usize, usize, usize) {
+/// How an iteration's images fared.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counts {
+    /// Accepted into the next model.
+    pub accepted: usize,
+    /// Rejected by the silhouette overlap.
+    pub rejected_overlap: usize,
+    /// Rejected by shape from shading's albedo change.
+    pub rejected_albedo: usize,
+    /// Not fitted (unreadable, no face found, fit error).
+    pub failed: usize,
+}
+
+/// Counts of an iteration's records.
+pub fn counts(records: &[ImageRecord]) -> Counts {
     let accepted = records.iter().filter(|r| r.accepted).count();
-    let overlap = records.iter().filter(|r| !r.accepted && r.iou.is_some()).count();
-    (accepted, overlap, records.len() - accepted - overlap)
+    let rejected_albedo = records.iter().filter(|r| !r.accepted && r.albedo_change.is_some()).count();
+    let rejected_overlap = records.iter().filter(|r| !r.accepted && r.iou.is_some() && r.albedo_change.is_none()).count();
+    Counts { accepted, rejected_overlap, rejected_albedo, failed: records.len() - accepted - rejected_overlap - rejected_albedo }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn record(accepted: bool, iou: Option<f64>) -> ImageRecord {
+    fn record(accepted: bool, iou: Option<f64>, albedo_change: Option<f32>) -> ImageRecord {
         ImageRecord {
             image: "a.png".into(),
             mirrored: false,
@@ -227,13 +330,29 @@ mod tests {
             score: None,
             pixel_rmse: None,
             angles_deg: None,
+            albedo_change,
+            detail_mm: None,
+            detail_vertices: None,
             seconds: 0.0,
         }
     }
 
     #[test]
     fn counts_split_accepted_overlap_and_failed() {
-        let r = [record(true, Some(0.9)), record(false, Some(0.3)), record(false, None), record(true, Some(0.7))];
-        assert_eq!(counts(&r), (2, 1, 1));
+        let r = [
+            record(true, Some(0.9), Some(0.01)),
+            record(false, Some(0.3), None),
+            record(false, None, None),
+            record(true, Some(0.7), None),
+            record(false, Some(0.8), Some(0.2)),
+        ];
+        assert_eq!(counts(&r), Counts { accepted: 2, rejected_overlap: 1, rejected_albedo: 1, failed: 1 });
+    }
+
+    #[test]
+    fn the_albedo_limit_is_the_papers_in_linear_colour() {
+        assert!((albedo_change_limit(0) - 8.0 / 255.0).abs() < 1e-7);
+        assert!((albedo_change_limit(4) - 6.0 / 255.0).abs() < 1e-7);
+        assert_eq!(albedo_change_limit(40), 0.0);
     }
 }

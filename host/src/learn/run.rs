@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{counts, learned_model, wake, ImageRecord, LearnError, LearnSettings, Wake};
+use super::{albedo_change_limit, counts, learned_model, wake, ImageRecord, LearnError, LearnSettings, Wake};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::gp::model_io;
 use crate::render::figure::{sample_grid, save_png, shape_light};
@@ -30,6 +30,12 @@ pub struct IterationFile {
     pub accepted: usize,
     /// Fits rejected by the silhouette overlap.
     pub rejected_overlap: usize,
+    /// Fits rejected by shape from shading's albedo change.
+    #[serde(default)]
+    pub rejected_albedo: usize,
+    /// The albedo change limit of this iteration (linear 0–1 colour), with shape from shading.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_albedo_change: Option<f32>,
     /// Images that could not be fitted.
     pub failed: usize,
     /// Wall-clock seconds of the iteration.
@@ -156,19 +162,24 @@ pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec
         }
         let t0 = std::time::Instant::now();
         let progress = |d, t| events(RunEvent::Fitting { iteration, done: d, total: t });
-        let wakes = wake(&model, &init, &plan.images, &plan.settings, plan.jobs, &progress)
+        // The paper's albedo-change limit tightens with the iterations done.
+        let settings = LearnSettings { max_albedo_change: albedo_change_limit(iteration - 1), ..plan.settings.clone() };
+        let max_albedo_change = settings.shading.is_some().then_some(settings.max_albedo_change);
+        let wakes = wake(&model, &init, &plan.images, &settings, plan.jobs, &progress)
             .map_err(|error| RunError::Threads { jobs: plan.jobs, error })?;
         let records: Vec<ImageRecord> = wakes.iter().map(|w| w.record.clone()).collect();
-        let (accepted, rejected_overlap, failed) = counts(&records);
+        let c = counts(&records);
         let record = LearningRecord {
             iteration,
             previous_model: previous_path.display().to_string(),
             init: plan.init.display().to_string(),
             images: records.len(),
-            accepted,
-            rejected_overlap,
-            failed,
+            accepted: c.accepted,
+            rejected_overlap: c.rejected_overlap,
+            rejected_albedo: c.rejected_albedo,
+            failed: c.failed,
             min_iou: plan.settings.min_iou,
+            max_albedo_change,
             seed: plan.settings.fit.seed,
         };
         std::fs::create_dir_all(&dir).map_err(io(&dir))?;
@@ -181,9 +192,11 @@ pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec
             previous_model: previous_path.display().to_string(),
             model: next_path.display().to_string(),
             images: records.len(),
-            accepted,
-            rejected_overlap,
-            failed,
+            accepted: c.accepted,
+            rejected_overlap: c.rejected_overlap,
+            rejected_albedo: c.rejected_albedo,
+            max_albedo_change,
+            failed: c.failed,
             seconds: t0.elapsed().as_secs_f64(),
             records,
         };
