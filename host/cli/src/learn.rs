@@ -38,10 +38,12 @@ pub struct LearnArgs {
     /// Landmark σ of the initializer's landmarks (fraction of the fit's image side).
     #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA)]
     pub init_landmark_sigma: f32,
-    /// Use each fitted instance as it is: no shape from shading (per-vertex shape and albedo
-    /// beyond the model), and so no albedo-change check.
+    /// Add to each kept fit the per-vertex shape and albedo detail its image shows beyond the
+    /// model (shape from shading, the paper's third step), and reject images whose albedo had to
+    /// change too much. Off by default: as it stands it makes the learned models' fits worse
+    /// (docs/learning.md).
     #[arg(long)]
-    pub no_shape_from_shading: bool,
+    pub shape_from_shading: bool,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -108,7 +110,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             fit,
             min_iou: a.min_iou,
             mirror: a.mirror,
-            shading: (!a.no_shape_from_shading).then_some(ShadingSettings::DEFAULT),
+            shading: a.shape_from_shading.then_some(ShadingSettings::DEFAULT),
             max_albedo_change: albedo_change_limit(0),
         },
         jobs,

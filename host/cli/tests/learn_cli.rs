@@ -56,7 +56,7 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     let init = dir.path().join("quick.init");
     ok(&gpmm(&["train-init", s(&model), "--quick", "-o", s(&init)]));
     let out = dir.path().join("learned");
-    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "-o", s(&out)];
+    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "--shape-from-shading", "-o", s(&out)];
     let printed = ok(&gpmm(&args));
     let learned = out.join("model_1.gpmm");
     assert_eq!(printed.trim(), s(&learned));
@@ -114,9 +114,10 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     ok(&rerun);
     assert!(String::from_utf8_lossy(&rerun.stderr).contains("complete on disk"), "{}", String::from_utf8_lossy(&rerun.stderr));
     assert_eq!(std::fs::read(&learned).unwrap(), before);
-    // Without shape from shading: the fitted instances alone, no albedo change recorded, another model.
+    // Without shape from shading (the default): the fitted instances alone, no albedo change
+    // recorded, another model.
     let plain = dir.path().join("plain");
-    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "--no-shape-from-shading", "-o", s(&plain)];
+    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "-o", s(&plain)];
     ok(&gpmm(&args));
     let records = read_json(&plain.join("iteration_1/records.json"));
     assert!(records.get("max_albedo_change").is_none(), "{records}");

@@ -98,7 +98,7 @@ pub fn solve_light(
 
 /// A model-space vertex seen from the camera: where it is, where its normal points, and how
 /// squarely it faces the camera.
-pub(in crate::fit) struct Facing {
+pub struct Facing {
     /// Camera-space position.
     pub position: Vec3,
     /// Camera-space normal.
@@ -110,7 +110,7 @@ pub(in crate::fit) struct Facing {
 
 /// The vertex at `p` with normal `n` (model space) under rotation `r` and translation `t`: the one
 /// facing test of the light, colour and shape solves and of the contour landmarks.
-pub(in crate::fit) fn facing(r: &[[f32; 3]; 3], t: Vec3, p: Vec3, n: Vec3) -> Facing {
+pub fn facing(r: &[[f32; 3]; 3], t: Vec3, p: Vec3, n: Vec3) -> Facing {
     let normal = mat_vec(r, n);
     let q = mat_vec(r, p);
     let position = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];

@@ -117,38 +117,44 @@ const EMPTY: u16 = u16::MAX;
 /// How far (mm) behind the nearest vertex of its cell a sample may lie and still count as seen:
 /// the surface's own depth change across a cell at the samples' slopes stays below it, a nose in
 /// front of a cheek does not.
-const OCCLUSION_TOLERANCE_MM: f32 = 5.0;
+pub const OCCLUSION_TOLERANCE_MM: f32 = 5.0;
 
 /// The nearest vertex depth in each cell of a coarse grid over the image (cells of
 /// `side / DEPTH_GRID` pixels, at least one): a z-buffer of vertex splats, in 16-bit steps of
-/// 1/16 mm (rounded toward the camera). A sample farther than [`OCCLUSION_TOLERANCE_MM`] behind
+/// 1/16 mm (rounded toward the camera). A point farther than [`OCCLUSION_TOLERANCE_MM`] behind
 /// its cell's nearest vertex is hidden by another part of the face (the nose, at 30–45° yaw,
-/// hides the far cheek's vertices that still face the camera).
-struct DepthGrid<'g> {
+/// hides the far cheek's vertices that still face the camera). The occlusion test of the shape
+/// solve, and of every host step that asks which vertices an image shows.
+pub struct DepthGrid<'g> {
     cell: f32,
     /// The depth (mm) of step 0: 2 m in front of the pose's centre.
     origin_mm: f32,
     /// [`DEPTH_CELLS`] cells, row by row.
     depth: &'g mut [u16],
+    rotation: [[f32; 3]; 3],
+    translation: Vec3,
+    camera: Camera,
 }
 
 impl<'g> DepthGrid<'g> {
-    /// The grid of `positions` (model space) seen through `frame` in a `width × height` image,
-    /// written over `depth` (at least [`DEPTH_CELLS`] cells) in place.
-    fn new(depth: &'g mut [u16], frame: &Frame<'_, '_>, positions: &[Vec3], width: u32, height: u32) -> Self {
+    /// The grid of `positions` (model space) seen under `pose` through `camera` in a
+    /// `width × height` image, written over `depth` in place; `None` if `depth` holds fewer than
+    /// [`DEPTH_CELLS`] cells.
+    pub fn new(depth: &'g mut [u16], pose: &Pose, camera: Camera, positions: &[Vec3], width: u32, height: u32) -> Option<Self> {
+        let depth = depth.get_mut(..DEPTH_CELLS)?;
         let cell = (width.max(height) as f32 / DEPTH_GRID as f32).max(1.0);
         depth.fill(EMPTY);
-        let origin_mm = -frame.translation[2] - f32::from(EMPTY) / DEPTH_STEPS_PER_MM / 2.0;
-        let grid = Self { cell, origin_mm, depth };
+        let origin_mm = -pose.translation[2] - f32::from(EMPTY) / DEPTH_STEPS_PER_MM / 2.0;
+        let grid = Self { cell, origin_mm, depth, rotation: pose.rotation(), translation: pose.translation, camera };
         for p in positions {
-            if let Some((i, j, d)) = grid.locate(frame, *p) {
+            if let Some((i, j, d)) = grid.locate(*p) {
                 let q = grid.steps(d);
                 if let Some(c) = grid.depth.get_mut(j * DEPTH_GRID + i) {
                     *c = (*c).min(q);
                 }
             }
         }
-        grid
+        Some(grid)
     }
 
     /// Depth `d` (mm) in whole steps from the origin, rounded down, clamped below [`EMPTY`].
@@ -164,9 +170,10 @@ impl<'g> DepthGrid<'g> {
     }
 
     /// The cell and depth (mm along the view axis) of model-space point `p`.
-    fn locate(&self, frame: &Frame<'_, '_>, p: Vec3) -> Option<(usize, usize, f32)> {
-        let pc = frame.to_camera(p);
-        let s = frame.camera.project(pc)?;
+    fn locate(&self, p: Vec3) -> Option<(usize, usize, f32)> {
+        let q = mat_vec(&self.rotation, p);
+        let pc = [q[0] + self.translation[0], q[1] + self.translation[1], q[2] + self.translation[2]];
+        let s = self.camera.project(pc)?;
         if !(s.x >= 0.0 && s.y >= 0.0) {
             return None;
         }
@@ -175,9 +182,10 @@ impl<'g> DepthGrid<'g> {
         (i < DEPTH_GRID && j < DEPTH_GRID).then_some((i, j, -pc[2]))
     }
 
-    /// Whether `p` is within the tolerance of its cell's nearest vertex.
-    fn seen(&self, frame: &Frame<'_, '_>, p: Vec3) -> bool {
-        self.locate(frame, p)
+    /// Whether model-space point `p` is within the tolerance of its cell's nearest vertex (false
+    /// outside the grid).
+    pub fn seen(&self, p: Vec3) -> bool {
+        self.locate(p)
             .and_then(|(i, j, d)| {
                 let near = *self.depth.get(j * DEPTH_GRID + i)?;
                 let near_mm = self.origin_mm + f32::from(near) / DEPTH_STEPS_PER_MM;
@@ -409,7 +417,7 @@ impl Sampling<'_, '_, '_> {
     /// The residual of vertex `v` if it is a sample: facing the camera, not hidden, in the image.
     fn residual(&self, v: usize) -> Option<Vec3> {
         let (p, n, a) = (*self.positions.get(v)?, *self.normals.get(v)?, *self.albedos.get(v)?);
-        if !self.frame.faces(p, n, self.min_cos) || !self.grid.seen(self.frame, p) {
+        if !self.frame.faces(p, n, self.min_cos) || !self.grid.seen(p) {
             return None;
         }
         self.frame.residual(p, n, a)
@@ -496,7 +504,8 @@ fn iterate<I: TriIndex, const KS: usize, const N: usize>(
     let alpha = coeffs.get(..k).ok_or(FitError::BadConfig)?;
     let frame = scene.frame(&scene.pose);
     let nudged: [Frame<'_, '_>; POSE_PARAMS] = core::array::from_fn(|i| scene.frame(&nudged_pose(&scene.pose, i)));
-    let grid = DepthGrid::new(depth, &frame, positions, scene.image.width(), scene.image.height());
+    let grid = DepthGrid::new(depth, &scene.pose, scene.camera, positions, scene.image.width(), scene.image.height())
+        .ok_or(FitError::BadConfig)?;
     let sampling = Sampling { positions, normals, albedos, frame: &frame, grid: &grid, stride: config.stride, min_cos: config.min_cos };
     let mut chunk = Chunk::new();
     let mut equations = NormalEquations::<N>::new(m);
@@ -638,19 +647,18 @@ mod tests {
 
     #[test]
     fn the_depth_grid_hides_what_lies_behind_a_nearer_vertex_only() {
-        let pixels = [[0u8; 3]; 64 * 64];
-        let image = TargetImage::new(&pixels, 64, 64).unwrap();
         let identity = Pose { yaw: 0.0, pitch: 0.0, roll: 0.0, translation: [0.0, 0.0, -500.0] };
-        let scene = Scene { pose: identity, camera: Camera::centered(64, 64, 500.0), light: ShLight::zero(), image: &image };
-        let frame = scene.frame(&scene.pose);
+        let camera = Camera::centered(64, 64, 500.0);
         // A nose tip 20 mm in front of a cheek point on the same line of sight, a lone point
         // elsewhere, and a point 3 mm behind the nose tip (the surface's own slope).
         let (nose, cheek, lone, slope) = ([0.0, 0.0, 20.0], [0.0, 0.0, 0.0], [30.0, 10.0, 0.0], [0.0, 0.0, 17.0]);
         let mut depth = [0u16; DEPTH_CELLS];
-        let grid = DepthGrid::new(&mut depth, &frame, &[nose, cheek, lone, slope], 64, 64);
-        assert!(grid.seen(&frame, nose) && grid.seen(&frame, lone) && grid.seen(&frame, slope));
-        assert!(!grid.seen(&frame, cheek), "the cheek lies 20 mm behind the nose in its cell");
+        let grid = DepthGrid::new(&mut depth, &identity, camera, &[nose, cheek, lone, slope], 64, 64).unwrap();
+        // Too little memory for the grid: refused, not a panic.
+        assert!(DepthGrid::new(&mut [0u16; 16], &identity, camera, &[nose], 64, 64).is_none());
+        assert!(grid.seen(nose) && grid.seen(lone) && grid.seen(slope));
+        assert!(!grid.seen(cheek), "the cheek lies 20 mm behind the nose in its cell");
         // Outside the image nothing is seen (no panic on any point).
-        assert!(!grid.seen(&frame, [1e6, 0.0, 0.0]) && !grid.seen(&frame, [f32::NAN, 0.0, 0.0]));
+        assert!(!grid.seen([1e6, 0.0, 0.0]) && !grid.seen([f32::NAN, 0.0, 0.0]));
     }
 }

@@ -2,19 +2,14 @@
 //! facing the camera, not hidden behind a nearer part of the face (a coarse depth grid of vertex
 //! splats), and projecting into the pixels the photo covers.
 //!
-//! The core keeps its depth grid private; this is the same test with the same constants (64 cells
-//! per side, 5 mm tolerance), written for the host.
+//! The tests are the core's own ([`facing`], [`DepthGrid`]).
 
+use gpmm_core::fit::solve::light::facing;
+use gpmm_core::fit::solve::shape::{DepthGrid, DEPTH_CELLS};
 use gpmm_core::fit::TargetImage;
-use gpmm_core::geometry::mat_vec;
 use gpmm_core::render::{Camera, Pose};
 
 type Vec3 = [f32; 3];
-
-/// Cells per side of the depth grid.
-const DEPTH_GRID: usize = 64;
-/// How far (mm) behind its cell's nearest vertex a vertex may lie and still count as seen.
-const OCCLUSION_TOLERANCE_MM: f32 = 5.0;
 
 /// A vertex the image speaks about: its index and the image's colour where it projects.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,41 +31,16 @@ pub fn seen_vertices(
     min_cos: f32,
 ) -> Vec<Seen> {
     let r = pose.rotation();
-    let t = pose.translation;
-    let to_camera = |p: Vec3| {
-        let q = mat_vec(&r, p);
-        [q[0] + t[0], q[1] + t[1], q[2] + t[2]]
-    };
-    let cell = (image.width().max(image.height()) as f32 / DEPTH_GRID as f32).max(1.0);
-    let locate = |p: Vec3| -> Option<(usize, f32, f32, f32)> {
-        let pc = to_camera(p);
-        let s = camera.project(pc)?;
-        if !(s.x >= 0.0 && s.y >= 0.0) {
-            return None;
-        }
-        let (i, j) = ((s.x / cell) as usize, (s.y / cell) as usize);
-        (i < DEPTH_GRID && j < DEPTH_GRID).then_some((j * DEPTH_GRID + i, -pc[2], s.x, s.y))
-    };
-    let mut depth = vec![f32::INFINITY; DEPTH_GRID * DEPTH_GRID];
-    for p in positions {
-        if let Some((c, d, _, _)) = locate(*p) {
-            depth[c] = depth[c].min(d);
-        }
-    }
+    let mut depth = vec![0u16; DEPTH_CELLS];
+    let Some(grid) = DepthGrid::new(&mut depth, pose, *camera, positions, image.width(), image.height()) else { return Vec::new() };
     let mut out = Vec::new();
     for (v, (p, n)) in positions.iter().zip(normals).enumerate() {
-        let pc = to_camera(*p);
-        let nc = mat_vec(&r, *n);
-        let dist = (pc[0] * pc[0] + pc[1] * pc[1] + pc[2] * pc[2]).sqrt();
-        let cos = -(nc[0] * pc[0] + nc[1] * pc[1] + nc[2] * pc[2]) / dist;
-        if cos.is_nan() || cos < min_cos {
+        let f = facing(&r, pose.translation, *p, *n);
+        if f.cos.is_nan() || f.cos < min_cos || !grid.seen(*p) {
             continue;
         }
-        let Some((c, d, x, y)) = locate(*p) else { continue };
-        if d > depth[c] + OCCLUSION_TOLERANCE_MM {
-            continue;
-        }
-        if let Some(target) = image.sample_bilinear(x, y) {
+        let Some(s) = camera.project(f.position) else { continue };
+        if let Some(target) = image.sample_bilinear(s.x, s.y) {
             out.push(Seen { vertex: v, target });
         }
     }
