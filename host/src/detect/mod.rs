@@ -113,7 +113,8 @@ impl Detector {
 /// The share of the best face's finder score a face needs for [`choose_face`] to take it for
 /// being larger. On the realistic development set the largest face above the minimum score was a
 /// weak false positive in 120 of 210 renders; the largest within 0.95 of the best score is the
-/// true face in all 210 (0.9: 207), as the best-scored face is.
+/// true face in all 210 (0.9: 207), as the best-scored face is
+/// (`tests/realistic/chosen_face.py SET --init INIT`).
 pub const LARGEST_AMONG_SCORE_SHARE: f32 = 0.95;
 
 /// Which face of several a command takes: `index` if it names one (the order
