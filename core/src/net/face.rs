@@ -202,7 +202,20 @@ pub fn find_face<const A: usize>(
 ) -> Result<FaceBox, NetError> {
     let side = init.finder.input().w;
     let first = look(init, rgb, w, h, Window::letterbox(w, h, side), scratch)?;
-    let Some(window) = second_look(&first, w, h, side) else { return Ok(first) };
+    looked_again(init, rgb, w, h, first, scratch)
+}
+
+/// `first` after its second look ([`second_look`]): that look's box if it settled on the same
+/// face ([`same_face`]), else `first`; `first` itself when no second look is taken.
+fn looked_again<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    first: FaceBox,
+    scratch: &mut NetScratch<A>,
+) -> Result<FaceBox, NetError> {
+    let Some(window) = second_look(&first, w, h, init.finder.input().w) else { return Ok(first) };
     let second = look(init, rgb, w, h, window, scratch)?;
     Ok(FaceBox { looks: 2, ..if same_face(&first, &second) { second } else { first } })
 }
@@ -358,13 +371,7 @@ pub fn find_faces<const A: usize>(
     let firsts = run_finder(init, (rgb, w, h), Window::letterbox(w, h, side), scratch, &mut out)?.faces(min_score);
     let mut faces = Faces::new();
     for first in &firsts {
-        let face = match second_look(first, w, h, side) {
-            Some(window) => {
-                let second = look(init, rgb, w, h, window, scratch)?;
-                FaceBox { looks: 2, ..if same_face(first, &second) { second } else { *first } }
-            }
-            None => *first,
-        };
+        let face = looked_again(init, rgb, w, h, *first, scratch)?;
         if !faces.iter().any(|k| iou(k, &face) > SAME_FACE_IOU) {
             let _ = faces.push(face);
         }

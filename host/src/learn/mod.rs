@@ -106,6 +106,27 @@ pub struct ImageRecord {
     pub seconds: f64,
 }
 
+impl ImageRecord {
+    /// The record of `image` (mirrored or not) before anything was done with it: not accepted,
+    /// no reason, no figures.
+    fn unfitted(image: &Path, mirrored: bool) -> Self {
+        Self {
+            image: image.display().to_string(),
+            mirrored,
+            accepted: false,
+            reason: None,
+            iou: None,
+            score: None,
+            pixel_rmse: None,
+            angles_deg: None,
+            albedo_change: None,
+            detail_mm: None,
+            detail_vertices: None,
+            seconds: 0.0,
+        }
+    }
+}
+
 /// One image's outcome: its record and, when accepted, its reconstruction (model frame).
 #[derive(Debug, Clone)]
 pub struct Wake {
@@ -127,20 +148,7 @@ pub fn wake_image(
     settings: &LearnSettings,
 ) -> Wake {
     let t0 = Instant::now();
-    let mut record = ImageRecord {
-        image: image.display().to_string(),
-        mirrored,
-        accepted: false,
-        reason: None,
-        iou: None,
-        score: None,
-        pixel_rmse: None,
-        angles_deg: None,
-        albedo_change: None,
-        detail_mm: None,
-        detail_vertices: None,
-        seconds: 0.0,
-    };
+    let mut record = ImageRecord::unfitted(image, mirrored);
     let reconstruction = match fit_and_check(model, shading, init, image, mirrored, settings, &mut record) {
         Ok(mesh) => mesh,
         Err(reason) => {
@@ -243,20 +251,7 @@ pub fn wake(
 
 /// A record of an image that could not be fitted, for `reason`.
 fn failed(image: &Path, mirrored: bool, reason: String) -> Wake {
-    let record = ImageRecord {
-        image: image.display().to_string(),
-        mirrored,
-        accepted: false,
-        reason: Some(reason),
-        iou: None,
-        score: None,
-        pixel_rmse: None,
-        angles_deg: None,
-        albedo_change: None,
-        detail_mm: None,
-        detail_vertices: None,
-        seconds: 0.0,
-    };
+    let record = ImageRecord { reason: Some(reason), ..ImageRecord::unfitted(image, mirrored) };
     Wake { record, reconstruction: None }
 }
 
