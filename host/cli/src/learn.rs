@@ -4,6 +4,7 @@ use crate::fit::FitSettingsArgs;
 use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use gpmm_host::learn::dev::{DevPoints, DevSet};
 use gpmm_host::learn::run::{run, RunEvent, RunPlan};
 use gpmm_host::learn::shading::ShadingSettings;
 use gpmm_host::learn::{albedo_change_limit, LearnSettings, MIN_IOU};
@@ -19,8 +20,13 @@ pub struct LearnArgs {
     #[arg(required = true, num_args = 1..)]
     pub images: Vec<PathBuf>,
     /// Init file (`gpmm train-init`): its finder and initializer start every fit.
-    #[arg(long, value_name = "INIT")]
-    pub init: PathBuf,
+    #[arg(long, value_name = "INIT", required_unless_present = "landmarks_dir")]
+    pub init: Option<PathBuf>,
+    /// Start every fit from landmark files instead of the init file: `DIR/STEM.pts` for each image
+    /// `STEM.png` (iBUG-68, 0-based; a detector's, for users who have one). Mirror images get the
+    /// points mirrored.
+    #[arg(long, value_name = "DIR")]
+    pub landmarks_dir: Option<PathBuf>,
     /// Output directory: model_N.gpmm and iteration_N/ (records.json, samples.png,
     /// reconstructions.png) per iteration; a rerun continues after the last complete iteration.
     #[arg(short, long, value_name = "DIR")]
@@ -44,6 +50,21 @@ pub struct LearnArgs {
     /// (docs/learning.md).
     #[arg(long)]
     pub shape_from_shading: bool,
+    /// A development set with known truth (a `gpmm synth` set, or one made from it, with its
+    /// truth.json): after each iteration the new model and its predecessor fit its images as the
+    /// loop fits its own (the init file's points, or --dev-landmarks-dir) and are measured against the true faces; a model
+    /// that is not better is not kept and the run stops. DIR/model.gpmm is then the kept model.
+    #[arg(long, value_name = "SET")]
+    pub dev: Option<PathBuf>,
+    /// Landmark files of the --dev images, when the loop reads landmark files (--landmarks-dir).
+    #[arg(long, value_name = "DIR", requires = "dev")]
+    pub dev_landmarks_dir: Option<PathBuf>,
+    /// Use the first N identities of --dev (default: all).
+    #[arg(long, value_name = "N", requires = "dev")]
+    pub dev_identities: Option<usize>,
+    /// Data directory with the true faces' source, for --dev (default: $GPMM_DATA or ../shared/data).
+    #[arg(long, value_name = "DIR", requires = "dev")]
+    pub data: Option<PathBuf>,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -102,7 +123,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let plan = RunPlan {
         model: a.model.clone(),
-        init: a.init.clone(),
+        init: if a.landmarks_dir.is_some() { None } else { a.init.clone() },
         images,
         out: a.output.clone(),
         iterations: a.iterations.unwrap_or(if a.quick { 1 } else { 5 }),
@@ -112,8 +133,33 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             mirror: a.mirror,
             shading: a.shape_from_shading.then_some(ShadingSettings::DEFAULT),
             max_albedo_change: albedo_change_limit(0),
+            landmarks_dir: a.landmarks_dir.clone(),
         },
         jobs,
+    };
+    let dev = match &a.dev {
+        Some(dir) => {
+            let pb = crate::progress::spinner(&format!("{}: finding the development faces", dir.display()));
+            let data = a.data.clone().unwrap_or_else(gpmm_host::data::default_data_dir);
+            let work = a.output.join("development");
+            let d = match (&a.landmarks_dir, &a.dev_landmarks_dir, &a.init) {
+                (Some(_), Some(points), _) => DevSet::prepare(dir, a.dev_identities, &data, DevPoints::Files(points), &work)?,
+                (Some(_), None, _) => {
+                    bail!("--dev with --landmarks-dir needs --dev-landmarks-dir: the development images start as the loop's do")
+                }
+                (None, _, Some(init)) => {
+                    let bytes = std::fs::read(init).with_context(|| format!("cannot read {}", init.display()))?;
+                    DevSet::prepare(dir, a.dev_identities, &data, DevPoints::Init(&bytes), &work)?
+                }
+                (None, _, None) => bail!("--init or --landmarks-dir is needed"),
+            };
+            pb.finish_and_clear();
+            if d.unfound > 0 {
+                eprintln!("{}: no face found in {} development images; they are left out", dir.display(), d.unfound);
+            }
+            Some(d)
+        }
+        None => None,
     };
     eprintln!(
         "{} images{}, {} iterations, {} threads -> {}",
@@ -125,29 +171,54 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     );
     let bar = ProgressBar::new(0);
     bar.set_style(bar_style("{bar:30} {pos}/{len} fits ({msg}) [{elapsed}]"));
-    let events = |e: RunEvent<'_>| {
-        match e {
+    let events = |e: RunEvent<'_>| match e {
         RunEvent::Reused(f) => {
-            note(&bar, format!("iteration {}: complete on disk ({} of {} accepted), kept", f.iteration, f.accepted, f.images))
+            note(&bar, format!("iteration {}: complete on disk ({} of {} accepted), reused", f.iteration, f.accepted, f.images));
+            if let Some(c) = &f.development {
+                note(&bar, development_line(f.iteration, c));
+            }
         }
         RunEvent::Fitting { iteration, done, total } => {
             bar.set_message(format!("iteration {iteration}"));
             bar.set_length(total as u64);
             bar.set_position(done as u64);
         }
-        RunEvent::Finished(f) => note(
-            &bar,
-            format!(
-                "iteration {}: {} of {} fits accepted, {} rejected by their silhouette, {} by their albedo change, {} failed ({:.0} s) -> {}",
-                f.iteration, f.accepted, f.images, f.rejected_overlap, f.rejected_albedo, f.failed, f.seconds, f.model
-            ),
-        ),
-    }
+        RunEvent::Checking { iteration, model, done, total } => {
+            bar.set_message(format!("iteration {iteration}: development fits of {}", model.display()));
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        }
+        RunEvent::Finished(f) => {
+            note(
+                &bar,
+                format!(
+                    "iteration {}: {} of {} fits accepted, {} rejected by their silhouette, {} by their albedo change, {} failed ({:.0} s) -> {}",
+                    f.iteration, f.accepted, f.images, f.rejected_overlap, f.rejected_albedo, f.failed, f.seconds, f.model
+                ),
+            );
+            if let Some(c) = &f.development {
+                note(&bar, development_line(f.iteration, c));
+            }
+        }
     };
-    let files = run(&plan, &events)?;
+    let outcome = run(&plan, dev.as_ref(), &events)?;
     bar.finish_and_clear();
-    if let Some(last) = files.last() {
+    if dev.is_some() {
+        let to = a.output.join("model.gpmm");
+        std::fs::copy(&outcome.kept, &to).with_context(|| format!("cannot copy {} to {}", outcome.kept.display(), to.display()))?;
+        eprintln!("kept {} (copied to {})", outcome.kept.display(), to.display());
+        println!("{}", to.display());
+    } else if let Some(last) = outcome.iterations.last() {
         println!("{}", last.model);
     }
     Ok(())
+}
+
+/// One line on an iteration's development check: both figures and which model is kept.
+fn development_line(iteration: u32, c: &gpmm_host::learn::dev::DevComparison) -> String {
+    let verdict = if c.kept { "kept" } else { "not kept: the run stops and keeps its predecessor" };
+    format!(
+        "iteration {iteration}: development median {:.3} mm (mean {:.3}) against {:.3} mm (mean {:.3}) before: {verdict}",
+        c.learned.median_mm, c.learned.mean_mm, c.previous.median_mm, c.previous.mean_mm
+    )
 }

@@ -1,6 +1,7 @@
 //! `gpmm learn` end to end on a tiny model (`--quick`): an iteration writes a model every command
 //! can read, with its record; an unreadable image is recorded, not fatal; a rerun keeps the
-//! complete iteration; bad arguments give clear errors.
+//! complete iteration; a development set decides which model is kept; bad arguments give clear
+//! errors.
 
 mod common;
 use common::{fails, gpmm, ok, read_json};
@@ -123,6 +124,83 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert!(records.get("max_albedo_change").is_none(), "{records}");
     assert!(records["records"].as_array().unwrap().iter().all(|r| r["albedo_change"].is_null()), "{records}");
     assert_ne!(std::fs::read(plain.join("model_1.gpmm")).unwrap(), before);
+
+    // From landmark files instead of the init file (here the renders' own exact points): no init
+    // needed, mirror images mirrored with their points; an image without a file is recorded.
+    let from_files = dir.path().join("from-files");
+    let args = ["learn", s(&model), s(&images), "--landmarks-dir", s(&images), "--quick", "--mirror", "-o", s(&from_files)];
+    ok(&gpmm(&args));
+    let records = read_json(&from_files.join("iteration_1/records.json"));
+    let list = records["records"].as_array().unwrap();
+    let renders: Vec<&serde_json::Value> = list.iter().filter(|r| r["image"].as_str().unwrap().ends_with("yaw00.png")).collect();
+    assert_eq!(renders.len(), 4, "{records}");
+    assert!(renders.iter().all(|r| r["accepted"] == true && r["score"].is_null()), "{renders:?}");
+    let broken: Vec<&serde_json::Value> = list.iter().filter(|r| r["image"].as_str().unwrap().ends_with("broken.png")).collect();
+    assert!(broken.iter().all(|r| r["accepted"] == false), "{broken:?}");
+    let m = gpmm_host::gp::model_io::load(&from_files.join("model_1.gpmm")).unwrap();
+    assert!(m.metadata.learning.as_ref().unwrap().init.contains("landmark files"), "{:?}", m.metadata.learning);
+
+    // With a development set: each model is measured against its predecessor there, the verdict
+    // is recorded, and DIR/model.gpmm is the kept model; a model that is not kept ends the run.
+    let dev = dir.path().join("dev");
+    ok(&gpmm(&[
+        "synth",
+        "--ict",
+        s(&data.join("ict")),
+        "--template-dir",
+        s(&t),
+        "--count",
+        "2",
+        "--yaws",
+        "0,30",
+        "--seed",
+        "10",
+        "-o",
+        s(&dev),
+    ]));
+    let checked = dir.path().join("checked");
+    let args = [
+        "learn",
+        s(&model),
+        s(&images),
+        "--init",
+        s(&init),
+        "--quick",
+        "--iterations",
+        "2",
+        "--dev",
+        s(&dev),
+        "--data",
+        s(&data),
+        "-o",
+        s(&checked),
+    ];
+    let run = gpmm(&args);
+    let printed = ok(&run);
+    let kept_path = checked.join("model.gpmm");
+    assert_eq!(printed.trim(), s(&kept_path));
+    let stderr = String::from_utf8_lossy(&run.stderr).to_string();
+    assert!(stderr.contains("development median"), "{stderr}");
+    let first = read_json(&checked.join("iteration_1/records.json"));
+    let c = &first["development"];
+    let (before_mm, after_mm) = (c["previous"]["median_mm"].as_f64().unwrap(), c["learned"]["median_mm"].as_f64().unwrap());
+    assert!(before_mm > 0.0 && before_mm < 50.0 && after_mm > 0.0 && after_mm < 50.0, "{c}");
+    assert!(c["previous"]["fits"].as_u64().unwrap() >= 3 && c["learned"]["fits"].as_u64().unwrap() >= 3, "{c}");
+    assert_eq!(c["kept"].as_bool().unwrap(), after_mm < before_mm, "{c}");
+    let second = checked.join("iteration_2/records.json");
+    if c["kept"] == true {
+        // The second iteration starts from model_1 and reuses its measured figure.
+        let c2 = read_json(&second)["development"].clone();
+        assert_eq!(c2["previous"], c["learned"], "{c2}");
+        let kept = if c2["kept"] == true { "model_2.gpmm" } else { "model_1.gpmm" };
+        assert_eq!(std::fs::read(&kept_path).unwrap(), std::fs::read(checked.join(kept)).unwrap());
+        assert!(stderr.contains(&format!("kept {}", s(&checked.join(kept)))), "{stderr}");
+    } else {
+        // Not kept: the run stops, and the start model is the one to use.
+        assert!(!second.exists(), "a second iteration ran after a model that was not kept");
+        assert!(stderr.contains("not kept"), "{stderr}");
+        assert_eq!(std::fs::read(&kept_path).unwrap(), std::fs::read(&model).unwrap());
+    }
 }
 
 #[test]

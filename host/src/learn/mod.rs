@@ -21,8 +21,12 @@
 //!    the model's frame, so already aligned) are the examples of a PCA, the next model, in the
 //!    template's topology with its landmarks.
 //!
+//! 6. **Development check** ([`dev`], when a set with known truth is given): the new model against its
+//!    predecessor on that set; one that is not better is not kept and the loop stops.
+//!
 //! Not yet part of the loop: retraining the initializer on the learned models.
 
+pub mod dev;
 pub mod run;
 pub mod shading;
 pub mod silhouette;
@@ -71,6 +75,9 @@ pub struct LearnSettings {
     /// The largest mean per-vertex albedo change of shape from shading an accepted image may have
     /// (linear 0–1 colour; a run sets it to [`albedo_change_limit`] of the iterations done).
     pub max_albedo_change: f32,
+    /// Read each image's start points from `DIR/STEM.pts` (a detector's, or any other source)
+    /// instead of the init file's initializer; a mirror image's points are mirrored with it.
+    pub landmarks_dir: Option<PathBuf>,
 }
 
 /// What became of one image in one iteration.
@@ -142,7 +149,7 @@ pub struct Wake {
 pub fn wake_image(
     model: &GpModel,
     shading: Option<&ShadingModel<'_>>,
-    init: &[u8],
+    init: Option<&[u8]>,
     image: &Path,
     mirrored: bool,
     settings: &LearnSettings,
@@ -166,7 +173,7 @@ pub fn wake_image(
 fn fit_and_check(
     model: &GpModel,
     shading: Option<&ShadingModel<'_>>,
-    init: &[u8],
+    init: Option<&[u8]>,
     image: &Path,
     mirrored: bool,
     settings: &LearnSettings,
@@ -176,11 +183,16 @@ fn fit_and_check(
     if mirrored {
         image::imageops::flip_horizontal_in_place(&mut photo);
     }
-    let mut detector = Detector::from_bytes(init).map_err(|e| format!("init file: {e}"))?;
-    let detection = detector.detect(&photo, MIN_SCORE, Reading::DEFAULT).map_err(|e| e.to_string())?;
-    let Some(det) = detection else { return Err("no face found".into()) };
-    record.score = Some(det.face.score);
-    let (points, _) = crate::photo::pts::within_margin(&det.landmarks, photo.width(), photo.height());
+    let points = match (&settings.landmarks_dir, init) {
+        (Some(dir), _) => file_points(dir, image, &photo, mirrored)?,
+        (None, Some(init)) => {
+            let mut detector = Detector::from_bytes(init).map_err(|e| format!("init file: {e}"))?;
+            let (points, score) = start_points(&mut detector, &photo)?;
+            record.score = Some(score);
+            points
+        }
+        (None, None) => return Err("neither an init file nor a landmark directory gives the start points".into()),
+    };
     let prepared = prepare(&photo, &points, settings.fit.size).map_err(|e| e.to_string())?;
     let outcome = fit_prepared(model, &prepared, &settings.fit, &mut |_, _, _| {}).map_err(|e| e.to_string())?;
     let start = silhouette::render_params(model, &outcome.landmark_params, &settings.fit).map_err(|e| e.to_string())?;
@@ -216,11 +228,35 @@ fn fit_and_check(
     Ok(Some(detail.applied_to(&mesh)))
 }
 
+/// The start of a fit without a landmark file: the finder's best face in `photo` and the
+/// initializer's points on it (those beyond the fit's margin moved onto the frame), with its score.
+pub fn start_points(detector: &mut Detector, photo: &image::RgbImage) -> Result<(Vec<[f32; 2]>, f32), String> {
+    let detection = detector.detect(photo, MIN_SCORE, Reading::DEFAULT).map_err(|e| e.to_string())?;
+    let Some(det) = detection else { return Err("no face found".into()) };
+    let (points, _) = crate::photo::pts::within_margin(&det.landmarks, photo.width(), photo.height());
+    Ok((points, det.face.score))
+}
+
+/// The points of `image` in `dir/STEM.pts` (iBUG-68, 0-based, checked against `photo`), mirrored
+/// with the image when `mirrored` (x → width − x, each point swapped with its iBUG partner).
+fn file_points(dir: &Path, image: &Path, photo: &image::RgbImage, mirrored: bool) -> Result<Vec<[f32; 2]>, String> {
+    use gpmm_core::model::ibug::{ibug68_partner, IBUG68_POINTS};
+    let stem = image.file_stem().ok_or_else(|| format!("{}: no file name", image.display()))?;
+    let path = dir.join(stem).with_extension("pts");
+    let pts = crate::photo::pts::read_pts(&path, false).map_err(|e| e.to_string())?;
+    pts.check(&path, IBUG68_POINTS, "ibug68", photo.width(), photo.height(), false).map_err(|e| e.to_string())?;
+    if !mirrored {
+        return Ok(pts.points);
+    }
+    let w = photo.width() as f32;
+    Ok((0..IBUG68_POINTS).map(|k| pts.points[ibug68_partner(k)]).map(|[x, y]| [w - x, y]).collect())
+}
+
 /// Every image (and mirror image) of one iteration, in parallel on `jobs` threads, in input order;
 /// `progress(done, total)` after each.
 pub fn wake(
     model: &GpModel,
-    init: &[u8],
+    init: Option<&[u8]>,
     images: &[PathBuf],
     settings: &LearnSettings,
     jobs: usize,

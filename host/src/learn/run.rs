@@ -4,11 +4,16 @@
 //! `DIR/iteration_N/records.json` holds every image's record and the iteration's counts; it is
 //! written last, after `model_N.gpmm` and the pictures, so an iteration with a records file is
 //! complete and a rerun continues after it.
+//!
+//! With a development set ([`DevSet`]) each new model is measured against its predecessor there;
+//! one that is not better is not kept (its file and records stay on disk, marked) and the run stops:
+//! the kept model is the last one that was better.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::dev::{DevComparison, DevFigure, DevSet};
 use super::{albedo_change_limit, counts, learned_model, wake, ImageRecord, LearnError, LearnSettings, Wake};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::gp::model_io;
@@ -40,6 +45,9 @@ pub struct IterationFile {
     pub failed: usize,
     /// Wall-clock seconds of the iteration.
     pub seconds: f64,
+    /// The model against its predecessor on the development set, when one was given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub development: Option<DevComparison>,
     /// Every image.
     pub records: Vec<ImageRecord>,
 }
@@ -49,8 +57,8 @@ pub struct IterationFile {
 pub struct RunPlan {
     /// The model the first iteration starts from.
     pub model: PathBuf,
-    /// The init file (finder and initializer).
-    pub init: PathBuf,
+    /// The init file (finder and initializer); `None` when the settings name a landmark directory.
+    pub init: Option<PathBuf>,
     /// The images.
     pub images: Vec<PathBuf>,
     /// Output directory.
@@ -77,8 +85,28 @@ pub enum RunEvent<'a> {
         /// Images in all.
         total: usize,
     },
+    /// Development images of an iteration fitted so far (`model`: the one being measured).
+    Checking {
+        /// The iteration.
+        iteration: u32,
+        /// The model file measured.
+        model: &'a Path,
+        /// Images fitted.
+        done: usize,
+        /// Images in all.
+        total: usize,
+    },
     /// An iteration finished.
     Finished(&'a IterationFile),
+}
+
+/// What a run leaves: every iteration's file and the model to use.
+#[derive(Debug, Clone)]
+pub struct RunOutcome {
+    /// The iterations on disk, in order (the last one possibly not kept).
+    pub iterations: Vec<IterationFile>,
+    /// The last model that was kept: the start model if no iteration was.
+    pub kept: PathBuf,
 }
 
 /// Why a run stopped.
@@ -114,6 +142,12 @@ pub enum RunError {
         /// Why.
         error: String,
     },
+    /// The development set could not be fitted or measured.
+    #[error("development set: {error}")]
+    Development {
+        /// Why.
+        error: crate::eval::EvalError,
+    },
     /// The worker threads could not start.
     #[error("cannot start {jobs} threads: {error}")]
     Threads {
@@ -134,18 +168,27 @@ pub fn iteration_dir(out: &Path, iteration: u32) -> PathBuf {
     out.join(format!("iteration_{iteration}"))
 }
 
-/// Runs the loop: every complete iteration on disk is kept, the others are run. Returns the
-/// iterations' files in order.
-pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec<IterationFile>, RunError> {
+/// Runs the loop: every complete iteration on disk is kept, the others are run; with `dev`, each
+/// new model is compared with its predecessor and the run stops at the first that is not better.
+pub fn run(plan: &RunPlan, dev: Option<&DevSet>, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<RunOutcome, RunError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |error| RunError::Io { path, error }
     };
     std::fs::create_dir_all(&plan.out).map_err(io(&plan.out))?;
-    let init = std::fs::read(&plan.init).map_err(io(&plan.init))?;
+    let init = match &plan.init {
+        Some(path) => Some(std::fs::read(path).map_err(io(path))?),
+        None => None,
+    };
     let mut previous_path = plan.model.clone();
     let mut model = model_io::load(&plan.model)?;
     let mut done = Vec::new();
+    // The kept model's development figure, once measured.
+    let mut kept_figure: Option<DevFigure> = None;
+    let figure = |dev: &DevSet, iteration: u32, path: &Path, label: &str| -> Result<DevFigure, RunError> {
+        let progress = |d, t| events(RunEvent::Checking { iteration, model: path, done: d, total: t });
+        dev.figure(path, label, &plan.settings.fit, plan.jobs, &progress).map_err(|error| RunError::Development { error })
+    };
     for iteration in 1..=plan.iterations {
         let dir = iteration_dir(&plan.out, iteration);
         let records_path = dir.join("records.json");
@@ -155,9 +198,24 @@ pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec
             let file: IterationFile =
                 serde_json::from_str(&text).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
             events(RunEvent::Reused(&file));
+            let stop = match &file.development {
+                Some(c) if !c.kept => true,
+                Some(c) => {
+                    kept_figure = Some(c.learned.clone());
+                    false
+                }
+                None => {
+                    // Measured without a development set: its model stands unmeasured.
+                    kept_figure = None;
+                    false
+                }
+            };
+            done.push(file);
+            if stop {
+                break;
+            }
             model = model_io::load(&next_path)?;
             previous_path = next_path;
-            done.push(file);
             continue;
         }
         let t0 = std::time::Instant::now();
@@ -165,14 +223,18 @@ pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec
         // The paper's albedo-change limit tightens with the iterations done.
         let settings = LearnSettings { max_albedo_change: albedo_change_limit(iteration - 1), ..plan.settings.clone() };
         let max_albedo_change = settings.shading.is_some().then_some(settings.max_albedo_change);
-        let wakes = wake(&model, &init, &plan.images, &settings, plan.jobs, &progress)
+        let wakes = wake(&model, init.as_deref(), &plan.images, &settings, plan.jobs, &progress)
             .map_err(|error| RunError::Threads { jobs: plan.jobs, error })?;
         let records: Vec<ImageRecord> = wakes.iter().map(|w| w.record.clone()).collect();
         let c = counts(&records);
         let record = LearningRecord {
             iteration,
             previous_model: previous_path.display().to_string(),
-            init: plan.init.display().to_string(),
+            init: match (&plan.settings.landmarks_dir, &plan.init) {
+                (Some(dir), _) => format!("landmark files in {}", dir.display()),
+                (None, Some(path)) => path.display().to_string(),
+                (None, None) => String::new(),
+            },
             images: records.len(),
             accepted: c.accepted,
             rejected_overlap: c.rejected_overlap,
@@ -187,6 +249,17 @@ pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec
         model_io::save(&next, &next_path)?;
         write_samples(&next, &dir.join("samples.png"))?;
         write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
+        let development = match dev {
+            Some(d) => {
+                let previous = match kept_figure.take() {
+                    Some(f) => f,
+                    None => figure(d, iteration, &previous_path, &format!("model_{}", iteration - 1))?,
+                };
+                let learned = figure(d, iteration, &next_path, &format!("model_{iteration}"))?;
+                Some(DevComparison::new(d.dir(), previous, learned))
+            }
+            None => None,
+        };
         let file = IterationFile {
             iteration,
             previous_model: previous_path.display().to_string(),
@@ -198,16 +271,22 @@ pub fn run(plan: &RunPlan, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<Vec
             max_albedo_change,
             failed: c.failed,
             seconds: t0.elapsed().as_secs_f64(),
+            development,
             records,
         };
         let text = serde_json::to_string_pretty(&file).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
         std::fs::write(&records_path, text + "\n").map_err(io(&records_path))?;
         events(RunEvent::Finished(&file));
+        let kept = file.development.as_ref().is_none_or(|c| c.kept);
+        kept_figure = file.development.as_ref().filter(|c| c.kept).map(|c| c.learned.clone());
+        done.push(file);
+        if !kept {
+            break;
+        }
         model = next;
         previous_path = next_path;
-        done.push(file);
     }
-    Ok(done)
+    Ok(RunOutcome { iterations: done, kept: previous_path })
 }
 
 /// Picture settings of the learning run's figures: small cells, light that shows shape.
