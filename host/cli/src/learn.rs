@@ -65,6 +65,11 @@ pub struct LearnArgs {
     /// Data directory with the true faces' source, for --dev (default: $GPMM_DATA or ../shared/data).
     #[arg(long, value_name = "DIR", requires = "dev")]
     pub data: Option<PathBuf>,
+    /// Share of the previous model's covariance the learned model keeps beside its fits' (0: the
+    /// fits' PCA alone, which loses variance with every iteration: each fit is drawn toward the
+    /// model it was fitted with).
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    pub keep_variance: f64,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
     pub jobs: Option<usize>,
@@ -108,6 +113,9 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     if !(a.min_iou.is_finite() && (0.0..=1.0).contains(&a.min_iou)) {
         bail!("--min-iou {}: an overlap is between 0 and 1", a.min_iou);
     }
+    if !(a.keep_variance.is_finite() && a.keep_variance >= 0.0) {
+        bail!("--keep-variance {}: a share of a covariance is 0 or more", a.keep_variance);
+    }
     let images = image_files(&a.images)?;
     let mut flags = a.settings.flags();
     flags.initializer_sigma = Some(a.init_landmark_sigma);
@@ -134,6 +142,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             shading: a.shape_from_shading.then_some(ShadingSettings::DEFAULT),
             max_albedo_change: albedo_change_limit(0),
             landmarks_dir: a.landmarks_dir.clone(),
+            keep_variance: Some(a.keep_variance),
         },
         jobs,
     };

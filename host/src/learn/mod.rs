@@ -38,7 +38,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::detect::Detector;
-use crate::eval::models::pca::pca_model;
+use crate::eval::models::pca::{pca_beside, KeptCovariance};
 use crate::fit::{fit_prepared, prepare, FitOptions};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::mesh::Mesh;
@@ -61,8 +61,8 @@ pub fn albedo_change_limit(done: u32) -> f32 {
 /// The least finder score taken as a face.
 pub const MIN_SCORE: f32 = 0.05;
 
-/// How a learning run fits its images.
-#[derive(Debug, Clone)]
+/// How a learning run fits its images (serializable, so that workers elsewhere fit alike).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LearnSettings {
     /// Fit settings (the initializer's landmark σ included).
     pub fit: FitOptions,
@@ -78,6 +78,9 @@ pub struct LearnSettings {
     /// Read each image's start points from `DIR/STEM.pts` (a detector's, or any other source)
     /// instead of the init file's initializer; a mirror image's points are mirrored with it.
     pub landmarks_dir: Option<PathBuf>,
+    /// The share of the previous model's covariance the learned model keeps beside its fits'
+    /// (`None` or 0: the fits' PCA alone; see [`crate::eval::models::pca::pca_beside`]).
+    pub keep_variance: Option<f64>,
 }
 
 /// What became of one image in one iteration.
@@ -311,14 +314,22 @@ pub enum LearnError {
 
 /// The next model: the PCA of the accepted reconstructions of `wakes`, in `previous`'s topology
 /// with its landmarks, its template's provenance and attribution, and a record of the iteration.
-pub fn learned_model(previous: &GpModel, wakes: &[Wake], record: LearningRecord) -> Result<GpModel, LearnError> {
+pub fn learned_model(
+    previous: &GpModel,
+    wakes: &[Wake],
+    keep_variance: Option<f64>,
+    record: LearningRecord,
+) -> Result<GpModel, LearnError> {
     let examples: Vec<Mesh> = wakes.iter().filter_map(|w| w.reconstruction.clone()).collect();
     if examples.len() < 2 {
         return Err(LearnError::TooFewAccepted { iteration: record.iteration, accepted: examples.len(), images: wakes.len() });
     }
     let source = format!("learned by gpmm learn (iteration {}) from {} of {} images", record.iteration, record.accepted, record.images);
     let attribution = previous.metadata.template.attribution.clone().unwrap_or_default();
-    let mut model = pca_model(&examples, &previous.triangles, &previous.landmarks, "learned", &source, &attribution)?;
+    // At most as many components as the predecessor has (or the examples give, without it).
+    let kept =
+        keep_variance.filter(|&s| s > 0.0).map(|share| KeptCovariance { model: previous, share, max_rank: previous.shape.rank().max(2) });
+    let mut model = pca_beside(&examples, kept, &previous.triangles, &previous.landmarks, "learned", &source, &attribution)?;
     model.metadata.template = previous.metadata.template.clone();
     model.metadata.landmark_scheme = previous.metadata.landmark_scheme.clone();
     model.metadata.units = previous.metadata.units.clone();

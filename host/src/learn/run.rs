@@ -148,6 +148,24 @@ pub enum RunError {
         /// Why.
         error: crate::eval::EvalError,
     },
+    /// A wake phase returned another number of images than it was given.
+    #[error("iteration {iteration}: the fits returned {got} results for {expected} images")]
+    Wakes {
+        /// The iteration.
+        iteration: u32,
+        /// Results returned.
+        got: usize,
+        /// Images (and mirror images) given.
+        expected: usize,
+    },
+    /// A wake phase elsewhere (a cluster) failed.
+    #[error("iteration {iteration}: {error}")]
+    Remote {
+        /// The iteration.
+        iteration: u32,
+        /// Why.
+        error: String,
+    },
     /// The worker threads could not start.
     #[error("cannot start {jobs} threads: {error}")]
     Threads {
@@ -168,18 +186,50 @@ pub fn iteration_dir(out: &Path, iteration: u32) -> PathBuf {
     out.join(format!("iteration_{iteration}"))
 }
 
-/// Runs the loop: every complete iteration on disk is kept, the others are run; with `dev`, each
-/// new model is compared with its predecessor and the run stops at the first that is not better.
+/// What one iteration's wake phase is given: the model to fit (its file and its contents) and the
+/// settings (the albedo limit of this iteration set).
+#[derive(Debug, Clone, Copy)]
+pub struct WakeJob<'a> {
+    /// The iteration (1-based).
+    pub iteration: u32,
+    /// The model's file (the start model or `model_{iteration − 1}.gpmm`).
+    pub model_path: &'a Path,
+    /// The model.
+    pub model: &'a GpModel,
+    /// The settings.
+    pub settings: &'a LearnSettings,
+}
+
+/// Runs the loop with its fits on this machine's threads (`plan.jobs`): [`run_with`] and [`wake`].
 pub fn run(plan: &RunPlan, dev: Option<&DevSet>, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<RunOutcome, RunError> {
+    let init = match &plan.init {
+        Some(path) => Some(std::fs::read(path).map_err(|error| RunError::Io { path: path.clone(), error })?),
+        None => None,
+    };
+    let local = |job: WakeJob<'_>| -> Result<Vec<Wake>, RunError> {
+        let iteration = job.iteration;
+        let progress = |d, t| events(RunEvent::Fitting { iteration, done: d, total: t });
+        wake(job.model, init.as_deref(), &plan.images, job.settings, plan.jobs, &progress)
+            .map_err(|error| RunError::Threads { jobs: plan.jobs, error })
+    };
+    run_with(plan, dev, &local, events)
+}
+
+/// Runs the loop: every complete iteration on disk is kept, the others are run, each iteration's
+/// images (and mirror images, in [`wake`]'s order) fitted by `wake_all` (on this machine, or on a
+/// cluster); with `dev`, each new model is compared with its predecessor and the run stops at the
+/// first that is not better.
+pub fn run_with(
+    plan: &RunPlan,
+    dev: Option<&DevSet>,
+    wake_all: &dyn Fn(WakeJob<'_>) -> Result<Vec<Wake>, RunError>,
+    events: &(dyn Fn(RunEvent<'_>) + Sync),
+) -> Result<RunOutcome, RunError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |error| RunError::Io { path, error }
     };
     std::fs::create_dir_all(&plan.out).map_err(io(&plan.out))?;
-    let init = match &plan.init {
-        Some(path) => Some(std::fs::read(path).map_err(io(path))?),
-        None => None,
-    };
     let mut previous_path = plan.model.clone();
     let mut model = model_io::load(&plan.model)?;
     let mut done = Vec::new();
@@ -219,12 +269,14 @@ pub fn run(plan: &RunPlan, dev: Option<&DevSet>, events: &(dyn Fn(RunEvent<'_>) 
             continue;
         }
         let t0 = std::time::Instant::now();
-        let progress = |d, t| events(RunEvent::Fitting { iteration, done: d, total: t });
         // The paper's albedo-change limit tightens with the iterations done.
         let settings = LearnSettings { max_albedo_change: albedo_change_limit(iteration - 1), ..plan.settings.clone() };
         let max_albedo_change = settings.shading.is_some().then_some(settings.max_albedo_change);
-        let wakes = wake(&model, init.as_deref(), &plan.images, &settings, plan.jobs, &progress)
-            .map_err(|error| RunError::Threads { jobs: plan.jobs, error })?;
+        let wakes = wake_all(WakeJob { iteration, model_path: &previous_path, model: &model, settings: &settings })?;
+        let expected = plan.images.len() * if settings.mirror { 2 } else { 1 };
+        if wakes.len() != expected {
+            return Err(RunError::Wakes { iteration, got: wakes.len(), expected });
+        }
         let records: Vec<ImageRecord> = wakes.iter().map(|w| w.record.clone()).collect();
         let c = counts(&records);
         let record = LearningRecord {
@@ -245,7 +297,7 @@ pub fn run(plan: &RunPlan, dev: Option<&DevSet>, events: &(dyn Fn(RunEvent<'_>) 
             seed: plan.settings.fit.seed,
         };
         std::fs::create_dir_all(&dir).map_err(io(&dir))?;
-        let next = learned_model(&model, &wakes, record)?;
+        let next = learned_model(&model, &wakes, plan.settings.keep_variance, record)?;
         model_io::save(&next, &next_path)?;
         write_samples(&next, &dir.join("samples.png"))?;
         write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;

@@ -88,6 +88,12 @@ pub fn learned_metadata(kernel: &str, shape_trace: f64, color_trace: f64, source
     }
 }
 
+/// Every scaled component of `part` as a dense `3N` vector, times `w`.
+fn scaled_components(part: &crate::gp::model::ModelPart, w: f64) -> Vec<Vec<f64>> {
+    let basis = crate::fit::register::basis_matrix(part, part.rank());
+    (0..basis.ncols()).map(|j| (0..basis.nrows()).map(|r| w * basis[(r, j)]).collect()).collect()
+}
+
 fn mean_of(items: &[&[[f64; 3]]]) -> Vec<[f64; 3]> {
     let n = items.first().map_or(0, |v| v.len());
     let mut mean = vec![[0.0; 3]; n];
@@ -115,6 +121,36 @@ pub fn pca_model(
     source: &str,
     attribution: &str,
 ) -> Result<GpModel, EvalError> {
+    pca_beside(meshes, None, triangles, landmarks, kernel, source, attribution)
+}
+
+/// The covariance a learned model keeps of its predecessor beside its examples' (see
+/// [`pca_beside`]).
+#[derive(Debug, Clone, Copy)]
+pub struct KeptCovariance<'a> {
+    /// The predecessor.
+    pub model: &'a GpModel,
+    /// The share of its covariance kept (> 0).
+    pub share: f64,
+    /// Components of the result at most.
+    pub max_rank: usize,
+}
+
+/// [`pca_model`] whose covariance also keeps `share` times `kept.model`'s (shape and colour):
+/// `C = S + share · C_prev`, with `S` the examples' sample covariance around their mean. Without
+/// it a model learned from its own fits can only lose variance (each fit is shrunk toward the
+/// model it was fitted with); with it, directions the examples do not vary in keep some of the
+/// predecessor's. The eigenbasis of the sum comes from the same Gram matrix, the predecessor's
+/// scaled components standing as further deviation vectors.
+pub fn pca_beside(
+    meshes: &[Mesh],
+    kept: Option<KeptCovariance<'_>>,
+    triangles: &[[u32; 3]],
+    landmarks: &[u32],
+    kernel: &str,
+    source: &str,
+    attribution: &str,
+) -> Result<GpModel, EvalError> {
     if meshes.len() < 2 {
         return Err(EvalError::Invalid(format!("a PCA model needs at least 2 examples, got {}", meshes.len())));
     }
@@ -122,12 +158,29 @@ pub fn pca_model(
     if meshes.iter().any(|m| m.positions.len() != n || m.colors.len() != n) {
         return Err(EvalError::Invalid("the PCA examples are not in correspondence (vertex counts differ)".into()));
     }
+    if let Some(k) = &kept {
+        if k.model.vertices() != n {
+            return Err(EvalError::Invalid(format!("the kept model has {} vertices, the examples {n}", k.model.vertices())));
+        }
+        if !(k.share.is_finite() && k.share > 0.0) {
+            return Err(EvalError::Invalid(format!("the kept covariance share {} must be positive", k.share)));
+        }
+    }
     let factor = 1.0 / (meshes.len() - 1) as f64;
     let shapes: Vec<&[[f64; 3]]> = meshes.iter().map(|m| m.positions.as_slice()).collect();
     let colors: Vec<&[[f64; 3]]> = meshes.iter().map(|m| m.colors.as_slice()).collect();
     let (ms, mc) = (mean_of(&shapes), mean_of(&colors));
-    let (es, bs) = covariance_basis(&deviations(&shapes, &ms), factor, meshes.len())?;
-    let (ec, bc) = covariance_basis(&deviations(&colors, &mc), factor, meshes.len())?;
+    let (mut ds, mut dc) = (deviations(&shapes, &ms), deviations(&colors, &mc));
+    let mut max_rank = meshes.len();
+    if let Some(k) = kept {
+        // f · e eᵀ = share · b bᵀ for e = sqrt(share / f) · b.
+        let w = (k.share / factor).sqrt();
+        ds.extend(scaled_components(&k.model.shape, w));
+        dc.extend(scaled_components(&k.model.color, w));
+        max_rank = k.max_rank;
+    }
+    let (es, bs) = covariance_basis(&ds, factor, max_rank)?;
+    let (ec, bc) = covariance_basis(&dc, factor, max_rank)?;
     let (ts, tc) = (es.iter().sum(), ec.iter().sum());
     Ok(GpModel {
         shape: dense_part(&ms, es, &bs),
@@ -175,5 +228,35 @@ mod tests {
         let (hi, lo) = if a.positions[0][0] > b.positions[0][0] { (a, b) } else { (b, a) };
         // Sample variance of {1, 3} is 2 per coordinate: the mean ± one standard deviation per coordinate.
         assert!((hi.positions[0][0] - (2.0 + 2f64.sqrt())).abs() < 1e-5 && (lo.positions[1][1] - (2.0 - 2f64.sqrt())).abs() < 1e-5);
+    }
+
+    #[test]
+    fn a_kept_share_adds_the_predecessors_covariance() {
+        let m = |s: f64| Mesh {
+            positions: vec![[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, 1.0]],
+            colors: vec![[0.5; 3]; 3],
+            triangles: vec![[0, 1, 2]],
+        };
+        let examples = [m(1.0), m(3.0)];
+        // The predecessor: one component moving vertex 2 along z by 2 (variance 4), which the
+        // examples never move.
+        let mut prev = pca_model(&examples, &[[0, 1, 2]], &[0, 1, 2], "pca", "test", "test").unwrap();
+        prev.shape = dense_part(&[[0.0; 3]; 3], vec![4.0], &[vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]]);
+        let kept = KeptCovariance { model: &prev, share: 0.25, max_rank: 10 };
+        let model = pca_beside(&examples, Some(kept), &[[0, 1, 2]], &[0, 1, 2], "pca", "test", "test").unwrap();
+        // Two components: the examples' (variance 2 on each of two coordinates: eigenvalue 4) and
+        // a quarter of the predecessor's (eigenvalue 1).
+        assert_eq!(model.shape.rank(), 2);
+        assert!(
+            (model.shape.eigenvalues[0] - 4.0).abs() < 1e-9 && (model.shape.eigenvalues[1] - 1.0).abs() < 1e-9,
+            "{:?}",
+            model.shape.eigenvalues
+        );
+        let z = model.instance(&[0.0, 1.0], &[]).unwrap();
+        // One standard deviation of it moves vertex 2 by 1 along z (the kept variance 0.25 · 4 = 1).
+        assert!(((z.positions[2][2] - 1.0).abs() - 1.0).abs() < 1e-5, "{:?}", z.positions);
+        assert_eq!(model.instance(&[], &[]).unwrap().positions[0][0], 2.0);
+        let refused = KeptCovariance { model: &prev, share: -1.0, max_rank: 10 };
+        assert!(pca_beside(&examples, Some(refused), &[[0, 1, 2]], &[0, 1, 2], "pca", "test", "test").is_err());
     }
 }

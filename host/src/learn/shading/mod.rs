@@ -38,7 +38,7 @@ use subspace::{Subspace, SubspaceError};
 type Vec3 = [f32; 3];
 
 /// How shape from shading weighs and runs.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ShadingSettings {
     /// Gradient steps.
     pub steps: u32,
