@@ -41,7 +41,8 @@ pub struct LearnArgs {
     /// fit to be used.
     #[arg(long, value_name = "IOU", default_value_t = MIN_IOU)]
     pub min_iou: f64,
-    /// Landmark σ of the initializer's landmarks (fraction of the fit's image side).
+    /// Landmark σ of the initializer's landmarks (fraction of the fit's image side; landmark files
+    /// from --landmarks-dir take --landmark-sigma, as `gpmm fit --landmarks` does).
     #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA)]
     pub init_landmark_sigma: f32,
     /// Add to each kept fit the per-vertex shape and albedo detail its image shows beyond the
@@ -118,7 +119,9 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     }
     let images = image_files(&a.images)?;
     let mut flags = a.settings.flags();
-    flags.initializer_sigma = Some(a.init_landmark_sigma);
+    // The initializer's points are fitted as `gpmm fit --init` fits them; landmark files as
+    // `gpmm fit --landmarks` does (a detector's visible outline, the fit's own σ).
+    flags.initializer_sigma = a.landmarks_dir.is_none().then_some(a.init_landmark_sigma);
     if a.quick {
         if a.settings.landmark_steps == gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps {
             flags.landmark_steps = Some(1500);
