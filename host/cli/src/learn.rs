@@ -149,7 +149,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         },
         jobs,
     };
-    let dev = match &a.dev {
+    let mut dev = match &a.dev {
         Some(dir) => {
             let pb = crate::progress::spinner(&format!("{}: finding the development faces", dir.display()));
             let data = a.data.clone().unwrap_or_else(gpmm_host::data::default_data_dir);
@@ -213,7 +213,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             }
         }
     };
-    let outcome = run(&plan, dev.as_ref(), &events)?;
+    let outcome = run(&plan, dev.as_mut(), &events)?;
     bar.finish_and_clear();
     if dev.is_some() {
         let to = a.output.join("model.gpmm");

@@ -101,6 +101,15 @@ impl DevSet {
         Ok(Self { set, world, work: work.to_path_buf(), unfound })
     }
 
+    /// Starts the development images from `init`'s points from now on, written to `work/NAME`
+    /// (a directory per init file: the fit cache knows points by their directory).
+    pub fn repoint(&mut self, init: &[u8], name: &str) -> Result<(), EvalError> {
+        let out = self.work.join(name);
+        self.unfound = write_start_points(&self.set, init, &out)?;
+        self.set.landmarks = LandmarkSource::new(Some(out), None)?;
+        Ok(())
+    }
+
     /// The development set's directory.
     pub fn dir(&self) -> &Path {
         &self.set.dir

@@ -196,40 +196,77 @@ pub struct WakeJob<'a> {
     pub model_path: &'a Path,
     /// The model.
     pub model: &'a GpModel,
+    /// The init file's bytes the fits start from (`None` with landmark files).
+    pub init: Option<&'a [u8]>,
     /// The settings.
     pub settings: &'a LearnSettings,
 }
 
-/// Runs the loop with its fits on this machine's threads (`plan.jobs`): [`run_with`] and [`wake`].
-pub fn run(plan: &RunPlan, dev: Option<&DevSet>, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<RunOutcome, RunError> {
-    let init = match &plan.init {
-        Some(path) => Some(std::fs::read(path).map_err(|error| RunError::Io { path: path.clone(), error })?),
-        None => None,
-    };
-    let local = |job: WakeJob<'_>| -> Result<Vec<Wake>, RunError> {
+/// What retraining the finder and initializer after a kept iteration is given.
+#[derive(Debug, Clone, Copy)]
+pub struct RetrainJob<'a> {
+    /// The iteration just kept.
+    pub iteration: u32,
+    /// Every model so far: the start model and each kept one, in order.
+    pub models: &'a [PathBuf],
+    /// The init file's bytes the iteration started from.
+    pub init: &'a [u8],
+}
+
+/// What the loop calls out to: who fits the images, who retrains the initializer, who hears
+/// of progress.
+pub struct Hooks<'a> {
+    /// Fits one iteration's images (this machine's threads, or a cluster).
+    pub wake_all: &'a dyn Fn(WakeJob<'_>) -> Result<Vec<Wake>, RunError>,
+    /// Retrains the finder and initializer on the models so far after each kept iteration and
+    /// returns the new init file's bytes (`None`: the init file stays the same).
+    pub retrain: Option<&'a dyn Fn(RetrainJob<'_>) -> Result<Vec<u8>, RunError>>,
+    /// Progress.
+    pub events: &'a (dyn Fn(RunEvent<'_>) + Sync),
+}
+
+/// `DIR/iteration_N/init.init`: the init file retrained after iteration N.
+pub fn retrained_init_path(out: &Path, iteration: u32) -> PathBuf {
+    iteration_dir(out, iteration).join("init.init")
+}
+
+/// The wake phase on this machine's threads (`plan.jobs`), as [`wake`] runs it.
+pub fn local_wake<'a>(
+    plan: &'a RunPlan,
+    events: &'a (dyn Fn(RunEvent<'_>) + Sync),
+) -> impl Fn(WakeJob<'_>) -> Result<Vec<Wake>, RunError> + 'a {
+    move |job: WakeJob<'_>| {
         let iteration = job.iteration;
         let progress = |d, t| events(RunEvent::Fitting { iteration, done: d, total: t });
-        wake(job.model, init.as_deref(), &plan.images, job.settings, plan.jobs, &progress)
+        wake(job.model, job.init, &plan.images, job.settings, plan.jobs, &progress)
             .map_err(|error| RunError::Threads { jobs: plan.jobs, error })
-    };
-    run_with(plan, dev, &local, events)
+    }
+}
+
+/// Runs the loop with its fits on this machine's threads and no retraining: [`run_with`].
+pub fn run(plan: &RunPlan, dev: Option<&mut DevSet>, events: &(dyn Fn(RunEvent<'_>) + Sync)) -> Result<RunOutcome, RunError> {
+    let local = local_wake(plan, events);
+    run_with(plan, dev, &Hooks { wake_all: &local, retrain: None, events })
 }
 
 /// Runs the loop: every complete iteration on disk is kept, the others are run, each iteration's
-/// images (and mirror images, in [`wake`]'s order) fitted by `wake_all` (on this machine, or on a
-/// cluster); with `dev`, each new model is compared with its predecessor and the run stops at the
-/// first that is not better.
-pub fn run_with(
-    plan: &RunPlan,
-    dev: Option<&DevSet>,
-    wake_all: &dyn Fn(WakeJob<'_>) -> Result<Vec<Wake>, RunError>,
-    events: &(dyn Fn(RunEvent<'_>) + Sync),
-) -> Result<RunOutcome, RunError> {
+/// images (and mirror images, in [`wake`]'s order) fitted by `hooks.wake_all` (on this machine, or
+/// on a cluster); with `dev`, each new model is compared with its predecessor and the run stops at
+/// the first that is not better; with `hooks.retrain`, the init file is retrained after each kept
+/// iteration (`DIR/iteration_N/init.init`, reused by a rerun) and the next iteration starts from it.
+pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>) -> Result<RunOutcome, RunError> {
+    let Hooks { wake_all, retrain, events } = *hooks;
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |error| RunError::Io { path, error }
     };
     std::fs::create_dir_all(&plan.out).map_err(io(&plan.out))?;
+    let mut init_path = plan.init.clone();
+    let mut init = match &plan.init {
+        Some(path) => Some(std::fs::read(path).map_err(io(path))?),
+        None => None,
+    };
+    let mut models = vec![plan.model.clone()];
     let mut previous_path = plan.model.clone();
     let mut model = model_io::load(&plan.model)?;
     let mut done = Vec::new();
@@ -266,13 +303,24 @@ pub fn run_with(
             }
             model = model_io::load(&next_path)?;
             previous_path = next_path;
+            models.push(previous_path.clone());
+            if let (Some(retrain), Some(current)) = (retrain, init.as_deref()) {
+                let path = retrained_init_path(&plan.out, iteration);
+                let bytes = match std::fs::read(&path) {
+                    Ok(bytes) => bytes,
+                    Err(_) => retrain_and_save(retrain, iteration, &models, current, &path)?,
+                };
+                kept_figure = repoint(dev.as_deref_mut(), &bytes, iteration, kept_figure)?;
+                init = Some(bytes);
+                init_path = Some(path);
+            }
             continue;
         }
         let t0 = std::time::Instant::now();
         // The paper's albedo-change limit tightens with the iterations done.
         let settings = LearnSettings { max_albedo_change: albedo_change_limit(iteration - 1), ..plan.settings.clone() };
         let max_albedo_change = settings.shading.is_some().then_some(settings.max_albedo_change);
-        let wakes = wake_all(WakeJob { iteration, model_path: &previous_path, model: &model, settings: &settings })?;
+        let wakes = wake_all(WakeJob { iteration, model_path: &previous_path, model: &model, init: init.as_deref(), settings: &settings })?;
         let expected = plan.images.len() * if settings.mirror { 2 } else { 1 };
         if wakes.len() != expected {
             return Err(RunError::Wakes { iteration, got: wakes.len(), expected });
@@ -282,7 +330,7 @@ pub fn run_with(
         let record = LearningRecord {
             iteration,
             previous_model: previous_path.display().to_string(),
-            init: match (&plan.settings.landmarks_dir, &plan.init) {
+            init: match (&plan.settings.landmarks_dir, &init_path) {
                 (Some(dir), _) => format!("landmark files in {}", dir.display()),
                 (None, Some(path)) => path.display().to_string(),
                 (None, None) => String::new(),
@@ -301,7 +349,7 @@ pub fn run_with(
         model_io::save(&next, &next_path)?;
         write_samples(&next, &dir.join("samples.png"))?;
         write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
-        let development = match dev {
+        let development = match dev.as_deref() {
             Some(d) => {
                 let previous = match kept_figure.take() {
                     Some(f) => f,
@@ -337,6 +385,14 @@ pub fn run_with(
         }
         model = next;
         previous_path = next_path;
+        models.push(previous_path.clone());
+        if let (Some(retrain), Some(current)) = (retrain, init.as_deref()) {
+            let path = retrained_init_path(&plan.out, iteration);
+            let bytes = retrain_and_save(retrain, iteration, &models, current, &path)?;
+            kept_figure = repoint(dev.as_deref_mut(), &bytes, iteration, kept_figure)?;
+            init = Some(bytes);
+            init_path = Some(path);
+        }
     }
     Ok(RunOutcome { iterations: done, kept: previous_path })
 }
@@ -382,4 +438,29 @@ fn write_reconstructions(model: &GpModel, wakes: &[Wake], path: &Path) -> Result
     let views = [View::FRONTAL, View::yaw(45.0)];
     let grid = sample_grid(model, &meshes, &labels, &views, &figure_settings()).map_err(|e| picture_error(e.to_string()))?;
     save_png(&grid, path).map_err(|e| picture_error(e.to_string()))
+}
+
+/// Retrains through `retrain` and writes the new init file to `path` (its iteration directory).
+fn retrain_and_save(
+    retrain: &dyn Fn(RetrainJob<'_>) -> Result<Vec<u8>, RunError>,
+    iteration: u32,
+    models: &[PathBuf],
+    init: &[u8],
+    path: &Path,
+) -> Result<Vec<u8>, RunError> {
+    let bytes = retrain(RetrainJob { iteration, models, init })?;
+    std::fs::write(path, &bytes).map_err(|error| RunError::Io { path: path.to_path_buf(), error })?;
+    Ok(bytes)
+}
+
+/// After a retraining the development images start from the new init file's points, so the kept
+/// model's figure (measured from the old points) is measured again; returns the figure to keep.
+fn repoint(dev: Option<&mut DevSet>, init: &[u8], iteration: u32, figure: Option<DevFigure>) -> Result<Option<DevFigure>, RunError> {
+    match dev {
+        Some(d) => {
+            d.repoint(init, &format!("points-{iteration}")).map_err(|error| RunError::Development { error })?;
+            Ok(None)
+        }
+        None => Ok(figure),
+    }
 }
