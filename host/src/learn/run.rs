@@ -213,6 +213,9 @@ pub struct RetrainJob<'a> {
     pub init: &'a [u8],
 }
 
+/// Retrains the finder and initializer (see [`Hooks::retrain`]).
+pub type Retrain<'a> = dyn Fn(RetrainJob<'_>) -> Result<Vec<u8>, RunError> + 'a;
+
 /// What the loop calls out to: who fits the images, who retrains the initializer, who hears
 /// of progress.
 pub struct Hooks<'a> {
@@ -220,7 +223,7 @@ pub struct Hooks<'a> {
     pub wake_all: &'a dyn Fn(WakeJob<'_>) -> Result<Vec<Wake>, RunError>,
     /// Retrains the finder and initializer on the models so far after each kept iteration and
     /// returns the new init file's bytes (`None`: the init file stays the same).
-    pub retrain: Option<&'a dyn Fn(RetrainJob<'_>) -> Result<Vec<u8>, RunError>>,
+    pub retrain: Option<&'a Retrain<'a>>,
     /// Progress.
     pub events: &'a (dyn Fn(RunEvent<'_>) + Sync),
 }
@@ -442,7 +445,7 @@ fn write_reconstructions(model: &GpModel, wakes: &[Wake], path: &Path) -> Result
 
 /// Retrains through `retrain` and writes the new init file to `path` (its iteration directory).
 fn retrain_and_save(
-    retrain: &dyn Fn(RetrainJob<'_>) -> Result<Vec<u8>, RunError>,
+    retrain: &Retrain<'_>,
     iteration: u32,
     models: &[PathBuf],
     init: &[u8],
