@@ -24,19 +24,21 @@ use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::device::fit::{
     device_settings, figure, fit_input_bytes, host_fit, parse_report, partition_bytes, record_bytes, run_firmware, run_firmware_on,
 };
-use gpmm_host::device::quantize::{quantize, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
+use gpmm_host::device::quantize::{quantize, Bits, BlobBuf, Profile, QuantizeOptions, QuantizedModel};
+use gpmm_host::eval::models::pca::{pca_beside, KeptCovariance};
 use gpmm_host::fit::{fit_prepared, prepare, rmse, FitOptions, Prepared};
 use gpmm_host::gp::kernel::ModelKernel;
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
+use gpmm_host::gp::model::{build_model, BuildOptions, GpModel, PartBasis};
 use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::synth::{synthesize, SynthFace, SynthOptions};
 use std::path::Path;
 use std::sync::OnceLock;
 
-/// The m4f blob and the float model it was quantized from (built once per test binary).
-fn models() -> &'static (QuantizedModel, BlobBuf) {
-    static M: OnceLock<(QuantizedModel, BlobBuf)> = OnceLock::new();
+/// The symmetric-full model of the template at 1,000 vertices, 50 + 50 components (built once
+/// per test binary).
+fn template_model() -> &'static GpModel {
+    static M: OnceLock<GpModel> = OnceLock::new();
     M.get_or_init(|| {
         let data = data_dir_for_tests().expect("data directory (GPMM_DATA)");
         let dir = template_dir(&data);
@@ -49,8 +51,15 @@ fn models() -> &'static (QuantizedModel, BlobBuf) {
             rank_color: RankSpec::Count(50),
             nystrom: NystromOptions { points: 600, ..Default::default() },
         };
-        let gp: GpModel = build_model(&template, &build, |_, _, _| {});
-        let q = quantize(&gp, &QuantizeOptions::for_profile(Profile::M4f)).expect("quantize for m4f");
+        build_model(&template, &build, |_, _, _| {})
+    })
+}
+
+/// The m4f blob and the float model it was quantized from (built once per test binary).
+fn models() -> &'static (QuantizedModel, BlobBuf) {
+    static M: OnceLock<(QuantizedModel, BlobBuf)> = OnceLock::new();
+    M.get_or_init(|| {
+        let q = quantize(template_model(), &QuantizeOptions::for_profile(Profile::M4f)).expect("quantize for m4f");
         let blob = q.to_blob().expect("blob");
         (q, blob)
     })
@@ -316,4 +325,50 @@ fn the_stm32f405_memory_map_gives_the_same_fit_record_within_its_ram_blocks() {
     assert!(statics <= statics_budget, "statics {statics} B > {statics_budget} B");
     assert!(peak < stack_budget, "stack peak {peak} B reaches the {stack_budget} B block");
     assert!(peak >= u64::from(cb.stack_peak_bytes) && peak > 10_000, "implausible stack peak {peak}");
+}
+
+/// A model `gpmm learn` makes (a PCA of reconstructions beside its predecessor's covariance: dense
+/// components) goes on the m4f as docs/learning.md says (8-bit values, 40 + 40 components) and
+/// fits there as on the host, bit for bit, at most a tenth dearer than the template model's
+/// factored blob with the same settings.
+#[test]
+fn a_learned_dense_model_fits_on_the_firmware_bit_for_bit() {
+    let gp = template_model();
+    let examples: Vec<_> = (0..12)
+        .map(|j| {
+            let c = |k: usize, f: f64| (((j * 31 + k * 17) as f64 * f).sin() * 1.5) as f32;
+            gp.instance(&(0..20).map(|k| c(k, 0.37)).collect::<Vec<_>>(), &(0..20).map(|k| c(k, 0.53)).collect::<Vec<_>>())
+                .expect("instance")
+        })
+        .collect();
+    let kept = KeptCovariance { model: gp, share: 1.0, max_rank: 50 };
+    let learned = pca_beside(&examples, Some(kept), &gp.triangles, &gp.landmarks, "learned", "test", "test").expect("learned model");
+    assert!(matches!(learned.shape.basis, PartBasis::Dense { .. }), "a learned model is dense");
+    let options = QuantizeOptions { bits: Bits::Eight, rank_shape: 40, rank_color: 40, ..QuantizeOptions::for_profile(Profile::M4f) };
+    let blob = quantize(&learned, &options).expect("quantize for m4f").to_blob().expect("blob");
+    let prep = prepared(&faces(1, 11)[1]);
+    let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(40, 40), &M4F);
+    let (host, host_lm) = host_fit(&blob, &prep, &fit, 3).expect("host fit");
+    let run = |blob: &BlobBuf, name: &str| {
+        let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &fit, 3).expect("fit input"));
+        let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+        std::fs::write(&file, &part).expect("write partition");
+        let log = run_firmware("m4f", &file, 1200).unwrap_or_else(|e| panic!("firmware run: {e}"));
+        parse_report("m4f", &log).unwrap_or_else(|e| panic!("{e}\n{log}"))
+    };
+    let (dev, template) = std::thread::scope(|s| {
+        let a = s.spawn(|| run(&blob, "fit-m4f-learned.partition"));
+        let b = s.spawn(|| run(&models().1, "fit-m4f-template.partition"));
+        (a.join().expect("learned model run"), b.join().expect("template model run"))
+    });
+    let host_ll = host.image.best_image.expect("image term").log_likelihood;
+    assert_eq!(host_lm, dev.landmarks_px, "fitted landmarks differ between host and firmware");
+    assert_eq!(host_ll.to_bits(), dev.log_likelihood.to_bits(), "log-likelihood {host_ll} vs {}", dev.log_likelihood);
+    println!(
+        "learned dense model, 8-bit 40 + 40: {} instructions (template model, 16-bit factored: {}), blob {} B, RAM {} + stack {} B",
+        dev.instructions_total, template.instructions_total, dev.blob_bytes, dev.ram_static_bytes, dev.stack_peak_bytes
+    );
+    let ratio = dev.instructions_total as f64 / template.instructions_total as f64;
+    assert!(ratio <= 1.1, "the learned model's fit costs {ratio:.3} times the template model's");
+    assert!(dev.ram_total_bytes <= dev.ram_budget_bytes && dev.flash_total_bytes <= dev.flash_budget_bytes, "{dev:?}");
 }

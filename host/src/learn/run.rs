@@ -444,13 +444,7 @@ fn write_reconstructions(model: &GpModel, wakes: &[Wake], path: &Path) -> Result
 }
 
 /// Retrains through `retrain` and writes the new init file to `path` (its iteration directory).
-fn retrain_and_save(
-    retrain: &Retrain<'_>,
-    iteration: u32,
-    models: &[PathBuf],
-    init: &[u8],
-    path: &Path,
-) -> Result<Vec<u8>, RunError> {
+fn retrain_and_save(retrain: &Retrain<'_>, iteration: u32, models: &[PathBuf], init: &[u8], path: &Path) -> Result<Vec<u8>, RunError> {
     let bytes = retrain(RetrainJob { iteration, models, init })?;
     std::fs::write(path, &bytes).map_err(|error| RunError::Io { path: path.to_path_buf(), error })?;
     Ok(bytes)
