@@ -53,8 +53,9 @@ pub struct LearnArgs {
     pub shape_from_shading: bool,
     /// A development set with known truth (a `gpmm synth` set, or one made from it, with its
     /// truth.json): after each iteration the new model and its predecessor fit its images as the
-    /// loop fits its own (the init file's points, or --dev-landmarks-dir) and are measured against the true faces; a model
-    /// that is not better is not kept and the run stops. DIR/model.gpmm is then the kept model.
+    /// loop fits its own (the init file's points, or --dev-landmarks-dir) and are measured against
+    /// the true faces; every iteration runs, each says whether it beat its predecessor and the best
+    /// so far, and DIR/model.gpmm is the best.
     #[arg(long, value_name = "SET")]
     pub dev: Option<PathBuf>,
     /// Landmark files of the --dev images, when the loop reads landmark files (--landmarks-dir).
@@ -218,7 +219,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     if dev.is_some() {
         let to = a.output.join("model.gpmm");
         std::fs::copy(&outcome.kept, &to).with_context(|| format!("cannot copy {} to {}", outcome.kept.display(), to.display()))?;
-        eprintln!("kept {} (copied to {})", outcome.kept.display(), to.display());
+        eprintln!("kept {}, the best on the development set (copied to {})", outcome.kept.display(), to.display());
         println!("{}", to.display());
     } else if let Some(last) = outcome.iterations.last() {
         println!("{}", last.model);
@@ -226,9 +227,13 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     Ok(())
 }
 
-/// One line on an iteration's development check: both figures and which model is kept.
+/// One line on an iteration's development check: both figures and the best model so far.
 fn development_line(iteration: u32, c: &gpmm_host::learn::dev::DevComparison) -> String {
-    let verdict = if c.kept { "kept" } else { "not kept: the run stops and keeps its predecessor" };
+    let verdict = match (c.better, c.best) {
+        (_, true) => "better, the best so far".to_string(),
+        (true, false) => format!("better than its predecessor; the best stays {} ({:.3} mm)", c.best_model, c.best_median_mm),
+        (false, _) => format!("worse; the best stays {} ({:.3} mm)", c.best_model, c.best_median_mm),
+    };
     format!(
         "iteration {iteration}: development median {:.3} mm (mean {:.3}) against {:.3} mm (mean {:.3}) before: {verdict}",
         c.learned.median_mm, c.learned.mean_mm, c.previous.median_mm, c.previous.mean_mm

@@ -4,8 +4,8 @@
 //! The development images are fitted as the loop fits its own images: the same start points (the
 //! init file's finder and initializer, or landmark files when the loop reads those) and the same fit
 //! settings. Each fit is measured against its true face as `gpmm eval reconstruction` measures it
-//! (similarity alignment, scan-to-mesh distance); the median over all measured vertices decides. A
-//! model that is not better than its predecessor is not kept and the loop stops.
+//! (similarity alignment, scan-to-mesh distance); the median over all measured vertices decides.
+//! Each model is compared with its predecessor and with the best so far; the run keeps the best.
 
 use std::path::{Path, PathBuf};
 
@@ -56,7 +56,7 @@ pub struct DevFigure {
     pub failed: usize,
 }
 
-/// An iteration's model against its predecessor's.
+/// An iteration's model against its predecessor's and the best so far.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DevComparison {
     /// The development set's directory.
@@ -65,15 +65,89 @@ pub struct DevComparison {
     pub previous: DevFigure,
     /// The model it made.
     pub learned: DevFigure,
-    /// Whether the learned model is kept (its median below its predecessor's).
-    pub kept: bool,
+    /// Whether the learned model is better than its predecessor (a lower median).
+    pub better: bool,
+    /// Whether it is the best so far, the start model included (the run keeps the best).
+    pub best: bool,
+    /// The best model so far and its median (mm), after this iteration.
+    pub best_model: String,
+    /// Its median.
+    pub best_median_mm: f64,
 }
 
-impl DevComparison {
-    /// Compares `learned` with `previous`: kept when its median error is lower.
-    pub fn new(set: &Path, previous: DevFigure, learned: DevFigure) -> Self {
-        let kept = learned.median_mm < previous.median_mm;
-        Self { set: set.display().to_string(), previous, learned, kept }
+/// The development figures a run carries from one iteration to the next: its latest model's and
+/// its best model's (`None` once the start points changed and it must be measured again).
+#[derive(Debug, Clone, Default)]
+pub struct DevTrack {
+    /// The latest model's figure.
+    last: Option<DevFigure>,
+    /// The best model and its figure.
+    best: Option<(PathBuf, Option<DevFigure>)>,
+}
+
+impl DevTrack {
+    /// The start points changed (a retrained init file): every figure must be measured again.
+    pub fn forget(&mut self) {
+        self.last = None;
+        if let Some(b) = &mut self.best {
+            b.1 = None;
+        }
+    }
+
+    /// Takes in a comparison read back from disk: `previous` the model it started from, `next`
+    /// the model it made.
+    pub fn reuse(&mut self, c: &DevComparison, previous: &Path, next: &Path) {
+        if self.best.is_none() {
+            self.best = Some((previous.to_path_buf(), Some(c.previous.clone())));
+        }
+        if c.best {
+            self.best = Some((next.to_path_buf(), Some(c.learned.clone())));
+        }
+        self.last = Some(c.learned.clone());
+    }
+
+    /// Compares the model `next` with `previous` (its predecessor) and with the best so far,
+    /// measuring what is not known yet with `measure`.
+    pub fn compare<E>(
+        &mut self,
+        set: &Path,
+        previous: &Path,
+        next: &Path,
+        measure: &dyn Fn(&Path) -> Result<DevFigure, E>,
+    ) -> Result<DevComparison, E> {
+        let before = match self.last.take() {
+            Some(f) => f,
+            None => measure(previous)?,
+        };
+        let (best_path, best_figure) = match self.best.take() {
+            Some((path, Some(f))) => (path, f),
+            Some((path, None)) if path != previous => {
+                let f = measure(&path)?;
+                (path, f)
+            }
+            _ => (previous.to_path_buf(), before.clone()),
+        };
+        let learned = measure(next)?;
+        let better = learned.median_mm < before.median_mm;
+        let best = learned.median_mm < best_figure.median_mm;
+        let (best_path, best_figure) = if best { (next.to_path_buf(), learned.clone()) } else { (best_path, best_figure) };
+        let c = DevComparison {
+            set: set.display().to_string(),
+            previous: before,
+            learned: learned.clone(),
+            better,
+            best,
+            best_model: best_path.display().to_string(),
+            best_median_mm: best_figure.median_mm,
+        };
+        self.best = Some((best_path, Some(best_figure)));
+        self.last = Some(learned);
+        Ok(c)
+    }
+
+    /// The best model so far, if any was measured.
+    pub fn best(&self) -> Option<&Path> {
+        self.best.as_ref().map(|(p, _)| p.as_path())
     }
 }
 
@@ -164,4 +238,44 @@ fn write_start_points(set: &SynthSet, init: &[u8], out: &Path) -> Result<usize, 
         }
     }
     Ok(unfound)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::RefCell;
+
+    fn fig(path: &Path, median: f64) -> DevFigure {
+        DevFigure { model: path.display().to_string(), median_mm: median, mean_mm: median, fits: 1, failed: 0 }
+    }
+
+    #[test]
+    fn the_track_keeps_the_best_and_measures_each_model_once_until_the_points_change() {
+        let medians = [("start", 1.5), ("m1", 1.4), ("m2", 1.45), ("m3", 1.3)];
+        let measured = RefCell::new(Vec::new());
+        let measure = |p: &Path| -> Result<DevFigure, ()> {
+            let name = p.display().to_string();
+            measured.borrow_mut().push(name.clone());
+            Ok(fig(p, medians.iter().find(|(n, _)| *n == name).map(|m| m.1).unwrap_or(f64::NAN)))
+        };
+        let set = Path::new("dev");
+        let mut t = DevTrack::default();
+        let c1 = t.compare(set, Path::new("start"), Path::new("m1"), &measure).unwrap();
+        assert!(c1.better && c1.best && c1.best_model == "m1");
+        let c2 = t.compare(set, Path::new("m1"), Path::new("m2"), &measure).unwrap();
+        assert!(!c2.better && !c2.best && c2.best_model == "m1" && c2.best_median_mm == 1.4);
+        assert_eq!(*measured.borrow(), ["start", "m1", "m2"]);
+        // New start points: the latest and the best are measured again before the comparison.
+        t.forget();
+        let c3 = t.compare(set, Path::new("m2"), Path::new("m3"), &measure).unwrap();
+        assert!(c3.better && c3.best && c3.previous.median_mm == 1.45);
+        assert_eq!(*measured.borrow(), ["start", "m1", "m2", "m2", "m1", "m3"]);
+        assert_eq!(t.best(), Some(Path::new("m3")));
+        // A run read back from disk ends with the same best.
+        let mut again = DevTrack::default();
+        for (c, (p, n)) in [&c1, &c2, &c3].into_iter().zip([("start", "m1"), ("m1", "m2"), ("m2", "m3")]) {
+            again.reuse(c, Path::new(p), Path::new(n));
+        }
+        assert_eq!(again.best(), Some(Path::new("m3")));
+    }
 }

@@ -5,15 +5,15 @@
 //! written last, after `model_N.gpmm` and the pictures, so an iteration with a records file is
 //! complete and a rerun continues after it.
 //!
-//! With a development set ([`DevSet`]) each new model is measured against its predecessor there;
-//! one that is not better is not kept (its file and records stay on disk, marked) and the run stops:
-//! the kept model is the last one that was better.
+//! With a development set ([`DevSet`]) each new model is measured against its predecessor and the
+//! best so far there; every iteration runs (each from the latest model, as the paper's loop does)
+//! and the run keeps the best.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::dev::{DevComparison, DevFigure, DevSet};
+use super::dev::{DevComparison, DevFigure, DevSet, DevTrack};
 use super::{albedo_change_limit, counts, learned_model, wake, ImageRecord, LearnError, LearnSettings, Wake};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::gp::model_io;
@@ -103,9 +103,10 @@ pub enum RunEvent<'a> {
 /// What a run leaves: every iteration's file and the model to use.
 #[derive(Debug, Clone)]
 pub struct RunOutcome {
-    /// The iterations on disk, in order (the last one possibly not kept).
+    /// The iterations on disk, in order.
     pub iterations: Vec<IterationFile>,
-    /// The last model that was kept: the start model if no iteration was.
+    /// The model to use: the best on the development set (the start model if no iteration beat
+    /// it), or the latest without one.
     pub kept: PathBuf,
 }
 
@@ -202,12 +203,12 @@ pub struct WakeJob<'a> {
     pub settings: &'a LearnSettings,
 }
 
-/// What retraining the finder and initializer after a kept iteration is given.
+/// What retraining the finder and initializer after an iteration is given.
 #[derive(Debug, Clone, Copy)]
 pub struct RetrainJob<'a> {
-    /// The iteration just kept.
+    /// The iteration just done.
     pub iteration: u32,
-    /// Every model so far: the start model and each kept one, in order.
+    /// Every model so far: the start model and each iteration's, in order.
     pub models: &'a [PathBuf],
     /// The init file's bytes the iteration started from.
     pub init: &'a [u8],
@@ -221,7 +222,7 @@ pub type Retrain<'a> = dyn Fn(RetrainJob<'_>) -> Result<Vec<u8>, RunError> + 'a;
 pub struct Hooks<'a> {
     /// Fits one iteration's images (this machine's threads, or a cluster).
     pub wake_all: &'a dyn Fn(WakeJob<'_>) -> Result<Vec<Wake>, RunError>,
-    /// Retrains the finder and initializer on the models so far after each kept iteration and
+    /// Retrains the finder and initializer on the models so far after each iteration and
     /// returns the new init file's bytes (`None`: the init file stays the same).
     pub retrain: Option<&'a Retrain<'a>>,
     /// Progress.
@@ -254,9 +255,10 @@ pub fn run(plan: &RunPlan, dev: Option<&mut DevSet>, events: &(dyn Fn(RunEvent<'
 
 /// Runs the loop: every complete iteration on disk is kept, the others are run, each iteration's
 /// images (and mirror images, in [`wake`]'s order) fitted by `hooks.wake_all` (on this machine, or
-/// on a cluster); with `dev`, each new model is compared with its predecessor and the run stops at
-/// the first that is not better; with `hooks.retrain`, the init file is retrained after each kept
-/// iteration (`DIR/iteration_N/init.init`, reused by a rerun) and the next iteration starts from it.
+/// on a cluster), each from the latest model; with `dev`, each new model is compared with its
+/// predecessor and the best so far, and the run keeps the best; with `hooks.retrain`, the init file
+/// is retrained after each iteration (`DIR/iteration_N/init.init`, reused by a rerun) and the next
+/// iteration starts from it.
 pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>) -> Result<RunOutcome, RunError> {
     let Hooks { wake_all, retrain, events } = *hooks;
     let io = |path: &Path| {
@@ -273,11 +275,16 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
     let mut previous_path = plan.model.clone();
     let mut model = model_io::load(&plan.model)?;
     let mut done = Vec::new();
-    // The kept model's development figure, once measured.
-    let mut kept_figure: Option<DevFigure> = None;
-    let figure = |dev: &DevSet, iteration: u32, path: &Path, label: &str| -> Result<DevFigure, RunError> {
+    let mut track = DevTrack::default();
+    let figure = |dev: &DevSet, iteration: u32, path: &Path| -> Result<DevFigure, RunError> {
         let progress = |d, t| events(RunEvent::Checking { iteration, model: path, done: d, total: t });
-        dev.figure(path, label, &plan.settings.fit, plan.jobs, &progress).map_err(|error| RunError::Development { error })
+        // The fit cache's file name: the start model may share its stem with a learned one.
+        let label = if path == plan.model {
+            "start".to_string()
+        } else {
+            path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned())
+        };
+        dev.figure(path, &label, &plan.settings.fit, plan.jobs, &progress).map_err(|error| RunError::Development { error })
     };
     for iteration in 1..=plan.iterations {
         let dir = iteration_dir(&plan.out, iteration);
@@ -288,22 +295,12 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
             let file: IterationFile =
                 serde_json::from_str(&text).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
             events(RunEvent::Reused(&file));
-            let stop = match &file.development {
-                Some(c) if !c.kept => true,
-                Some(c) => {
-                    kept_figure = Some(c.learned.clone());
-                    false
-                }
-                None => {
-                    // Measured without a development set: its model stands unmeasured.
-                    kept_figure = None;
-                    false
-                }
-            };
-            done.push(file);
-            if stop {
-                break;
+            match &file.development {
+                Some(c) => track.reuse(c, &previous_path, &next_path),
+                // Measured without a development set: its model stands unmeasured.
+                None => track.forget(),
             }
+            done.push(file);
             model = model_io::load(&next_path)?;
             previous_path = next_path;
             models.push(previous_path.clone());
@@ -313,7 +310,7 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
                     Ok(bytes) => bytes,
                     Err(_) => retrain_and_save(retrain, iteration, &models, current, &path)?,
                 };
-                kept_figure = repoint(dev.as_deref_mut(), &bytes, iteration, kept_figure)?;
+                repoint(dev.as_deref_mut(), &bytes, iteration, &mut track)?;
                 init = Some(bytes);
                 init_path = Some(path);
             }
@@ -353,14 +350,7 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
         write_samples(&next, &dir.join("samples.png"))?;
         write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
         let development = match dev.as_deref() {
-            Some(d) => {
-                let previous = match kept_figure.take() {
-                    Some(f) => f,
-                    None => figure(d, iteration, &previous_path, &format!("model_{}", iteration - 1))?,
-                };
-                let learned = figure(d, iteration, &next_path, &format!("model_{iteration}"))?;
-                Some(DevComparison::new(d.dir(), previous, learned))
-            }
+            Some(d) => Some(track.compare(d.dir(), &previous_path, &next_path, &|p: &Path| figure(d, iteration, p))?),
             None => None,
         };
         let file = IterationFile {
@@ -380,24 +370,20 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
         let text = serde_json::to_string_pretty(&file).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
         std::fs::write(&records_path, text + "\n").map_err(io(&records_path))?;
         events(RunEvent::Finished(&file));
-        let kept = file.development.as_ref().is_none_or(|c| c.kept);
-        kept_figure = file.development.as_ref().filter(|c| c.kept).map(|c| c.learned.clone());
         done.push(file);
-        if !kept {
-            break;
-        }
         model = next;
         previous_path = next_path;
         models.push(previous_path.clone());
         if let (Some(retrain), Some(current)) = (retrain, init.as_deref()) {
             let path = retrained_init_path(&plan.out, iteration);
             let bytes = retrain_and_save(retrain, iteration, &models, current, &path)?;
-            kept_figure = repoint(dev.as_deref_mut(), &bytes, iteration, kept_figure)?;
+            repoint(dev.as_deref_mut(), &bytes, iteration, &mut track)?;
             init = Some(bytes);
             init_path = Some(path);
         }
     }
-    Ok(RunOutcome { iterations: done, kept: previous_path })
+    let kept = track.best().map_or(previous_path, Path::to_path_buf);
+    Ok(RunOutcome { iterations: done, kept })
 }
 
 /// Picture settings of the learning run's figures: small cells, light that shows shape.
@@ -450,14 +436,12 @@ fn retrain_and_save(retrain: &Retrain<'_>, iteration: u32, models: &[PathBuf], i
     Ok(bytes)
 }
 
-/// After a retraining the development images start from the new init file's points, so the kept
-/// model's figure (measured from the old points) is measured again; returns the figure to keep.
-fn repoint(dev: Option<&mut DevSet>, init: &[u8], iteration: u32, figure: Option<DevFigure>) -> Result<Option<DevFigure>, RunError> {
-    match dev {
-        Some(d) => {
-            d.repoint(init, &format!("points-{iteration}")).map_err(|error| RunError::Development { error })?;
-            Ok(None)
-        }
-        None => Ok(figure),
+/// After a retraining the development images start from the new init file's points, so every
+/// figure measured from the old points is measured again.
+fn repoint(dev: Option<&mut DevSet>, init: &[u8], iteration: u32, track: &mut DevTrack) -> Result<(), RunError> {
+    if let Some(d) = dev {
+        d.repoint(init, &format!("points-{iteration}")).map_err(|error| RunError::Development { error })?;
+        track.forget();
     }
+    Ok(())
 }
