@@ -12,12 +12,10 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-#[test]
-fn learn_quick_makes_a_model_records_every_image_and_resumes() {
-    let Some(data) = gpmm_host::data::data_dir_for_tests() else { return };
-    let dir = tempfile::tempdir().unwrap();
+/// Two identities at yaw 0 and 30 rendered by `gpmm synth` with `seed` into `out`.
+fn synth(data: &Path, seed: u64, out: &Path) {
     let t = data.join("template/lee-perry-smith");
-    let images = dir.path().join("images");
+    let seed = seed.to_string();
     ok(&gpmm(&[
         "synth",
         "--ict",
@@ -29,10 +27,19 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
         "--yaws",
         "0,30",
         "--seed",
-        "9",
+        &seed,
         "-o",
-        s(&images),
+        s(out),
     ]));
+}
+
+#[test]
+fn learn_quick_makes_a_model_records_every_image_and_resumes() {
+    let Some(data) = gpmm_host::data::data_dir_for_tests() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let t = data.join("template/lee-perry-smith");
+    let images = dir.path().join("images");
+    synth(&data, 9, &images);
     // A broken "image" among them: it is recorded as failed, the run goes on.
     std::fs::write(images.join("broken.png"), b"not a png").unwrap();
     let model = dir.path().join("tiny.gpmm");
@@ -143,21 +150,7 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     // With a development set: each model is measured against its predecessor and the best so
     // far there, every iteration runs, and DIR/model.gpmm is the best.
     let dev = dir.path().join("dev");
-    ok(&gpmm(&[
-        "synth",
-        "--ict",
-        s(&data.join("ict")),
-        "--template-dir",
-        s(&t),
-        "--count",
-        "2",
-        "--yaws",
-        "0,30",
-        "--seed",
-        "10",
-        "-o",
-        s(&dev),
-    ]));
+    synth(&data, 10, &dev);
     let checked = dir.path().join("checked");
     let args = [
         "learn",

@@ -213,13 +213,14 @@ mod tests {
         }
     }
 
+    /// A triangle whose first two vertices lie `s` out along x and y.
+    fn triangle(s: f64) -> Mesh {
+        Mesh { positions: vec![[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, 1.0]], colors: vec![[0.5; 3]; 3], triangles: vec![[0, 1, 2]] }
+    }
+
     #[test]
     fn pca_of_two_meshes_has_one_component_through_both() {
-        let m = |s: f64| Mesh {
-            positions: vec![[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, 1.0]],
-            colors: vec![[0.5; 3]; 3],
-            triangles: vec![[0, 1, 2]],
-        };
+        let m = triangle;
         let model = pca_model(&[m(1.0), m(3.0)], &[[0, 1, 2]], &[0, 1, 2], "pca", "test", "test").unwrap();
         assert_eq!(model.shape.rank(), 1);
         assert_eq!(model.color.rank(), 0);
@@ -232,11 +233,7 @@ mod tests {
 
     #[test]
     fn a_kept_share_adds_the_predecessors_covariance() {
-        let m = |s: f64| Mesh {
-            positions: vec![[s, 0.0, 0.0], [0.0, s, 0.0], [0.0, 0.0, 1.0]],
-            colors: vec![[0.5; 3]; 3],
-            triangles: vec![[0, 1, 2]],
-        };
+        let m = triangle;
         let examples = [m(1.0), m(3.0)];
         // The predecessor: one component moving vertex 2 along z by 2 (variance 4), which the
         // examples never move.
