@@ -1,7 +1,8 @@
 //! Training scenes for the finder and the initializer, rendered from the morphable model itself:
 //! a random face (shape, colour, pose, light, camera, framing) over a procedural background, with
 //! camera effects. Labels come from the model (landmark vertices, pose, light); nothing is
-//! labelled by hand. One scene is a pure function of `(seed, index)`.
+//! labelled by hand. One scene is a pure function of `(seed, index)`; given several models of one
+//! template, the pair also picks the model its face comes from ([`face_model_index`]).
 //!
 //! Around the model's face: the template's whole head ([`head`]), dressed with hair and clothes
 //! ([`dress`]), and open eyes painted over the scan's shut ones ([`eyes`]). Behind it, when the
