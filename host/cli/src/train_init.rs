@@ -1,4 +1,5 @@
-//! `gpmm train-init`: the face finder and initializer trained on renders of a model.
+//! `gpmm train-init`: the face finder and initializer trained on renders of a model or a mixture
+//! of models, from random weights or from an init file's networks (fine-tuning).
 
 use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
@@ -7,7 +8,9 @@ use gpmm_core::model::ibug::IBUG68_POINTS;
 use gpmm_host::gp::model_io;
 use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::head::HeadContext;
-use gpmm_train::scene::{Openings, SceneSource};
+use gpmm_train::scene::{FaceModel, Openings, SceneSource};
+use gpmm_train::train::{check_mixture, FINE_TUNE_LR_SHARE};
+use gpmm_train::TrainError;
 use indicatif::ProgressBar;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
@@ -19,8 +22,12 @@ const COMPARISONS: &str = "Comparisons (each turns off a default)";
 /// Arguments of `gpmm train-init`.
 #[derive(Debug, Args)]
 pub struct TrainInitArgs {
-    /// Model file (.gpmm) whose renders the networks learn from (its landmark vertices are the labels).
-    pub model: PathBuf,
+    /// Model files (.gpmm) whose renders the networks learn from (their landmark vertices are the
+    /// labels). With several, each scene's face comes from one of them, picked uniformly for the
+    /// seed and the scene; all must have the first one's vertices and landmarks (models made from
+    /// one template: the template model and `gpmm learn`'s), and the head is fitted to the first.
+    #[arg(value_name = "MODEL", required = true, num_args = 1..)]
+    pub models: Vec<PathBuf>,
     /// Output init file.
     #[arg(short, long, value_name = "INIT")]
     pub output: PathBuf,
@@ -30,9 +37,18 @@ pub struct TrainInitArgs {
     /// A few seconds of training on a few dozen scenes (for tests: the networks learn little).
     #[arg(long)]
     pub quick: bool,
-    /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 30 minutes on 2 cores).
+    /// Chunks of fresh scenes (default training: 40 of 2048 scenes, 3 passes each, about 30 minutes
+    /// on 2 cores; with --from: 4). With --from, 0 only re-calibrates and re-quantizes its networks
+    /// (and validates them on these models' scenes).
     #[arg(long, value_name = "N")]
-    pub chunks: Option<NonZeroUsize>,
+    pub chunks: Option<usize>,
+    /// Init file whose finder and initializer the training starts from (fine-tuning) instead of
+    /// random weights; they must have this training's architecture and the models' landmarks.
+    #[arg(long, value_name = "INIT")]
+    pub from: Option<PathBuf>,
+    /// Peak learning rate of the cosine schedule (default 0.002; with --from a quarter of it).
+    #[arg(long, value_name = "LR")]
+    pub lr: Option<f64>,
     /// The finder's passes over each chunk (each pass shows every scene of the chunk once more,
     /// in a new order; default 3).
     #[arg(long, value_name = "N")]
@@ -82,16 +98,38 @@ pub struct TrainInitArgs {
 
 /// Runs `gpmm train-init`.
 pub fn train_init(a: TrainInitArgs) -> Result<()> {
-    let model = model_io::load(&a.model)?;
-    let mut opts = if a.quick { gpmm_train::TrainOptions::quick(a.seed) } else { gpmm_train::TrainOptions::full(a.seed) };
-    // Zero chunks or passes are refused by the argument parser (`NonZeroUsize`).
-    opts.chunks = a.chunks.map_or(opts.chunks, NonZeroUsize::get);
+    let models = a.models.iter().map(|p| model_io::load(p)).collect::<Result<Vec<_>, _>>()?;
+    let refs: Vec<&gpmm_host::gp::model::GpModel> = models.iter().collect();
+    check_mixture(&refs).map_err(|e| match e {
+        TrainError::Mixture { index, error } => anyhow::anyhow!("{}: {error}", a.models[index].display()),
+        e => anyhow::anyhow!("{e}"),
+    })?;
+    let (model, first) = (&models[0], &a.models[0]);
+    let mut opts = match (a.quick, a.from.is_some()) {
+        (true, _) => gpmm_train::TrainOptions::quick(a.seed),
+        (false, false) => gpmm_train::TrainOptions::full(a.seed),
+        (false, true) => gpmm_train::TrainOptions::fine_tuning(a.seed),
+    };
+    if a.from.is_some() {
+        opts.lr = gpmm_train::TrainOptions::full(a.seed).lr * FINE_TUNE_LR_SHARE;
+    }
+    if let Some(lr) = a.lr {
+        if !(lr.is_finite() && lr > 0.0) {
+            bail!("--lr {lr} is not a positive learning rate");
+        }
+        opts.lr = lr;
+    }
+    // Zero passes are refused by the argument parser (`NonZeroUsize`), zero chunks here.
+    if a.chunks == Some(0) && a.from.is_none() {
+        bail!("--chunks 0 trains nothing: it only re-quantizes the networks of --from INIT");
+    }
+    opts.chunks = a.chunks.unwrap_or(opts.chunks);
     opts.passes = a.passes.map_or(opts.passes, NonZeroUsize::get);
     opts.init_passes = a.init_passes.or(a.passes).map_or(opts.init_passes, NonZeroUsize::get);
     if a.no_mirror {
         opts.mirror = false;
     } else if opts.mirror && model.landmarks.len() != IBUG68_POINTS {
-        eprintln!("{}: {} landmarks, not the 68 iBUG ones: no mirrored crops", a.model.display(), model.landmarks.len());
+        eprintln!("{}: {} landmarks, not the 68 iBUG ones: no mirrored crops", first.display(), model.landmarks.len());
         opts.mirror = false;
     }
     opts.ranges.open_eyes = !a.shut_eyes;
@@ -103,7 +141,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         let (mesh, landmarks) = template_files(&dir).with_context(|| {
             format!("the head around the faces comes from a template directory: pass --head DIR or --no-head ({})", dir.display())
         })?;
-        let head = HeadContext::load(&model, &mesh, &landmarks)?;
+        let head = HeadContext::load(model, &mesh, &landmarks)?;
         eprintln!("head: {} vertices from {}", head.vertices(), mesh.display());
         Some(head)
     };
@@ -118,10 +156,14 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     if let (Some(b), Some(dir)) = (&backgrounds, &a.backgrounds) {
         eprintln!("backgrounds: {} photos from {}", b.len(), dir.display());
     }
-    let openings = Openings::of_model(&model, &opts.ranges);
-    let source =
-        SceneSource { model: &model, head: head.as_ref(), ranges: &opts.ranges, openings: &openings, backgrounds: backgrounds.as_ref() };
+    let from = match &a.from {
+        Some(path) => Some(std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?),
+        None => None,
+    };
     if let Some(path) = &a.preview {
+        let openings: Vec<Openings> = models.iter().map(|m| Openings::of_model(m, &opts.ranges)).collect();
+        let faces: Vec<FaceModel<'_>> = models.iter().zip(&openings).map(|(model, openings)| FaceModel { model, openings }).collect();
+        let source = SceneSource { faces: &faces, head: head.as_ref(), ranges: &opts.ranges, backgrounds: backgrounds.as_ref() };
         let grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
             .with_context(|| format!("cannot write {}", path.display()))?;
@@ -129,15 +171,21 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     }
     let bar = ProgressBar::new(opts.steps() as u64);
     bar.set_style(bar_style("{bar:30} {pos}/{len} steps ({msg}) [{elapsed} / ~{duration}]"));
-    let (bytes, report) = gpmm_train::train_with(&model, head.as_ref(), backgrounds.as_ref(), &opts, |p| match p {
+    let progress = |p| match p {
         gpmm_train::train::Progress::Rendering { chunk } => bar.set_message(format!("rendering chunk {}/{}", chunk + 1, opts.chunks)),
         gpmm_train::train::Progress::Step { done, finder, initializer, .. } => {
             bar.set_position(done as u64);
             bar.set_message(format!("loss {finder:.3} / {initializer:.3}"));
         }
         gpmm_train::train::Progress::Validating => bar.set_message("quantizing and validating".to_string()),
-    })
-    .map_err(|e| anyhow::anyhow!("cannot train on {}: {e}", a.model.display()))?;
+    };
+    let (bytes, report) =
+        gpmm_train::train_on(&refs, head.as_ref(), backgrounds.as_ref(), from.as_deref(), &opts, progress).map_err(|e| {
+            match (e, &a.from) {
+                (TrainError::Start { error }, Some(path)) => anyhow::anyhow!("cannot fine-tune from {}: {error}", path.display()),
+                (e, _) => anyhow::anyhow!("cannot train on {}: {e}", first.display()),
+            }
+        })?;
     bar.finish_and_clear();
     std::fs::write(&a.output, &bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));

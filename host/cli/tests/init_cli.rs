@@ -351,3 +351,62 @@ fn device_fit_without_landmarks_matches_the_host_bit_for_bit() {
         assert!(err.contains("no face found"), "{err}");
     }
 }
+
+#[test]
+fn fine_tuning_on_a_mixture_writes_a_file_detect_reads_and_refuses_what_does_not_fit() {
+    let Some(f) = fixture() else { return };
+    // A second model in the first one's topology: other mean faces.
+    let mut other = gpmm_host::gp::model_io::load(&f.model).unwrap();
+    other.color.mean.iter_mut().for_each(|c| c[1] = (c[1] * 1.3).min(1.0));
+    let second = f.dir.path().join("second.gpmm");
+    gpmm_host::gp::model_io::save(&other, &second).unwrap();
+    let tuned = f.dir.path().join("tuned.init");
+    let out = ok(&gpmm(&["train-init", s(&f.model), s(&second), "--from", s(&f.init), "--quick", "--seed", "9", "-o", s(&tuned)]));
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(report["steps"].as_u64().unwrap() > 0);
+    let bytes = std::fs::read(&tuned).unwrap();
+    assert_ne!(bytes, std::fs::read(&f.init).unwrap());
+    let file = gpmm_core::net::face::InitFile::parse(&bytes).unwrap();
+    let metadata: serde_json::Value = serde_json::from_str(file.metadata).unwrap();
+    assert_eq!((metadata["models"].as_array().map(Vec::len), &metadata["fine_tuned_from"]["seed"]), (Some(2), &serde_json::json!(7)));
+    let detected = ok(&gpmm(&["detect", s(&f.synth.join("0000_yaw30.png")), "--init", s(&tuned)]));
+    let json: serde_json::Value = serde_json::from_str(&detected).unwrap();
+    assert_eq!(json["faces"][0]["landmarks"].as_array().map(Vec::len), Some(68), "{json}");
+
+    // An init file whose initializer reads 5 landmarks: refused, naming it.
+    let geo = gpmm_train::train::geometry(5);
+    let net = |side: usize, specs: Vec<gpmm_train::nets::Spec>| gpmm_train::encode::FloatNet {
+        input: gpmm_core::net::Shape { h: side, w: side, c: 3 },
+        layers: specs
+            .iter()
+            .map(|l| gpmm_train::encode::FloatLayer {
+                kind: l.kind,
+                kernel: l.kernel,
+                stride: l.stride,
+                relu: l.relu,
+                cin: l.cin,
+                cout: l.cout,
+                weights: vec![0.01; l.cout * l.kernel * l.kernel * l.cin],
+                bias: vec![0.0; l.cout],
+                out_max: 1.0,
+            })
+            .collect(),
+    };
+    let (f5, i5) = (net(96, gpmm_train::nets::finder_specs()), net(64, gpmm_train::nets::initializer_specs(geo.initializer_outputs())));
+    let five = f.dir.path().join("five-landmarks.init");
+    std::fs::write(&five, gpmm_train::encode::init_file_bytes(&f5, &i5, geo.crop_margin, 5, 12, "{}").unwrap()).unwrap();
+    let err = fails(&gpmm(&["train-init", s(&f.model), "--from", s(&five), "--quick", "-o", s(&f.dir.path().join("x.init"))]));
+    assert!(err.contains("five-landmarks.init") && err.contains("reads 5 landmarks"), "{err}");
+    // A model of another vertex count in the mixture: refused, naming it.
+    let data = gpmm_host::data::data_dir_for_tests().unwrap();
+    let t = data.join("template/lee-perry-smith");
+    let coarse = f.dir.path().join("coarse.gpmm");
+    let (ply, lm) = (t.join("lee-perry-smith.ply"), t.join("landmarks_ibug68.json"));
+    let build = ["build", "--template", s(&ply), "--landmarks", s(&lm), "--vertices", "900", "--rank-shape", "5", "--rank-color", "5"];
+    ok(&gpmm(&[&build[..], &["--nystrom-points", "300", "-o", s(&coarse)]].concat()));
+    let err = fails(&gpmm(&["train-init", s(&f.model), s(&coarse), "--quick", "-o", s(&f.dir.path().join("x.init"))]));
+    assert!(err.contains("coarse.gpmm") && err.contains("vertices"), "{err}");
+    // Zero chunks re-quantize --from's networks, and mean nothing without it.
+    let err = fails(&gpmm(&["train-init", s(&f.model), "--chunks", "0", "--quick", "-o", s(&f.dir.path().join("x.init"))]));
+    assert!(err.contains("--chunks 0"), "{err}");
+}

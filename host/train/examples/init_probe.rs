@@ -15,7 +15,7 @@ use gpmm_train::data::{samples, Geometry, Sample};
 use gpmm_train::encode::encode_network;
 use gpmm_train::nets::{batch_tensor, initializer_specs, Net, Spec};
 use gpmm_train::scene::head::HeadContext;
-use gpmm_train::scene::{Openings, SceneRanges, SceneSource};
+use gpmm_train::scene::{FaceModel, Openings, SceneRanges, SceneSource};
 use gpmm_train::train::{cosine_lr, geometry, output_loss, pass_order};
 
 const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
@@ -196,7 +196,8 @@ fn main() -> Res<()> {
     let head = HeadContext::load(&model, &template.join("lee-perry-smith.ply"), &template.join("landmarks_ibug68.json"))?;
     let ranges = SceneRanges::default();
     let openings = Openings::of_model(&model, &ranges);
-    let source = SceneSource { model: &model, head: Some(&head), ranges: &ranges, openings: &openings, backgrounds: None };
+    let faces = [FaceModel { model: &model, openings: &openings }];
+    let source = SceneSource { faces: &faces, head: Some(&head), ranges: &ranges, backgrounds: None };
     let l = model.landmarks.len();
     let mut geo = geometry(l);
     match variant {

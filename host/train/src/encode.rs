@@ -1,6 +1,7 @@
 //! Float networks (as trained) quantized into the core's int8 network encoding
 //! (`docs/init-format.md`): per-output-channel weight scales, one activation scale per tensor;
-//! a finder and an initializer so encoded make an init file.
+//! a finder and an initializer so encoded make an init file. And back: an encoded network
+//! dequantized into floats, for training to start from ([`decode_network`]).
 
 use gpmm_core::format::bytes::Writer;
 use gpmm_core::format::FormatError;
@@ -130,4 +131,37 @@ pub fn init_file_bytes(
     out.truncate(len);
     Detector::from_bytes(&out).map_err(EncodeError::Readback)?;
     Ok(out)
+}
+
+/// The float network an encoded one stands for: each weight its `i8` value times its output
+/// channel's multiplier over the input tensor's scale, the biases as stored, each layer's
+/// calibration maximum from its output scale. Encoding the result gives the same weights back.
+pub fn decode_network(net: &Network<'_>) -> FloatNet {
+    let mut in_scale = INPUT_SCALE;
+    let mut layers = Vec::with_capacity(net.layer_count());
+    for l in net.layers_iter() {
+        let per = l.kernel * l.kernel * l.cin;
+        let weights = l
+            .weights
+            .chunks_exact(per.max(1))
+            .enumerate()
+            .flat_map(|(o, w)| {
+                let scale = l.multiplier(o) / in_scale;
+                w.iter().map(move |&q| f32::from(q) * scale)
+            })
+            .collect();
+        layers.push(FloatLayer {
+            kind: l.kind,
+            kernel: l.kernel,
+            stride: l.stride,
+            relu: l.relu,
+            cin: l.cin,
+            cout: l.cout,
+            weights,
+            bias: (0..l.cout).map(|o| l.bias(o)).collect(),
+            out_max: l.out_scale * 127.0,
+        });
+        in_scale = l.out_scale;
+    }
+    FloatNet { input: net.input(), layers }
 }

@@ -8,6 +8,7 @@ pub mod nets;
 pub mod patches;
 pub mod preview;
 pub mod scene;
+pub mod start;
 pub mod train;
 
-pub use train::{train, train_with, TrainOptions, TrainReport};
+pub use train::{fine_tune, train, train_on, train_with, TrainError, TrainOptions, TrainReport};

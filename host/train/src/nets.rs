@@ -57,6 +57,72 @@ pub fn initializer_specs(outputs: usize) -> Vec<Spec> {
     ]
 }
 
+impl Spec {
+    /// The shape of a trained layer.
+    pub fn of_layer(l: &FloatLayer) -> Self {
+        Self { kind: l.kind, kernel: l.kernel, stride: l.stride, relu: l.relu, cin: l.cin, cout: l.cout }
+    }
+}
+
+impl std::fmt::Display for Spec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kind = match self.kind {
+            LayerKind::Conv => "convolution",
+            LayerKind::Dense => "dense",
+        };
+        let relu = if self.relu { " + ReLU" } else { "" };
+        write!(f, "{kind} {}x{} stride {}, {} -> {} channels{relu}", self.kernel, self.kernel, self.stride, self.cin, self.cout)
+    }
+}
+
+/// How a trained network differs from the one a training builds.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ArchitectureMismatch {
+    /// Another input shape.
+    #[error("its input is {found_h}x{found_w}x{found_c}, the training's {h}x{w}x{c}", found_h = found.h, found_w = found.w, found_c = found.c, h = expected.h, w = expected.w, c = expected.c)]
+    Input {
+        /// The trained network's.
+        found: Shape,
+        /// The training's.
+        expected: Shape,
+    },
+    /// Another number of layers.
+    #[error("it has {found} layers, the training's {expected}")]
+    Layers {
+        /// The trained network's.
+        found: usize,
+        /// The training's.
+        expected: usize,
+    },
+    /// A layer of another shape.
+    #[error("its layer {layer} is a {found}, the training's a {expected}")]
+    Layer {
+        /// Layer index.
+        layer: usize,
+        /// The trained network's.
+        found: Spec,
+        /// The training's.
+        expected: Spec,
+    },
+}
+
+/// Whether `net` has the input shape and layers a training builds (`input`, `specs`).
+pub fn check_architecture(net: &FloatNet, input: Shape, specs: &[Spec]) -> std::result::Result<(), ArchitectureMismatch> {
+    if net.input != input {
+        return Err(ArchitectureMismatch::Input { found: net.input, expected: input });
+    }
+    if net.layers.len() != specs.len() {
+        return Err(ArchitectureMismatch::Layers { found: net.layers.len(), expected: specs.len() });
+    }
+    for (layer, (l, &expected)) in net.layers.iter().zip(specs).enumerate() {
+        let found = Spec::of_layer(l);
+        if found != expected {
+            return Err(ArchitectureMismatch::Layer { layer, found, expected });
+        }
+    }
+    Ok(())
+}
+
 /// A network under training.
 #[derive(Debug)]
 pub struct Net {
@@ -86,6 +152,17 @@ impl Net {
             biases.push(Var::from_tensor(&Tensor::zeros(s.cout, DType::F32, device)?)?);
         }
         Ok(Self { input, specs, weights, biases })
+    }
+
+    /// A network starting from trained weights (`net`'s; its calibration maxima are not kept).
+    pub fn from_float(net: &FloatNet, device: &Device) -> Result<Self> {
+        let (mut weights, mut biases) = (Vec::new(), Vec::new());
+        for l in &net.layers {
+            let w = Tensor::from_vec(l.weights.clone(), (l.cout, l.kernel * l.kernel * l.cin), device)?;
+            weights.push(Var::from_tensor(&w)?);
+            biases.push(Var::from_tensor(&Tensor::from_vec(l.bias.clone(), l.cout, device)?)?);
+        }
+        Ok(Self { input: net.input, specs: net.layers.iter().map(Spec::of_layer).collect(), weights, biases })
     }
 
     /// Multiply-accumulates of one forward pass of one sample.

@@ -1,12 +1,15 @@
 //! The training loop: fresh chunks of rendered samples, AdamW with a cosine learning rate, then
 //! calibration, quantization and a check of the quantized networks through the core's detector.
+//! The scenes' faces come from one model or a mixture of models; the networks start from random
+//! weights or, fine-tuning, from an init file's ([`crate::start`]).
 
 use crate::data::{face_free_frames, samples, Geometry, Sample};
 use crate::encode::{init_file_bytes, EncodeError};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
 use crate::scene::backgrounds::Backgrounds;
 use crate::scene::head::HeadContext;
-use crate::scene::{render_scene, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
+use crate::scene::{render_scene, FaceModel, Openings, SceneRanges, SceneSource, LIGHT_LABELS};
+use crate::start::{networks_of_init, StartError};
 use candle_core::{Device, Tensor, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use gpmm_core::net::{NetError, Shape};
@@ -48,6 +51,15 @@ pub struct TrainOptions {
 /// far, scores highest.
 pub const MINED_FROM: usize = 4;
 
+/// Chunks of the default fine-tuning ([`TrainOptions::fine_tuning`]): a tenth of a full training.
+pub const FINE_TUNE_CHUNKS: usize = 4;
+
+/// A fine-tuning's peak learning rate over a training's from random weights.
+pub const FINE_TUNE_LR_SHARE: f64 = 0.25;
+
+/// Scenes the activation scales are calibrated on (the first of the last chunk's).
+const CALIBRATION_SCENES: usize = 256;
+
 /// Weight of one cell of a face-free frame in the finder's loss (a positive frame's one face
 /// cell weighs 1, all its other cells together 1).
 const FACE_FREE_CELL_WEIGHT: f64 = 0.25;
@@ -69,6 +81,13 @@ impl TrainOptions {
             ranges: SceneRanges::default(),
             face_free: 0.125,
         }
+    }
+
+    /// The default fine-tuning of an init file ([`fine_tune`]): the default training's chunks
+    /// ([`FINE_TUNE_CHUNKS`] of them) at its learning rate times [`FINE_TUNE_LR_SHARE`].
+    pub fn fine_tuning(seed: u64) -> Self {
+        let full = Self::full(seed);
+        Self { chunks: FINE_TUNE_CHUNKS, lr: full.lr * FINE_TUNE_LR_SHARE, ..full }
     }
 
     /// A few seconds: for tests (the networks learn little).
@@ -157,6 +176,23 @@ pub fn geometry(landmarks: usize) -> Geometry {
 /// Why training or its validation stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
+    /// No model to draw faces from.
+    #[error("no model to train on")]
+    NoModels,
+    /// A model of a mixture is not in the first one's topology.
+    #[error("{error}")]
+    Mixture {
+        /// Index of the model in the mixture.
+        index: usize,
+        /// How it differs from the first.
+        error: MixtureMismatch,
+    },
+    /// The init file to start from does not fit the training.
+    #[error("{error}")]
+    Start {
+        /// Why.
+        error: StartError,
+    },
     /// The initializer cannot read this many landmarks.
     #[error("the model has {0} landmarks; the initializer reads 1 to 68")]
     Landmarks(usize),
@@ -188,6 +224,43 @@ pub enum TrainError {
     /// The quantized detector failed on a validation scene.
     #[error("{0}")]
     Detect(DetectError),
+}
+
+/// How a model of a mixture differs from the first one (whose topology scenes and labels share).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MixtureMismatch {
+    /// Another vertex count.
+    #[error("it has {found} vertices, the first model {expected}; a mixture's models share the template's topology")]
+    Vertices {
+        /// This model's.
+        found: usize,
+        /// The first model's.
+        expected: usize,
+    },
+    /// Another landmark count.
+    #[error("it has {found} landmarks, the first model {expected}")]
+    Landmarks {
+        /// This model's.
+        found: usize,
+        /// The first model's.
+        expected: usize,
+    },
+}
+
+/// Checks that every model of `models` has the first one's vertex and landmark counts.
+pub fn check_mixture(models: &[&GpModel]) -> Result<(), TrainError> {
+    let first = models.first().ok_or(TrainError::NoModels)?;
+    for (index, m) in models.iter().enumerate().skip(1) {
+        let error = if m.vertices() != first.vertices() {
+            MixtureMismatch::Vertices { found: m.vertices(), expected: first.vertices() }
+        } else if m.landmarks.len() != first.landmarks.len() {
+            MixtureMismatch::Landmarks { found: m.landmarks.len(), expected: first.landmarks.len() }
+        } else {
+            continue;
+        };
+        return Err(TrainError::Mixture { index, error });
+    }
+    Ok(())
 }
 
 /// Stable `ln(1 + e^x)`.
@@ -318,10 +391,41 @@ pub fn train_with(
     head: Option<&HeadContext>,
     backgrounds: Option<&Backgrounds>,
     opts: &TrainOptions,
+    progress: impl FnMut(Progress),
+) -> Result<(Vec<u8>, TrainReport), TrainError> {
+    train_on(&[model], head, backgrounds, None, opts, progress)
+}
+
+/// Both networks of the init file `from` trained further on scenes of a mixture of `models` (the
+/// learning loop's retraining; [`TrainOptions::fine_tuning`] is the default length and rate).
+pub fn fine_tune(
+    models: &[&GpModel],
+    head: Option<&HeadContext>,
+    backgrounds: Option<&Backgrounds>,
+    from: &[u8],
+    opts: &TrainOptions,
+    progress: impl FnMut(Progress),
+) -> Result<(Vec<u8>, TrainReport), TrainError> {
+    train_on(models, head, backgrounds, Some(from), opts, progress)
+}
+
+/// Trains both networks on scenes whose faces come from `models` (each scene's from one of them,
+/// [`crate::scene::face_model_index`]; all in the first one's topology, `head` linked to the
+/// first), starting from random weights or from the init file `from`. With `opts.chunks` zero,
+/// `from`'s networks are only re-calibrated and re-quantized.
+pub fn train_on(
+    models: &[&GpModel],
+    head: Option<&HeadContext>,
+    backgrounds: Option<&Backgrounds>,
+    from: Option<&[u8]>,
+    opts: &TrainOptions,
     mut progress: impl FnMut(Progress),
 ) -> Result<(Vec<u8>, TrainReport), TrainError> {
-    let openings = Openings::of_model(model, &opts.ranges);
-    let source = SceneSource { model, head, ranges: &opts.ranges, openings: &openings, backgrounds };
+    check_mixture(models)?;
+    let openings: Vec<Openings> = models.iter().map(|m| Openings::of_model(m, &opts.ranges)).collect();
+    let faces: Vec<FaceModel<'_>> = models.iter().zip(&openings).map(|(&model, openings)| FaceModel { model, openings }).collect();
+    let source = SceneSource { faces: &faces, head, ranges: &opts.ranges, backgrounds };
+    let model = faces[0].model;
     let landmarks = model.landmarks.len();
     if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
         return Err(TrainError::Landmarks(landmarks));
@@ -331,11 +435,24 @@ pub fn train_with(
     }
     let device = Device::Cpu;
     let geo = geometry(landmarks);
-    let finder =
-        Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device).map_err(TrainError::Tensor)?;
-    let initializer =
-        Net::new(Shape { h: geo.crop_side, w: geo.crop_side, c: 3 }, initializer_specs(geo.initializer_outputs()), opts.seed ^ 1, &device)
-            .map_err(TrainError::Tensor)?;
+    let (finder, initializer, from_metadata) = match from {
+        Some(bytes) => {
+            let (f, i, metadata) = networks_of_init(bytes, &geo, &device).map_err(|error| TrainError::Start { error })?;
+            (f, i, Some(metadata))
+        }
+        None => (
+            Net::new(Shape { h: geo.frame_side, w: geo.frame_side, c: 3 }, finder_specs(), opts.seed, &device)
+                .map_err(TrainError::Tensor)?,
+            Net::new(
+                Shape { h: geo.crop_side, w: geo.crop_side, c: 3 },
+                initializer_specs(geo.initializer_outputs()),
+                opts.seed ^ 1,
+                &device,
+            )
+            .map_err(TrainError::Tensor)?,
+            None,
+        ),
+    };
     let params = |lr| ParamsAdamW { lr, weight_decay: 1e-4, ..Default::default() };
     let mut opt_f = AdamW::new(finder.vars(), params(opts.lr)).map_err(TrainError::Tensor)?;
     let mut opt_i = AdamW::new(initializer.vars(), params(opts.lr)).map_err(TrainError::Tensor)?;
@@ -406,15 +523,22 @@ pub fn train_with(
         train_seconds += t0.elapsed().as_secs_f64();
         (last_f, last_i) = (sum[0] / n[0].max(1) as f32, sum[1] / n[1].max(1) as f32);
         if chunk + 1 == opts.chunks {
-            calib = data.into_iter().take(256).collect();
+            calib = data.into_iter().take(CALIBRATION_SCENES).collect();
         }
     }
     progress(Progress::Validating);
+    if calib.is_empty() {
+        // No training chunk: calibrate on scenes of their own.
+        calib = samples(source, &geo, opts.seed, 0, opts.chunk_scenes.min(CALIBRATION_SCENES) as u64);
+        if calib.is_empty() {
+            return Err(TrainError::NoScenes);
+        }
+    }
     let fx = batch_tensor(calib.iter().map(|s| s.frame.as_slice()), geo.frame_side, &device).map_err(TrainError::Tensor)?;
     let ix = batch_tensor(calib.iter().map(|s| s.crop.as_slice()), geo.crop_side, &device).map_err(TrainError::Tensor)?;
     let f_float = finder.to_float(&finder.calibrate(&fx).map_err(TrainError::Tensor)?).map_err(TrainError::Tensor)?;
     let i_float = initializer.to_float(&initializer.calibrate(&ix).map_err(TrainError::Tensor)?).map_err(TrainError::Tensor)?;
-    let metadata = serde_json::json!({
+    let mut metadata = serde_json::json!({
         "format": "gpmm-init",
         "trained_on": model.metadata.kernel,
         "seed": opts.seed,
@@ -441,8 +565,18 @@ pub fn train_with(
         "background_share": backgrounds.map_or(0.0, |b| b.share),
         "face_free_frames": if backgrounds.is_some() { opts.face_free } else { 0.0 },
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
-    })
-    .to_string();
+    });
+    // A single model trained from random weights records what it always recorded.
+    if models.len() > 1 {
+        metadata["models"] = models
+            .iter()
+            .map(|m| serde_json::json!({ "kernel": m.metadata.kernel, "learning_iteration": m.metadata.learning.as_ref().map(|l| l.iteration) }))
+            .collect();
+    }
+    if let Some(from) = from_metadata {
+        metadata["fine_tuned_from"] = serde_json::from_str(&from).unwrap_or(serde_json::Value::String(from));
+    }
+    let metadata = metadata.to_string();
     let bytes =
         init_file_bytes(&f_float, &i_float, geo.crop_margin, landmarks as u16, geo.light as u16, &metadata).map_err(TrainError::Encode)?;
     let mut detector = Detector::from_bytes(&bytes).map_err(TrainError::InitFile)?;

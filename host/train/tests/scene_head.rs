@@ -10,7 +10,7 @@ use gpmm_host::mesh::template::{load_template, TemplateOptions};
 use gpmm_host::render::{Instance, Renderer};
 use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::head::HeadContext;
-use gpmm_train::scene::{face_free_frame, render_scene, Openings, Scene, SceneRanges, SceneSource};
+use gpmm_train::scene::{face_free_frame, render_scene, FaceModel, Openings, Scene, SceneRanges, SceneSource};
 use image::{Rgb, RgbImage};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -52,7 +52,8 @@ impl<'a> Scenes<'a> {
 
     /// Scene `i` of the stream `seed` drawn with `ranges`.
     fn render(&mut self, ranges: &SceneRanges, seed: u64, i: u64) -> Option<Scene> {
-        let source = SceneSource { model: self.model, head: Some(self.head), ranges, openings: &self.openings, backgrounds: None };
+        let faces = [FaceModel { model: self.model, openings: &self.openings }];
+        let source = SceneSource { faces: &faces, head: Some(self.head), ranges, backgrounds: None };
         render_scene(source, seed, i, &mut self.renderer)
     }
 }
@@ -161,7 +162,8 @@ fn a_background_photo_changes_the_background_and_nothing_else() {
     let ranges = SceneRanges { dressed: false, ..SceneRanges::default() };
     let openings = Openings::of_model(&model, &ranges);
     let green = Backgrounds::from_photos(vec![RgbImage::from_pixel(640, 480, Rgb([20, 200, 30]))], 1.0);
-    let plain = SceneSource { model: &model, head: None, ranges: &ranges, openings: &openings, backgrounds: None };
+    let faces = [FaceModel { model: &model, openings: &openings }];
+    let plain = SceneSource { faces: &faces, head: None, ranges: &ranges, backgrounds: None };
     let photo = SceneSource { backgrounds: Some(&green), ..plain };
     let mut renderer = Renderer::new();
     let mut greener = 0;

@@ -1,7 +1,8 @@
 //! Training scenes for the finder and the initializer, rendered from the morphable model itself:
 //! a random face (shape, colour, pose, light, camera, framing) over a procedural background, with
 //! camera effects. Labels come from the model (landmark vertices, pose, light); nothing is
-//! labelled by hand. One scene is a pure function of `(seed, index)`.
+//! labelled by hand. One scene is a pure function of `(seed, index)`; given several models of one
+//! template, the pair also picks the model its face comes from ([`face_model_index`]).
 //!
 //! Around the model's face: the template's whole head ([`head`]), dressed with hair and clothes
 //! ([`dress`]), and open eyes painted over the scan's shut ones ([`eyes`]). Behind it, when the
@@ -198,19 +199,41 @@ impl Openings {
     }
 }
 
-/// What scenes are drawn from: the model, the head put around its faces (if any), the ranges.
+/// A model scenes draw faces from, with its openings.
 #[derive(Debug, Clone, Copy)]
-pub struct SceneSource<'a> {
+pub struct FaceModel<'a> {
     /// The model whose faces are rendered (its landmark vertices are the labels).
     pub model: &'a GpModel,
+    /// The model's openings for the scenes' ranges ([`Openings::of_model`]).
+    pub openings: &'a Openings,
+}
+
+/// What scenes are drawn from: the models, the head put around their faces (if any), the ranges.
+#[derive(Debug, Clone, Copy)]
+pub struct SceneSource<'a> {
+    /// The models each scene draws its face from ([`face_model_index`]); all in the first one's
+    /// topology (same vertices and landmarks), the head being linked to the first.
+    pub faces: &'a [FaceModel<'a>],
     /// The whole head around each face; `None` renders the face alone.
     pub head: Option<&'a HeadContext>,
     /// The ranges of pose, camera and framing.
     pub ranges: &'a SceneRanges,
-    /// The model's openings for these ranges ([`Openings::of_model`]).
-    pub openings: &'a Openings,
     /// Real face-free photos some scenes are drawn over (and face-free frames are cut from).
     pub backgrounds: Option<&'a Backgrounds>,
+}
+
+/// Which of `models` models scene `index` of the stream `seed` draws its face from: uniform, fixed
+/// for a seed and index, from a stream of its own (so one model's scenes are as they always were).
+pub fn face_model_index(seed: u64, index: u64, models: usize) -> usize {
+    if models <= 1 {
+        return 0;
+    }
+    // SplitMix64's finalizer of the pair.
+    let mut z = (seed ^ 0x3C6E_F372_FE94_F82B).wrapping_add(index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z % models as u64) as usize
 }
 
 /// Width and height of a frame whose longer side is `long` px.
@@ -239,7 +262,10 @@ pub fn face_free_frame(source: SceneSource<'_>, seed: u64, index: u64) -> RgbIma
 
 /// Renders scene `index` of the set drawn with `seed`.
 pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &mut Renderer) -> Option<Scene> {
-    let SceneSource { model, head, ranges, openings, backgrounds } = source;
+    let SceneSource { faces, head, ranges, backgrounds } = source;
+    let FaceModel { model, openings } = *faces.get(face_model_index(seed, index, faces.len()))?;
+    // The head is linked to the first model: other models' faces are changes of its mean.
+    let head_model = faces.first()?.model;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let normal = Normal::new(0.0f32, 1.0).ok()?;
     let k = ranges.components;
@@ -289,10 +315,10 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     let mut dress_rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0xBF58_476D_1CE4_E5B9) ^ 0xD2E5);
     let (mut headed, backdrop) = match head {
         Some(h) if ranges.dressed => {
-            let (headed, backdrop) = h.dressed_around(model, &instance, &mut rng, &mut dress_rng);
+            let (headed, backdrop) = h.dressed_around(head_model, &instance, &mut rng, &mut dress_rng);
             (Some(headed), Some(backdrop))
         }
-        Some(h) => (Some(h.around(model, &instance, &mut rng)), None),
+        Some(h) => (Some(h.around(head_model, &instance, &mut rng)), None),
         None => (None, None),
     };
     // Open eyes (the scan's are shut) from a stream of their own, so the rest of the scene is the
