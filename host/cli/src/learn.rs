@@ -5,11 +5,11 @@ use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_host::learn::dev::{DevPoints, DevSet};
-use gpmm_host::learn::run::{run, RunEvent, RunPlan};
+use gpmm_host::learn::run::{image_files, run, RunEvent, RunPlan};
 use gpmm_host::learn::shading::ShadingSettings;
 use gpmm_host::learn::{albedo_change_limit, LearnSettings, MIN_IOU};
 use indicatif::ProgressBar;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `gpmm learn`.
 #[derive(Debug, Args)]
@@ -81,33 +81,6 @@ pub struct LearnArgs {
     /// Fit settings (as `gpmm fit`'s).
     #[command(flatten)]
     pub settings: FitSettingsArgs,
-}
-
-/// Image files named on the command line, directories expanded (sorted).
-fn image_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    let is_image = |p: &Path| {
-        p.extension().and_then(|e| e.to_str()).is_some_and(|e| ["png", "jpg", "jpeg", "ppm"].contains(&e.to_ascii_lowercase().as_str()))
-    };
-    let mut files = Vec::new();
-    for input in inputs {
-        if input.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
-                .with_context(|| format!("cannot list {}", input.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.is_file() && is_image(p))
-                .collect();
-            found.sort();
-            if found.is_empty() {
-                bail!("{}: no .png, .jpg or .ppm images in this directory", input.display());
-            }
-            files.extend(found);
-        } else if input.is_file() {
-            files.push(input.clone());
-        } else {
-            bail!("{}: no such image or directory", input.display());
-        }
-    }
-    Ok(files)
 }
 
 /// Runs `gpmm learn`.

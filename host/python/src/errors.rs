@@ -38,6 +38,12 @@ fn os_error(message: String, not_found: bool, errno: Option<i32>, path: &Path) -
     raise(class, (message, errno, path.display().to_string()))
 }
 
+/// The OS error of `path` for an I/O failure `io`, with the program's message.
+pub(crate) fn io_error(message: impl Into<String>, io: &std::io::Error, path: &Path) -> PyErr {
+    let not_found = io.kind() == std::io::ErrorKind::NotFound;
+    os_error(message.into(), not_found, io.raw_os_error().or(not_found.then_some(ENOENT)), path)
+}
+
 /// The error of a failed read of `paths` (the files a call reads): an OS error naming the one of
 /// them that cannot be opened and read (the one the message names, if several), else (the files
 /// are fine, their content is not) a `GpmmValueError`. `message` is the program's.

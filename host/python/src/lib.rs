@@ -1,6 +1,7 @@
 //! `gpmm._gpmm`: the native half of the gpmm Python package, a thin layer over the gpmm-host
 //! library (the code the `gpmm` program runs): models and their arrays, building from a template,
-//! sampling, rendering, fitting, quantization, blobs and statismo `.h5` files.
+//! sampling, rendering, fitting, quantization, blobs, statismo `.h5` files and learning models from
+//! images.
 //!
 //! Long work runs with the GIL released; every error is a `gpmm.GpmmError` carrying the message
 //! the `gpmm` program prints for the same failure (see `errors`).
@@ -9,6 +10,7 @@ mod args;
 mod arrays;
 mod errors;
 mod from_arrays;
+mod learn;
 mod model;
 
 use args::{opt, Int};
@@ -184,5 +186,7 @@ fn _gpmm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_pts, m)?)?;
     m.add_function(wrap_pyfunction!(data_dir, m)?)?;
+    m.add_function(wrap_pyfunction!(learn::learn_wake, m)?)?;
+    m.add_function(wrap_pyfunction!(learn::learn_run, m)?)?;
     Ok(())
 }

@@ -11,6 +11,7 @@ use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
 use gpmm_host::fit::{fit_image, overlay, report, FitFlags, ReportInputs};
 use gpmm_host::gp::model::{GpModel, PartBasis};
 use gpmm_host::gp::{model_io, statismo};
+use gpmm_host::learn::shading::ShadingBases;
 use gpmm_host::photo::calibration::LandmarkCalibration;
 use gpmm_host::render::light::{light_from_rows, parse_background, parse_light};
 use gpmm_host::render::{render_model, RenderSettings, View};
@@ -19,7 +20,7 @@ use pyo3::types::{PyBytes, PyDict};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// A morphable model of shape (mm) and albedo (linear RGB): mean, bases, eigenvalues, triangles,
@@ -28,12 +29,38 @@ use std::time::Instant;
 pub struct Model {
     inner: Arc<GpModel>,
     source: String,
+    /// Shape from shading's bases of this model, once a learning fit on this process asked for
+    /// them (with the key of the ranks and settings they were made for).
+    shading: Mutex<Option<(String, Arc<ShadingBases>)>>,
 }
 
 impl Model {
     /// Wraps a host model; `source` names it in fit reports (its file, or `<bytes>`).
     pub fn new(model: GpModel, source: String) -> Self {
-        Self { inner: Arc::new(model), source }
+        Self { inner: Arc::new(model), source, shading: Mutex::new(None) }
+    }
+
+    /// The host model.
+    pub(crate) fn host(&self) -> &Arc<GpModel> {
+        &self.inner
+    }
+
+    /// Shape from shading's bases for `key` (the ranks and settings `make` prepares them with):
+    /// the ones kept from the last call with the same key, else made now and kept.
+    pub(crate) fn shading_bases<E>(
+        &self,
+        key: &str,
+        make: impl FnOnce(&GpModel) -> Result<ShadingBases, E>,
+    ) -> Result<Arc<ShadingBases>, E> {
+        let mut kept = self.shading.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((k, bases)) = kept.as_ref() {
+            if k == key {
+                return Ok(bases.clone());
+            }
+        }
+        let bases = Arc::new(make(&self.inner)?);
+        *kept = Some((key.to_string(), bases.clone()));
+        Ok(bases)
     }
 }
 

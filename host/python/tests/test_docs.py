@@ -21,7 +21,7 @@ def python_blocks(text):
 
 def test_the_doc_has_the_tour_blocks():
     blocks = python_blocks(DOC.read_text())
-    assert len(blocks) >= 5, "the tour, fitting, blobs, errors, from_arrays and batch blocks"
+    assert len(blocks) >= 5, "the tour, fitting, blobs, errors, from_arrays, batch and learning blocks"
     assert all("gpmm" in code for _, code in blocks)
 
 
@@ -42,3 +42,7 @@ def test_the_tour_runs_as_written(tmp_path, monkeypatch, data_dir):
     assert namespace["mine"].rank_shape == 10 and np.isfinite(namespace["mine_fit"]["log_likelihood"])
     assert [r["name"] for r in namespace["results"]] == ["astronaut.png", "obama.jpg"]
     assert len(namespace["lines"]) == 2
+    learned = namespace["learned"]
+    assert (tmp_path / learned["model"]).is_file() and learned["iterations"][0]["accepted"] >= 2
+    two = [r for r in learned["iterations"][0]["records"] if r["image"].endswith("two_people.jpg")]
+    assert len(two) == 1 and not two[0]["accepted"] and "two_people.pts" in two[0]["reason"], two

@@ -268,8 +268,7 @@ pub fn wake(
     let ranks = settings.fit.core().ranks;
     // A model whose bases cannot be prepared fails every image alike, each record saying why.
     let shading = settings.shading.as_ref().map(|sfs| ShadingModel::new(model, ranks.shape, ranks.color, sfs).map_err(|e| e.to_string()));
-    let views: Vec<(&PathBuf, bool)> =
-        images.iter().flat_map(|p| std::iter::once((p, false)).chain(settings.mirror.then_some((p, true)))).collect();
+    let views = views(images, settings.mirror);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build()?;
     let done = std::sync::atomic::AtomicUsize::new(0);
     Ok(pool.install(|| {
@@ -277,7 +276,7 @@ pub fn wake(
             .par_iter()
             .map(|(p, m)| {
                 let w = match &shading {
-                    Some(Err(e)) => failed(p, *m, format!("shape from shading: {e}")),
+                    Some(Err(e)) => Wake::failed(p, *m, format!("shape from shading: {e}")),
                     Some(Ok(sm)) => wake_image(model, Some(sm), init, p, *m, settings),
                     None => wake_image(model, None, init, p, *m, settings),
                 };
@@ -288,10 +287,18 @@ pub fn wake(
     }))
 }
 
-/// A record of an image that could not be fitted, for `reason`.
-fn failed(image: &Path, mirrored: bool, reason: String) -> Wake {
-    let record = ImageRecord { reason: Some(reason), ..ImageRecord::unfitted(image, mirrored) };
-    Wake { record, reconstruction: None }
+/// The views an iteration fits, in the order of its records: each image, then (with `mirror`)
+/// its mirror image.
+pub fn views(images: &[PathBuf], mirror: bool) -> Vec<(&PathBuf, bool)> {
+    images.iter().flat_map(|p| std::iter::once((p, false)).chain(mirror.then_some((p, true)))).collect()
+}
+
+impl Wake {
+    /// The outcome of a view that could not be fitted, for `reason` (e.g. a cluster's task that failed).
+    pub fn failed(image: &Path, mirrored: bool, reason: String) -> Self {
+        let record = ImageRecord { reason: Some(reason), ..ImageRecord::unfitted(image, mirrored) };
+        Self { record, reconstruction: None }
+    }
 }
 
 /// Why an iteration made no model.

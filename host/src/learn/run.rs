@@ -113,6 +113,14 @@ pub struct RunOutcome {
 /// Why a run stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
+    /// An input named on the command line (or in a call) is not an image or a directory of images.
+    #[error("{}: {error}", path.display())]
+    Input {
+        /// The input.
+        path: PathBuf,
+        /// What is wrong with it.
+        error: &'static str,
+    },
     /// A file could not be read or written.
     #[error("{}: {error}", path.display())]
     Io {
@@ -175,6 +183,31 @@ pub enum RunError {
         /// Why.
         error: rayon::ThreadPoolBuildError,
     },
+}
+
+/// The image files a run is given: files as they are, directories' images (.png, .jpg, .jpeg,
+/// .ppm; not searched recursively) in name order.
+pub fn image_files(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, RunError> {
+    let is_image = |p: &Path| {
+        p.extension().and_then(|e| e.to_str()).is_some_and(|e| ["png", "jpg", "jpeg", "ppm"].contains(&e.to_ascii_lowercase().as_str()))
+    };
+    let mut files = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            let listing = std::fs::read_dir(input).map_err(|error| RunError::Io { path: input.clone(), error })?;
+            let mut found: Vec<PathBuf> = listing.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_file() && is_image(p)).collect();
+            found.sort();
+            if found.is_empty() {
+                return Err(RunError::Input { path: input.clone(), error: "no .png, .jpg or .ppm images in this directory" });
+            }
+            files.extend(found);
+        } else if input.is_file() {
+            files.push(input.clone());
+        } else {
+            return Err(RunError::Input { path: input.clone(), error: "no such image or directory" });
+        }
+    }
+    Ok(files)
 }
 
 /// `DIR/model_N.gpmm`.

@@ -12,7 +12,8 @@ also a ``FileNotFoundError`` (``.filename`` names it), a bad argument or bad dat
 >>> fit = model.fit(gpmm.load_image(images / "astronaut.png"), gpmm.read_pts(images / "astronaut.pts"), seed=0)
 >>> fit["yaw_deg"], fit["shape"][:5], fit["overlay"].shape
 
-See docs/python.md for the tour and :mod:`gpmm.batch` for fitting folders on a Dask cluster.
+See docs/python.md for the tour, :mod:`gpmm.batch` for fitting folders on a Dask cluster and
+:func:`learn` for learning a model from unlabelled images (on a Dask cluster with ``client=``).
 """
 
 from ._errors import GpmmError, GpmmFileNotFoundError, GpmmOSError, GpmmValueError
@@ -31,6 +32,7 @@ from ._gpmm import (
     read_pts,
 )
 from ._json import jsonable
+from ._learn import learn
 
 
 def export_h5(model: Model, path) -> None:
@@ -53,6 +55,7 @@ __all__ = [
     "inspect",
     "jsonable",
     "kernels",
+    "learn",
     "load",
     "load_image",
     "model_from_bytes",

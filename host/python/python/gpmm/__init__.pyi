@@ -19,6 +19,7 @@ from ._gpmm import (
     read_pts as read_pts,
 )
 from ._json import jsonable as jsonable
+from ._learn import learn as learn
 from os import PathLike
 from typing import Union
 
@@ -37,6 +38,7 @@ __all__ = [
     "inspect",
     "jsonable",
     "kernels",
+    "learn",
     "load",
     "load_image",
     "model_from_bytes",

@@ -2,7 +2,7 @@
 
 from os import PathLike
 from pathlib import Path
-from typing import Any, Mapping, Optional, Sequence, Tuple, Union, final
+from typing import Any, Callable, Mapping, Optional, Sequence, Tuple, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -19,6 +19,8 @@ __all__ = [
     "import_h5",
     "inspect",
     "kernels",
+    "learn_run",
+    "learn_wake",
     "load",
     "load_image",
     "model_from_bytes",
@@ -202,3 +204,40 @@ def read_pts(path: _Path, one_based: bool = False) -> npt.NDArray[np.float32]:
 
 def data_dir() -> Path:
     """The data directory: $GPMM_DATA if set, else ../shared/data (FileNotFoundError if absent)."""
+
+def learn_wake(
+    model: Model, init: Optional[bytes], image: _Path, mirrored: bool, settings_json: str
+) -> Tuple[str, Optional[npt.NDArray[np.float64]], Optional[npt.NDArray[np.float64]]]:
+    """Fits one view of a learning iteration: its record (JSON) and, if accepted, its reconstruction."""
+
+def learn_run(
+    model: _Path,
+    images: Sequence[_Path],
+    output: _Path,
+    *,
+    init: Optional[_Path] = None,
+    landmarks_dir: Optional[_Path] = None,
+    iterations: int = 5,
+    mirror: bool = False,
+    min_iou: Optional[float] = None,
+    init_landmark_sigma: Optional[float] = None,
+    shape_from_shading: bool = False,
+    keep_variance: float = 0.0,
+    dev: Optional[_Path] = None,
+    dev_landmarks_dir: Optional[_Path] = None,
+    dev_identities: Optional[int] = None,
+    data: Optional[_Path] = None,
+    jobs: Optional[int] = None,
+    wake_all: Optional[Callable[[int, str, Optional[bytes], str, list[Tuple[str, bool]]], Sequence[Any]]] = None,
+    progress: Optional[Callable[[dict[str, Any]], None]] = None,
+    seed: Optional[int] = None,
+    size: Optional[int] = None,
+    landmark_steps: Optional[int] = None,
+    image_steps: Optional[int] = None,
+    shape_rank: Optional[int] = None,
+    color_rank: Optional[int] = None,
+    landmark_sigma: Optional[float] = None,
+    contour_sigma: Optional[float] = None,
+    set: Optional[Sequence[str]] = None,
+) -> dict[str, Any]:
+    """Runs gpmm learn's loop; its wake phase on this process's threads or through `wake_all`."""

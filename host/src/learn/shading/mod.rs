@@ -28,6 +28,8 @@ pub mod subspace;
 pub mod surface;
 pub mod visibility;
 
+use std::borrow::Cow;
+
 use crate::fit::{morphable, FitBuffers, FitRunError, Params, KC, KS};
 use crate::gp::model::GpModel;
 use crate::mesh::Mesh;
@@ -90,30 +92,51 @@ pub enum ShadingError {
     Subspace(#[from] SubspaceError),
 }
 
-/// A model prepared for shape from shading: its subspaces' penalties and its mesh's neighbours
-/// (made once per model, used for every image).
+/// A model's subspace penalties and mesh neighbours for shape from shading (owned, so that a
+/// worker that keeps a model can keep them beside it and prepare them once).
 #[derive(Debug, Clone)]
-pub struct ShadingModel<'m> {
-    model: &'m GpModel,
+pub struct ShadingBases {
+    vertices: usize,
     shape: Subspace,
     color: Subspace,
     neighbours: Vec<Vec<u32>>,
 }
 
-impl<'m> ShadingModel<'m> {
-    /// `model` with the fit's ranks (`shape_rank`, `color_rank` leading components).
-    pub fn new(model: &'m GpModel, shape_rank: usize, color_rank: usize, settings: &ShadingSettings) -> Result<Self, ShadingError> {
+impl ShadingBases {
+    /// Those of `model` with the fit's ranks (`shape_rank`, `color_rank` leading components).
+    pub fn new(model: &GpModel, shape_rank: usize, color_rank: usize, settings: &ShadingSettings) -> Result<Self, ShadingError> {
         Ok(Self {
-            model,
+            vertices: model.shape.mean.len(),
             shape: Subspace::new(&model.shape, shape_rank, settings.shape_sigma_mm, "shape")?,
             color: Subspace::new(&model.color, color_rank, settings.albedo_sigma, "colour")?,
             neighbours: surface::neighbours(model.shape.mean.len(), &model.triangles),
         })
     }
+}
+
+/// A model prepared for shape from shading: its subspaces' penalties and its mesh's neighbours
+/// (made once per model, used for every image).
+#[derive(Debug, Clone)]
+pub struct ShadingModel<'m> {
+    model: &'m GpModel,
+    bases: Cow<'m, ShadingBases>,
+}
+
+impl<'m> ShadingModel<'m> {
+    /// `model` with the fit's ranks (`shape_rank`, `color_rank` leading components).
+    pub fn new(model: &'m GpModel, shape_rank: usize, color_rank: usize, settings: &ShadingSettings) -> Result<Self, ShadingError> {
+        Ok(Self { model, bases: Cow::Owned(ShadingBases::new(model, shape_rank, color_rank, settings)?) })
+    }
+
+    /// `model` with bases prepared from it before ([`ShadingBases::new`]); `None` when they were
+    /// prepared for a mesh of another size.
+    pub fn with_bases(model: &'m GpModel, bases: &'m ShadingBases) -> Option<Self> {
+        (bases.vertices == model.shape.mean.len()).then_some(Self { model, bases: Cow::Borrowed(bases) })
+    }
 
     /// Each vertex's neighbours.
     pub fn neighbours(&self) -> &[Vec<u32>] {
-        &self.neighbours
+        &self.bases.neighbours
     }
 }
 
@@ -291,7 +314,7 @@ impl Problem<'_> {
             *g += gp[0] * n[0] + gp[1] * n[1] + gp[2] * n[2];
         }
         // Shape penalty: λ |h|² + yᵀ Q y with y = Σ_v h_v (B(v) · n_v).
-        let (shape, k) = (&self.sm.shape, self.sm.shape.rank());
+        let (shape, k) = (&self.sm.bases.shape, self.sm.bases.shape.rank());
         let mut y = vec![0.0f64; k];
         for (v, hv) in h.iter().enumerate() {
             if *hv != 0.0 {
@@ -309,11 +332,11 @@ impl Problem<'_> {
             *g += (2.0 * lambda * f64::from(*hv) + 2.0 * through) as f32;
         }
         // Smoothness.
-        let lh = surface::laplacian(h, &self.sm.neighbours);
+        let lh = surface::laplacian(h, &self.sm.bases.neighbours);
         value += f64::from(self.smoothness) * lh.iter().map(|x| f64::from(x * x)).sum::<f64>();
-        surface::laplacian_gradient(&lh, &self.sm.neighbours, self.smoothness, gh);
+        surface::laplacian_gradient(&lh, &self.sm.bases.neighbours, self.smoothness, gh);
         // Albedo penalty.
-        let color = &self.sm.color;
+        let color = &self.sm.bases.color;
         let y = color.project(|v| c[v]);
         let (quadratic, qy) = color.quadratic(&y);
         let lambda = color.lambda();
@@ -383,11 +406,11 @@ pub fn shape_from_shading(
         r2 <= 3.0 * settings.max_residual * settings.max_residual
     });
     let n = positions.len();
-    let k = sm.shape.rank();
+    let k = sm.bases.shape.rank();
     let mut along_normal = vec![0.0f32; n * k];
     for (v, nv) in normals.iter().enumerate() {
         for (kk, out) in along_normal[v * k..(v + 1) * k].iter_mut().enumerate() {
-            let b = sm.shape.component(kk, v);
+            let b = sm.bases.shape.component(kk, v);
             *out = b[0] * nv[0] + b[1] * nv[1] + b[2] * nv[2];
         }
     }
