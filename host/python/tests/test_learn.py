@@ -58,9 +58,13 @@ def same_iteration(a, b):
         assert without(ra) == without(rb), ra["image"]
 
 
-def test_a_local_cluster_learns_the_models_of_the_local_run(tmp_path, inputs, client):
+def test_a_local_cluster_learns_the_models_of_the_local_run(tmp_path, inputs, client, run_cli):
     model, images, init = inputs
     local = gpmm.learn(model, images, tmp_path / "local", init=init, **LEARN)
+    # The program's run with the same settings (its --quick fits) writes the same model.
+    run_cli("learn", model, images, "--init", init, "--quick", "--mirror", "--seed", LEARN["seed"], "-o", tmp_path / "cli")
+    assert (tmp_path / "cli" / "model_1.gpmm").read_bytes() == (tmp_path / "local" / "model_1.gpmm").read_bytes()
+    same_iteration(json.loads((tmp_path / "cli" / "iteration_1" / "records.json").read_text()), local["iterations"][0])
     events = []
     remote = gpmm.learn(model, images, tmp_path / "dask", init=init, client=client, progress=events.append, **LEARN)
     assert local["model"] == str(tmp_path / "local" / "model_1.gpmm")
@@ -89,6 +93,17 @@ def test_a_local_cluster_learns_the_models_of_the_local_run(tmp_path, inputs, cl
     # A rerun reuses the complete iteration.
     again = gpmm.learn(model, images, tmp_path / "dask", init=init, client=client, **LEARN)
     assert again["iterations"] == remote["iterations"]
+
+
+def test_shape_from_shading_on_a_local_cluster_learns_the_local_model(tmp_path, inputs, client):
+    """Shape from shading's bases, prepared once per worker and model, give the local run's fits."""
+    model, images, init = inputs
+    runs = [gpmm.learn(model, images, tmp_path / out, init=init, shape_from_shading=True, client=c, **LEARN)
+            for out, c in (("local", None), ("dask", client))]
+    assert (tmp_path / "local" / "model_1.gpmm").read_bytes() == (tmp_path / "dask" / "model_1.gpmm").read_bytes()
+    same_iteration(runs[0]["iterations"][0], runs[1]["iterations"][0])
+    assert all(r["albedo_change"] is not None for r in runs[1]["iterations"][0]["records"] if r["accepted"])
+    assert runs[1]["iterations"][0]["max_albedo_change"] is not None
 
 
 def _fail_mirror_of(name):
