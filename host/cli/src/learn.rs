@@ -190,8 +190,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     let outcome = run(&plan, dev.as_mut(), &events)?;
     bar.finish_and_clear();
     if dev.is_some() {
-        let to = a.output.join("model.gpmm");
-        std::fs::copy(&outcome.kept, &to).with_context(|| format!("cannot copy {} to {}", outcome.kept.display(), to.display()))?;
+        let to = outcome.copy_kept(&a.output).with_context(|| format!("cannot copy {}", outcome.kept.display()))?;
         eprintln!("kept {}, the best on the development set (copied to {})", outcome.kept.display(), to.display());
         println!("{}", to.display());
     } else if let Some(last) = outcome.iterations.last() {

@@ -65,8 +65,8 @@ pub fn learn_wake<'py>(
 /// `wake_all(iteration, model_path, init, settings_json, views)` that returns, for each
 /// `(image, mirrored)` of `views` in order, what `learn_wake` returns for it or a string saying
 /// why it could not be fitted. `progress`: called with a dict per event. Returns `kept` (the
-/// model to use), `model` (the last one written, `None` if no iteration ran) and `iterations`
-/// (each iteration's records.json as a dict).
+/// model to use), `best` (with `dev`: `output/model.gpmm`, its copy), `model` (the last one
+/// written, `None` if no iteration ran) and `iterations` (each iteration's records.json as a dict).
 #[pyfunction]
 #[pyo3(signature = (model, images, output, *, init = None, landmarks_dir = None, iterations = Int::of(5), mirror = false,
     min_iou = None, init_landmark_sigma = None, shape_from_shading = false, keep_variance = 0.0, dev = None,
@@ -205,14 +205,22 @@ pub fn learn_run<'py>(
             Python::attach(|py| remote_wake(py, callback, &job, &views))
                 .map_err(|e| RunError::Remote { iteration: job.iteration, error: keep(e) })
         };
-        run_with(&plan, dev_set.as_mut(), &Hooks { wake_all: &remote, retrain: None, events: &events }).map_err(|e| run_error(e, &model))
+        let outcome = run_with(&plan, dev_set.as_mut(), &Hooks { wake_all: &remote, retrain: None, events: &events })
+            .map_err(|e| run_error(e, &model))?;
+        // With a development set, `output/model.gpmm` is the best model, as the program leaves it.
+        let best = match &dev_set {
+            Some(_) => Some(outcome.copy_kept(&output).map_err(|e| run_error(e, &model))?),
+            None => None,
+        };
+        Ok((outcome, best))
     });
     if let Some(e) = raised.lock().unwrap_or_else(std::sync::PoisonError::into_inner).take() {
         return Err(e);
     }
-    let outcome = outcome?;
+    let (outcome, best) = outcome?;
     let out = PyDict::new(py);
     out.set_item("kept", outcome.kept.display().to_string())?;
+    out.set_item("best", best.map(|p| p.display().to_string()))?;
     out.set_item("model", outcome.iterations.last().map(|f| f.model.clone()))?;
     out.set_item("iterations", json_to_py(py, &outcome.iterations)?)?;
     Ok(out.into_any())

@@ -106,6 +106,29 @@ def test_shape_from_shading_on_a_local_cluster_learns_the_local_model(tmp_path, 
     assert runs[1]["iterations"][0]["max_albedo_change"] is not None
 
 
+def test_a_development_set_keeps_the_programs_best(tmp_path, inputs, client, run_cli, data_dir, template):
+    """With dev=, the cluster's run measures each model on the set as the program does, and
+    output/model.gpmm is the same best model."""
+    model, images, init = inputs
+    dev = tmp_path / "dev"
+    run_cli("synth", "--ict", data_dir / "ict", "--template-dir", template[0].parent, "--count", "2", "--yaws", "0,30",
+            "--seed", "10", "-o", dev)
+    settings = dict(LEARN, mirror=False)
+    out = gpmm.learn(model, images, tmp_path / "py", init=init, dev=dev, data=data_dir, client=client, **settings)
+    run_cli("learn", model, images, "--init", init, "--quick", "--seed", LEARN["seed"], "--dev", dev, "--data", data_dir,
+            "-o", tmp_path / "cli")
+    development = out["iterations"][0]["development"]
+    cli = json.loads((tmp_path / "cli" / "iteration_1" / "records.json").read_text())["development"]
+    # The same figures (the learned model's file is named after each run's folder).
+    for c in (development, cli):
+        c["learned"].pop("model")
+    assert without(development, ("best_model",)) == without(cli, ("best_model",)), (development, cli)
+    assert development["learned"]["fits"] >= 3, development
+    assert out["best"] == str(tmp_path / "py" / "model.gpmm")
+    assert (tmp_path / "py" / "model.gpmm").read_bytes() == (tmp_path / "cli" / "model.gpmm").read_bytes()
+    assert (tmp_path / "py" / "model.gpmm").read_bytes() == open(out["kept"], "rb").read()
+
+
 def _fail_mirror_of(name):
     """Makes this worker's fit of the mirror image of `name` fail as a crashed task would."""
     real = gpmm._gpmm

@@ -110,6 +110,15 @@ pub struct RunOutcome {
     pub kept: PathBuf,
 }
 
+impl RunOutcome {
+    /// `DIR/model.gpmm`, the model a run with a development set keeps: a copy of [`Self::kept`].
+    pub fn copy_kept(&self, out: &Path) -> Result<PathBuf, RunError> {
+        let to = out.join("model.gpmm");
+        std::fs::copy(&self.kept, &to).map_err(|error| RunError::Io { path: to.clone(), error })?;
+        Ok(to)
+    }
+}
+
 /// Why a run stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {

@@ -105,8 +105,9 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
     cores). ``progress``: called with a dict per event (``event`` is "fitting", "checking",
     "finished" or "reused").
 
-    Returns ``kept`` (the model to use: the best on ``dev``, else the last), ``model`` (the last
-    one written) and ``iterations`` (each iteration's records.json as a dict: counts and a record
+    Returns ``kept`` (the model to use: the best on ``dev``, else the last), ``best`` (with
+    ``dev``: ``output/model.gpmm``, its copy, as the program leaves it), ``model`` (the last one
+    written) and ``iterations`` (each iteration's records.json as a dict: counts and a record
     per view saying whether it was accepted and why not).
     """
     paths = [images] if isinstance(images, (str, os.PathLike)) else list(images)
