@@ -190,6 +190,44 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert_eq!(c2["best_median_mm"].as_f64().unwrap(), best, "{c2}");
     assert_eq!(std::fs::read(&kept_path).unwrap(), std::fs::read(&best_file).unwrap(), "DIR/model.gpmm is not the best");
     assert!(stderr.contains(&format!("kept {}", s(&best_file))), "{stderr}");
+    // Retraining the initializer after each iteration: the next iteration starts from the new
+    // init file, the development images are re-read with it, and a rerun reuses it.
+    let retrained = dir.path().join("retrained");
+    let args_r = [
+        "learn",
+        s(&model),
+        s(&images),
+        "--init",
+        s(&init),
+        "--quick",
+        "--iterations",
+        "2",
+        "--retrain-init",
+        "1",
+        "--dev",
+        s(&dev),
+        "--data",
+        s(&data),
+        "-o",
+        s(&retrained),
+    ];
+    let run_r = gpmm(&args_r);
+    ok(&run_r);
+    let first_init = retrained.join("iteration_1/init.init");
+    let bytes = std::fs::read(&first_init).expect("iteration_1/init.init");
+    assert_ne!(bytes, std::fs::read(&init).unwrap(), "the retrained init file is the start's");
+    let report = read_json(&retrained.join("iteration_1/init.json"));
+    assert!(report["found"].as_f64().is_some() && report["median_landmark_error"].as_f64().is_some(), "{report}");
+    let m2 = gpmm_host::gp::model_io::load(&retrained.join("model_2.gpmm")).unwrap();
+    assert_eq!(m2.metadata.learning.as_ref().unwrap().init, s(&first_init));
+    assert!(retrained.join("development/points-1").is_dir() && retrained.join("iteration_2/init.init").is_file());
+    let stderr = String::from_utf8_lossy(&run_r.stderr).to_string();
+    assert!(stderr.contains("initializer retrained"), "{stderr}");
+    let rerun = gpmm(&args_r);
+    ok(&rerun);
+    assert!(!String::from_utf8_lossy(&rerun.stderr).contains("initializer retrained"), "a rerun retrained again");
+    assert_eq!(std::fs::read(&first_init).unwrap(), bytes);
+
     // A rerun reads both iterations back and keeps the same best.
     let rerun = gpmm(&args);
     ok(&rerun);
