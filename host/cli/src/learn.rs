@@ -82,9 +82,9 @@ pub struct LearnArgs {
     #[arg(long, value_name = "DIR", requires = "retrain_init")]
     pub head: Option<PathBuf>,
     /// Share of the previous model's covariance the learned model keeps beside its fits' (0: the
-    /// fits' PCA alone, which loses variance with every iteration: each fit is drawn toward the
-    /// model it was fitted with).
-    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    /// fits' PCA alone, which loses variance with every iteration, each fit being drawn toward the
+    /// model it was fitted with, and with it the faces' identity: docs/learning.md).
+    #[arg(long, value_name = "F", default_value_t = gpmm_host::learn::DEFAULT_KEEP_VARIANCE)]
     pub keep_variance: f64,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
