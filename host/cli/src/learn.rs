@@ -4,12 +4,15 @@ use crate::fit::FitSettingsArgs;
 use crate::progress::{bar_style, note};
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use gpmm_host::gp::model::GpModel;
+use gpmm_host::gp::model_io;
 use gpmm_host::learn::dev::{DevPoints, DevSet};
-use gpmm_host::learn::run::{image_files, run, RunEvent, RunPlan};
+use gpmm_host::learn::run::{image_files, iteration_dir, local_wake, run_with, Hooks, Retrain, RetrainJob, RunError, RunEvent, RunPlan};
 use gpmm_host::learn::shading::ShadingSettings;
 use gpmm_host::learn::{albedo_change_limit, LearnSettings, MIN_IOU};
+use gpmm_train::scene::head::HeadContext;
 use indicatif::ProgressBar;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `gpmm learn`.
 #[derive(Debug, Args)]
@@ -64,13 +67,24 @@ pub struct LearnArgs {
     /// Use the first N identities of --dev (default: all).
     #[arg(long, value_name = "N", requires = "dev")]
     pub dev_identities: Option<usize>,
-    /// Data directory with the true faces' source, for --dev (default: $GPMM_DATA or ../shared/data).
-    #[arg(long, value_name = "DIR", requires = "dev")]
+    /// Data directory: the true faces' source for --dev, the template head for --retrain-init
+    /// (default: $GPMM_DATA or ../shared/data).
+    #[arg(long, value_name = "DIR")]
     pub data: Option<PathBuf>,
+    /// Retrain the init file's finder and initializer after each iteration: fine-tune the networks
+    /// it started from for CHUNKS chunks of renders of every model so far (the start model and each
+    /// iteration's, drawn alike), as `gpmm train-init MODELS --from INIT --chunks CHUNKS` does; the
+    /// next iteration starts from it (DIR/iteration_N/init.init, its validation in init.json).
+    #[arg(long, value_name = "CHUNKS", requires = "init", conflicts_with = "landmarks_dir")]
+    pub retrain_init: Option<usize>,
+    /// Template directory whose head, neck and ears are put around the faces the initializer is
+    /// retrained on (default: the data directory's template).
+    #[arg(long, value_name = "DIR", requires = "retrain_init")]
+    pub head: Option<PathBuf>,
     /// Share of the previous model's covariance the learned model keeps beside its fits' (0: the
-    /// fits' PCA alone, which loses variance with every iteration: each fit is drawn toward the
-    /// model it was fitted with).
-    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    /// fits' PCA alone, which loses variance with every iteration, each fit being drawn toward the
+    /// model it was fitted with, and with it the faces' identity: docs/learning.md).
+    #[arg(long, value_name = "F", default_value_t = gpmm_host::learn::DEFAULT_KEEP_VARIANCE)]
     pub keep_variance: f64,
     /// Parallel fits (default: all cores).
     #[arg(long, value_name = "J")]
@@ -187,7 +201,40 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             }
         }
     };
-    let outcome = run(&plan, dev.as_mut(), &events)?;
+    let head = match a.retrain_init {
+        Some(0) => bail!("--retrain-init 0 trains nothing; leave it out to keep the init file"),
+        Some(_) => Some(retraining_head(&plan.model, a.head.as_deref(), a.data.as_deref())?),
+        None => None,
+    };
+    let retrain = |job: RetrainJob<'_>| -> Result<Vec<u8>, RunError> {
+        let chunks = a.retrain_init.unwrap_or(0);
+        let mut opts = if a.quick {
+            gpmm_train::TrainOptions::quick(plan.settings.fit.seed)
+        } else {
+            gpmm_train::TrainOptions::fine_tuning(plan.settings.fit.seed)
+        };
+        opts.chunks = chunks;
+        let remote = |error: String| RunError::Remote { iteration: job.iteration, error };
+        let models = job.models.iter().map(|p| model_io::load(p)).collect::<Result<Vec<_>, _>>()?;
+        let refs: Vec<&GpModel> = models.iter().collect();
+        let progress = |p: gpmm_train::train::Progress| {
+            if let gpmm_train::train::Progress::Step { done, total, .. } = p {
+                bar.set_message(format!("iteration {}: retraining the initializer on {} models", job.iteration, refs.len()));
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            }
+        };
+        let (bytes, report) = gpmm_train::fine_tune(&refs, head.as_ref(), None, job.init, &opts, progress)
+            .map_err(|e| remote(format!("retraining the initializer: {e}")))?;
+        let path = iteration_dir(&plan.out, job.iteration).join("init.json");
+        let text = serde_json::to_string_pretty(&report).map_err(|e| remote(e.to_string()))?;
+        std::fs::write(&path, text + "\n").map_err(|error| RunError::Io { path: path.clone(), error })?;
+        note(&bar, format!("iteration {}: initializer retrained ({chunks} chunks): found {:.1} %, landmark error {:.3} of the eye distance on its validation renders", job.iteration, 100.0 * report.found, report.median_landmark_error));
+        Ok(bytes)
+    };
+    let local = local_wake(&plan, &events);
+    let hooks = Hooks { wake_all: &local, retrain: a.retrain_init.is_some().then_some(&retrain as &Retrain<'_>), events: &events };
+    let outcome = run_with(&plan, dev.as_mut(), &hooks)?;
     bar.finish_and_clear();
     if dev.is_some() {
         let to = outcome.copy_kept(&a.output).with_context(|| format!("cannot copy {}", outcome.kept.display()))?;
@@ -210,4 +257,16 @@ fn development_line(iteration: u32, c: &gpmm_host::learn::dev::DevComparison) ->
         "iteration {iteration}: development median {:.3} mm (mean {:.3}) against {:.3} mm (mean {:.3}) before: {verdict}",
         c.learned.median_mm, c.learned.mean_mm, c.previous.median_mm, c.previous.mean_mm
     )
+}
+
+/// The head put around the faces the initializer is retrained on: the template directory's (as
+/// `gpmm train-init` loads it), fitted to the start model.
+fn retraining_head(model: &Path, head: Option<&Path>, data: Option<&Path>) -> Result<HeadContext> {
+    let dir = head
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| gpmm_host::data::template_dir(&data.map(Path::to_path_buf).unwrap_or_else(gpmm_host::data::default_data_dir)));
+    let (mesh, landmarks) = crate::train_init::template_files(&dir)
+        .with_context(|| format!("retraining puts the faces on a head from a template directory: pass --head DIR ({})", dir.display()))?;
+    let start = model_io::load(model)?;
+    Ok(HeadContext::load(&start, &mesh, &landmarks)?)
 }

@@ -194,7 +194,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
 }
 
 /// The mesh (the directory's only .ply) and `landmarks_ibug68.json` of a template directory.
-fn template_files(dir: &Path) -> Result<(PathBuf, PathBuf)> {
+pub(crate) fn template_files(dir: &Path) -> Result<(PathBuf, PathBuf)> {
     let entries = std::fs::read_dir(dir).with_context(|| format!("cannot read the directory {}", dir.display()))?;
     let plys: Vec<PathBuf> =
         entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("ply"))).collect();

@@ -90,11 +90,15 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     for name in ["samples.png", "reconstructions.png"] {
         assert!(out.join("iteration_1").join(name).is_file(), "{name} missing");
     }
-    // The model: the template's topology and landmarks, a rank below the accepted examples, its record.
+    // The model: the template's topology and landmarks, the predecessor's rank and at least the
+    // kept share of its variance (by default half of its covariance stays beside the fits'), its record.
     let m = gpmm_host::gp::model_io::load(&learned).unwrap();
     let base = gpmm_host::gp::model_io::load(&model).unwrap();
     assert_eq!((m.vertices(), &m.triangles, &m.landmarks), (base.vertices(), &base.triangles, &base.landmarks));
-    assert!(m.shape.rank() >= 1 && m.shape.rank() < accepted as usize, "rank {}", m.shape.rank());
+    assert_eq!(m.shape.rank(), base.shape.rank());
+    let trace = |e: &[f64]| e.iter().sum::<f64>();
+    let kept = gpmm_host::learn::DEFAULT_KEEP_VARIANCE * trace(&base.shape.eigenvalues);
+    assert!(trace(&m.shape.eigenvalues) >= kept * 0.99, "{} < {kept}", trace(&m.shape.eigenvalues));
     let rec = m.metadata.learning.as_ref().expect("a learning record");
     assert_eq!((rec.iteration, rec.images, rec.accepted as u64), (1, 10, accepted));
     assert!(rec.max_albedo_change.is_some_and(|m| (f64::from(m) - limit).abs() < 1e-6), "{rec:?}");
@@ -125,8 +129,11 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     // Without shape from shading (the default): the fitted instances alone, no albedo change
     // recorded, another model.
     let plain = dir.path().join("plain");
-    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "-o", s(&plain)];
+    let args = ["learn", s(&model), s(&images), "--init", s(&init), "--quick", "--mirror", "--keep-variance", "0", "-o", s(&plain)];
     ok(&gpmm(&args));
+    // Of the fits alone (no kept share): a PCA of the accepted examples, fewer components than examples.
+    let alone = gpmm_host::gp::model_io::load(&plain.join("model_1.gpmm")).unwrap();
+    assert!(alone.shape.rank() >= 1 && alone.shape.rank() < accepted as usize, "rank {}", alone.shape.rank());
     let records = read_json(&plain.join("iteration_1/records.json"));
     assert!(records.get("max_albedo_change").is_none(), "{records}");
     assert!(records["records"].as_array().unwrap().iter().all(|r| r["albedo_change"].is_null()), "{records}");
@@ -190,6 +197,44 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert_eq!(c2["best_median_mm"].as_f64().unwrap(), best, "{c2}");
     assert_eq!(std::fs::read(&kept_path).unwrap(), std::fs::read(&best_file).unwrap(), "DIR/model.gpmm is not the best");
     assert!(stderr.contains(&format!("kept {}", s(&best_file))), "{stderr}");
+    // Retraining the initializer after each iteration: the next iteration starts from the new
+    // init file, the development images are re-read with it, and a rerun reuses it.
+    let retrained = dir.path().join("retrained");
+    let args_r = [
+        "learn",
+        s(&model),
+        s(&images),
+        "--init",
+        s(&init),
+        "--quick",
+        "--iterations",
+        "2",
+        "--retrain-init",
+        "1",
+        "--dev",
+        s(&dev),
+        "--data",
+        s(&data),
+        "-o",
+        s(&retrained),
+    ];
+    let run_r = gpmm(&args_r);
+    ok(&run_r);
+    let first_init = retrained.join("iteration_1/init.init");
+    let bytes = std::fs::read(&first_init).expect("iteration_1/init.init");
+    assert_ne!(bytes, std::fs::read(&init).unwrap(), "the retrained init file is the start's");
+    let report = read_json(&retrained.join("iteration_1/init.json"));
+    assert!(report["found"].as_f64().is_some() && report["median_landmark_error"].as_f64().is_some(), "{report}");
+    let m2 = gpmm_host::gp::model_io::load(&retrained.join("model_2.gpmm")).unwrap();
+    assert_eq!(m2.metadata.learning.as_ref().unwrap().init, s(&first_init));
+    assert!(retrained.join("development/points-1").is_dir() && retrained.join("iteration_2/init.init").is_file());
+    let stderr = String::from_utf8_lossy(&run_r.stderr).to_string();
+    assert!(stderr.contains("initializer retrained"), "{stderr}");
+    let rerun = gpmm(&args_r);
+    ok(&rerun);
+    assert!(!String::from_utf8_lossy(&rerun.stderr).contains("initializer retrained"), "a rerun retrained again");
+    assert_eq!(std::fs::read(&first_init).unwrap(), bytes);
+
     // A rerun reads both iterations back and keeps the same best.
     let rerun = gpmm(&args);
     ok(&rerun);

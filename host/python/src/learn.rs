@@ -11,7 +11,7 @@ use gpmm_host::fit::FitFlags;
 use gpmm_host::learn::dev::{DevPoints, DevSet};
 use gpmm_host::learn::run::{image_files, local_wake, run_with, Hooks, RunError, RunEvent, RunPlan, WakeJob};
 use gpmm_host::learn::shading::{ShadingBases, ShadingModel, ShadingSettings};
-use gpmm_host::learn::{albedo_change_limit, views, wake_image, ImageRecord, LearnSettings, Wake, MIN_IOU};
+use gpmm_host::learn::{albedo_change_limit, views, wake_image, ImageRecord, LearnSettings, Wake, DEFAULT_KEEP_VARIANCE, MIN_IOU};
 use gpmm_host::mesh::Mesh;
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
@@ -69,12 +69,12 @@ pub fn learn_wake<'py>(
 /// written, `None` if no iteration ran) and `iterations` (each iteration's records.json as a dict).
 #[pyfunction]
 #[pyo3(signature = (model, images, output, *, init = None, landmarks_dir = None, iterations = Int::of(5), mirror = false,
-    min_iou = None, init_landmark_sigma = None, shape_from_shading = false, keep_variance = 0.0, dev = None,
+    min_iou = None, init_landmark_sigma = None, shape_from_shading = false, keep_variance = None, dev = None,
     dev_landmarks_dir = None, dev_identities = None, data = None, jobs = None, wake_all = None, progress = None,
     seed = None, size = None, landmark_steps = None, image_steps = None, shape_rank = None, color_rank = None,
     landmark_sigma = None, contour_sigma = None, set = None),
     text_signature = "(model, images, output, *, init=None, landmarks_dir=None, iterations=5, mirror=False, min_iou=None, \
-    init_landmark_sigma=None, shape_from_shading=False, keep_variance=0.0, dev=None, dev_landmarks_dir=None, \
+    init_landmark_sigma=None, shape_from_shading=False, keep_variance=None, dev=None, dev_landmarks_dir=None, \
     dev_identities=None, data=None, jobs=None, wake_all=None, progress=None, seed=None, size=None, landmark_steps=None, \
     image_steps=None, shape_rank=None, color_rank=None, landmark_sigma=None, contour_sigma=None, set=None)")]
 #[allow(clippy::too_many_arguments)]
@@ -90,7 +90,7 @@ pub fn learn_run<'py>(
     min_iou: Option<f64>,
     init_landmark_sigma: Option<f32>,
     shape_from_shading: bool,
-    keep_variance: f64,
+    keep_variance: Option<f64>,
     dev: Option<PathBuf>,
     dev_landmarks_dir: Option<PathBuf>,
     dev_identities: Option<Int>,
@@ -112,6 +112,7 @@ pub fn learn_run<'py>(
     if !(min_iou.is_finite() && (0.0..=1.0).contains(&min_iou)) {
         return Err(value_error(format!("min_iou = {min_iou}: an overlap is between 0 and 1")));
     }
+    let keep_variance = keep_variance.unwrap_or(DEFAULT_KEEP_VARIANCE);
     if !(keep_variance.is_finite() && keep_variance >= 0.0) {
         return Err(value_error(format!("keep_variance = {keep_variance}: a share of a covariance is 0 or more")));
     }

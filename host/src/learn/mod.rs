@@ -58,6 +58,11 @@ pub fn albedo_change_limit(done: u32) -> f32 {
     ((r2 - done as f32 * r3) / 255.0).max(0.0)
 }
 
+/// The share of the previous model's covariance a learned model keeps by default: on the
+/// development set its fits identified 76.7 % of the probes (exact landmarks) where the template
+/// model's identified 70.0 %, a model of the fits alone 17.2 % and a share of 1 72.8 %.
+pub const DEFAULT_KEEP_VARIANCE: f64 = 0.5;
+
 /// The least finder score taken as a face.
 pub const MIN_SCORE: f32 = 0.05;
 

@@ -222,7 +222,7 @@ def learn_run(
     min_iou: Optional[float] = None,
     init_landmark_sigma: Optional[float] = None,
     shape_from_shading: bool = False,
-    keep_variance: float = 0.0,
+    keep_variance: Optional[float] = None,
     dev: Optional[_Path] = None,
     dev_landmarks_dir: Optional[_Path] = None,
     dev_identities: Optional[int] = None,

@@ -87,7 +87,7 @@ class _ClusterWake:
 
 def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: PathLike, *,
           init: Optional[PathLike] = None, landmarks_dir: Optional[PathLike] = None, iterations: int = 5,
-          mirror: bool = False, keep_variance: float = 0.0, min_iou: Optional[float] = None,
+          mirror: bool = False, keep_variance: Optional[float] = None, min_iou: Optional[float] = None,
           init_landmark_sigma: Optional[float] = None, shape_from_shading: bool = False,
           dev: Optional[PathLike] = None, dev_identities: Optional[int] = None,
           dev_landmarks_dir: Optional[PathLike] = None, data: Optional[PathLike] = None,
@@ -99,7 +99,8 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
 
     ``images``: image files or folders of them. ``init``: the init file (``gpmm train-init``)
     whose finder and initializer start every fit, or ``landmarks_dir`` with ``STEM.pts`` files.
-    ``settings``: the fit settings ``Model.fit`` takes (``seed``, ``landmark_steps``,
+    ``keep_variance``: the share of the previous model's covariance kept beside the fits' (the
+    program's default when ``None``). ``settings``: the fit settings ``Model.fit`` takes (``seed``, ``landmark_steps``,
     ``image_steps``, ``set`` ...). ``client``: a ``distributed.Client`` whose workers fit the
     views (the same models as without it); ``None`` fits on ``jobs`` threads here (default all
     cores). ``progress``: called with a dict per event (``event`` is "fitting", "checking",
