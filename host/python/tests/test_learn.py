@@ -60,7 +60,11 @@ def same_iteration(a, b):
 
 def test_a_local_cluster_learns_the_models_of_the_local_run(tmp_path, inputs, client, run_cli):
     model, images, init = inputs
-    local = gpmm.learn(model, images, tmp_path / "local", init=init, **LEARN)
+    heard = []
+    local = gpmm.learn(model, images, tmp_path / "local", init=init, progress=heard.append, **LEARN)
+    # This process's threads report every view (in the order they finish), then the iteration.
+    assert sorted(e["done"] for e in heard if e["event"] == "fitting") == list(range(1, 11))
+    assert heard[-1]["event"] == "finished" and heard[-1]["model"] == local["model"]
     # The program's run with the same settings (its --quick fits) writes the same model.
     run_cli("learn", model, images, "--init", init, "--quick", "--mirror", "--seed", LEARN["seed"], "-o", tmp_path / "cli")
     assert (tmp_path / "cli" / "model_1.gpmm").read_bytes() == (tmp_path / "local" / "model_1.gpmm").read_bytes()
