@@ -17,7 +17,18 @@ use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict, PyList, PyTuple};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
+
+/// How many times this process prepared shape from shading's bases.
+static SHADING_PREPARED: AtomicUsize = AtomicUsize::new(0);
+
+/// How many times this process prepared shape from shading's bases for `learn_wake` (once per
+/// model object and settings: a worker's count).
+#[pyfunction]
+pub fn learn_shading_preparations() -> usize {
+    SHADING_PREPARED.load(Ordering::Relaxed)
+}
 
 /// Fits one view of a learning iteration (the image, or its mirror image with `mirrored`) as
 /// `gpmm learn` does: `(record, positions, colors)`, the record as JSON text and the accepted
@@ -44,7 +55,11 @@ pub fn learn_wake<'py>(
         let Some(sfs) = &settings.shading else { return Ok(wake_image(&m, None, init.as_deref(), &image, mirrored, &settings)) };
         let key = serde_json::to_string(&(ranks.shape, ranks.color, sfs)).map_err(|e| e.to_string())?;
         // A model whose bases cannot be prepared fails every image alike, as on the local threads.
-        let bases = match model.shading_bases(&key, |m| ShadingBases::new(m, ranks.shape, ranks.color, sfs)) {
+        let prepare = |m: &_| {
+            SHADING_PREPARED.fetch_add(1, Ordering::Relaxed);
+            ShadingBases::new(m, ranks.shape, ranks.color, sfs)
+        };
+        let bases = match model.shading_bases(&key, prepare) {
             Ok(bases) => bases,
             Err(e) => return Err(format!("shape from shading: {e}")),
         };

@@ -188,5 +188,6 @@ fn _gpmm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(data_dir, m)?)?;
     m.add_function(wrap_pyfunction!(learn::learn_wake, m)?)?;
     m.add_function(wrap_pyfunction!(learn::learn_run, m)?)?;
+    m.add_function(wrap_pyfunction!(learn::learn_shading_preparations, m)?)?;
     Ok(())
 }

@@ -108,6 +108,9 @@ def test_shape_from_shading_on_a_local_cluster_learns_the_local_model(tmp_path, 
     same_iteration(runs[0]["iterations"][0], runs[1]["iterations"][0])
     assert all(r["albedo_change"] is not None for r in runs[1]["iterations"][0]["records"] if r["accepted"])
     assert runs[1]["iterations"][0]["max_albedo_change"] is not None
+    # Each worker prepared the bases once for its model (none before: no other test shades).
+    prepared = client.run(gpmm._gpmm.learn_shading_preparations)
+    assert sorted(prepared.values()) == [1, 1], prepared
 
 
 def test_a_development_set_keeps_the_programs_best(tmp_path, inputs, client, run_cli, data_dir, template):

@@ -20,6 +20,7 @@ __all__ = [
     "inspect",
     "kernels",
     "learn_run",
+    "learn_shading_preparations",
     "learn_wake",
     "load",
     "load_image",
@@ -209,6 +210,9 @@ def learn_wake(
     model: Model, init: Optional[bytes], image: _Path, mirrored: bool, settings_json: str
 ) -> Tuple[str, Optional[npt.NDArray[np.float64]], Optional[npt.NDArray[np.float64]]]:
     """Fits one view of a learning iteration: its record (JSON) and, if accepted, its reconstruction."""
+
+def learn_shading_preparations() -> int:
+    """How many times this process prepared shape from shading's bases for learn_wake."""
 
 def learn_run(
     model: _Path,
