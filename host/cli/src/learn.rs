@@ -239,6 +239,11 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     if dev.is_some() {
         let to = outcome.copy_kept(&a.output).with_context(|| format!("cannot copy {}", outcome.kept.display()))?;
         eprintln!("kept {}, the best on the development set (copied to {})", outcome.kept.display(), to.display());
+        // The init file retrained after the kept iteration learned that model (and those before it).
+        let paired = (1..=plan.iterations).find(|&n| gpmm_host::learn::run::model_path(&plan.out, n) == outcome.kept);
+        if let Some(init) = paired.map(|n| gpmm_host::learn::run::retrained_init_path(&plan.out, n)).filter(|p| p.is_file()) {
+            eprintln!("its init file: {} (retrained after that iteration)", init.display());
+        }
         println!("{}", to.display());
     } else if let Some(last) = outcome.iterations.last() {
         println!("{}", last.model);

@@ -230,6 +230,19 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert!(retrained.join("development/points-1").is_dir() && retrained.join("iteration_2/init.init").is_file());
     let stderr = String::from_utf8_lossy(&run_r.stderr).to_string();
     assert!(stderr.contains("initializer retrained"), "{stderr}");
+    // The kept model is named with the init file retrained after its iteration (none for the start model).
+    let best = read_json(&retrained.join("iteration_2/records.json"))["development"]["best_model"].as_str().unwrap().to_string();
+    let paired = if best.ends_with("model_1.gpmm") {
+        Some("iteration_1/init.init")
+    } else if best.ends_with("model_2.gpmm") {
+        Some("iteration_2/init.init")
+    } else {
+        None
+    };
+    match paired {
+        Some(p) => assert!(stderr.contains(&format!("its init file: {}", s(&retrained.join(p)))), "{stderr}"),
+        None => assert!(!stderr.contains("its init file"), "{stderr}"),
+    }
     let rerun = gpmm(&args_r);
     ok(&rerun);
     assert!(!String::from_utf8_lossy(&rerun.stderr).contains("initializer retrained"), "a rerun retrained again");
