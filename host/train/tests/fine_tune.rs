@@ -2,14 +2,12 @@
 //! the mixture, an init file dequantized and re-quantized without training detects as it did,
 //! and networks or models that do not fit the training are refused with the reason.
 
+mod common;
+
 use gpmm_core::net::face::{landmark_box, FaceBox, InitFile, Reading};
 use gpmm_core::net::{NetScratch, Shape};
-use gpmm_host::data::{data_dir_for_tests, template_dir};
 use gpmm_host::detect::Detector;
-use gpmm_host::gp::kernel::ModelKernel;
-use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
-use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::gp::model::GpModel;
 use gpmm_host::render::Renderer;
 use gpmm_train::data::sample_of_scene;
 use gpmm_train::encode::{decode_network, encode_network, init_file_bytes};
@@ -25,20 +23,7 @@ use std::sync::OnceLock;
 /// A small model of the template (800 vertices, 8 components each).
 fn model() -> Option<&'static GpModel> {
     static M: OnceLock<Option<GpModel>> = OnceLock::new();
-    M.get_or_init(|| {
-        let dir = template_dir(&data_dir_for_tests()?);
-        let (mesh, landmarks) = (dir.join("lee-perry-smith.ply"), dir.join("landmarks_ibug68.json"));
-        let template = load_template(&mesh, &landmarks, &TemplateOptions { vertices: Some(800), ..Default::default() }).unwrap();
-        let build = BuildOptions {
-            kernel: ModelKernel::SymmetricFull,
-            hyperparameters: Default::default(),
-            rank_shape: RankSpec::Count(8),
-            rank_color: RankSpec::Count(8),
-            nystrom: NystromOptions { points: 200, ..Default::default() },
-        };
-        Some(build_model(&template, &build, |_, _, _| {}))
-    })
-    .as_ref()
+    M.get_or_init(|| common::template_model(800, 8, 200)).as_ref()
 }
 
 /// The model with other faces: a wider mean shape and a greener mean albedo (same topology).

@@ -2,28 +2,16 @@
 //! change, some turn iris-dark, and the lid landmarks move apart onto the painted rims while the
 //! corners stay where they are.
 
-use gpmm_host::data::{data_dir_for_tests, template_dir};
-use gpmm_host::gp::kernel::ModelKernel;
-use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
-use gpmm_host::mesh::template::{load_template, TemplateOptions};
+mod common;
+
+use gpmm_host::gp::model::GpModel;
 use gpmm_host::render::Instance;
 use gpmm_train::scene::eyes::OpenEyes;
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 fn model() -> Option<GpModel> {
-    let dir = template_dir(&data_dir_for_tests()?);
-    let (mesh, lm) = (dir.join("lee-perry-smith.ply"), dir.join("landmarks_ibug68.json"));
-    let template = load_template(&mesh, &lm, &TemplateOptions { vertices: Some(4000), ..Default::default() }).unwrap();
-    let build = BuildOptions {
-        kernel: ModelKernel::SymmetricFull,
-        hyperparameters: Default::default(),
-        rank_shape: RankSpec::Count(4),
-        rank_color: RankSpec::Count(4),
-        nystrom: NystromOptions { points: 100, ..Default::default() },
-    };
-    Some(build_model(&template, &build, |_, _, _| {}))
+    common::template_model(4000, 4, 100)
 }
 
 #[test]

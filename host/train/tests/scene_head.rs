@@ -2,11 +2,10 @@
 //! closed near the face, untouched far from it) and refuses a model built from another scan. And
 //! what is behind it: background photos change the background only.
 
-use gpmm_host::data::{data_dir_for_tests, template_dir};
-use gpmm_host::gp::kernel::ModelKernel;
-use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
-use gpmm_host::gp::model::{build_model, BuildOptions, GpModel};
-use gpmm_host::mesh::template::{load_template, TemplateOptions};
+mod common;
+
+use common::template_files as files;
+use gpmm_host::gp::model::GpModel;
 use gpmm_host::render::{Instance, Renderer};
 use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::head::HeadContext;
@@ -14,23 +13,10 @@ use gpmm_train::scene::{face_free_frame, render_scene, FaceModel, Openings, Scen
 use image::{Rgb, RgbImage};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
-use std::path::{Path, PathBuf};
 
-fn files() -> Option<(PathBuf, PathBuf)> {
-    let dir = template_dir(&data_dir_for_tests()?);
-    Some((dir.join("lee-perry-smith.ply"), dir.join("landmarks_ibug68.json")))
-}
-
-fn small_model(mesh: &Path, landmarks: &Path) -> GpModel {
-    let template = load_template(mesh, landmarks, &TemplateOptions { vertices: Some(800), ..Default::default() }).unwrap();
-    let build = BuildOptions {
-        kernel: ModelKernel::SymmetricFull,
-        hyperparameters: Default::default(),
-        rank_shape: RankSpec::Count(8),
-        rank_color: RankSpec::Count(8),
-        nystrom: NystromOptions { points: 200, ..Default::default() },
-    };
-    build_model(&template, &build, |_, _, _| {})
+/// The template at 800 vertices, 8 + 8 components.
+fn small_model() -> GpModel {
+    common::template_model(800, 8, 200).expect("data directory")
 }
 
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
@@ -61,7 +47,7 @@ impl<'a> Scenes<'a> {
 #[test]
 fn the_head_continues_the_face_and_leaves_the_far_head_alone() {
     let Some((mesh, lm)) = files() else { return };
-    let model = small_model(&mesh, &lm);
+    let model = small_model();
     let head = HeadContext::load(&model, &mesh, &lm).unwrap();
     assert!(head.vertices() > 2 * model.vertices(), "{} head vertices", head.vertices());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
@@ -100,7 +86,7 @@ fn the_head_continues_the_face_and_leaves_the_far_head_alone() {
 #[test]
 fn a_model_of_another_scan_is_refused_with_the_file_named() {
     let Some((mesh, lm)) = files() else { return };
-    let mut model = small_model(&mesh, &lm);
+    let mut model = small_model();
     for p in &mut model.shape.mean {
         p[1] += 25.0;
     }
@@ -111,7 +97,7 @@ fn a_model_of_another_scan_is_refused_with_the_file_named() {
 #[test]
 fn dressed_heads_keep_the_face_and_its_labels() {
     let Some((mesh, lm)) = files() else { return };
-    let model = small_model(&mesh, &lm);
+    let model = small_model();
     let head = HeadContext::load(&model, &mesh, &lm).unwrap();
     let n = model.vertices();
     let face = Instance::of_model(&model, &[1.5, -1.0], &[0.5]).unwrap();
@@ -157,8 +143,7 @@ fn green_share(frame: &RgbImage, rows: std::ops::Range<u32>) -> f64 {
 
 #[test]
 fn a_background_photo_changes_the_background_and_nothing_else() {
-    let Some((mesh, lm)) = files() else { return };
-    let model = small_model(&mesh, &lm);
+    let Some(model) = common::template_model(800, 8, 200) else { return };
     let ranges = SceneRanges { dressed: false, ..SceneRanges::default() };
     let openings = Openings::of_model(&model, &ranges);
     let green = Backgrounds::from_photos(vec![RgbImage::from_pixel(640, 480, Rgb([20, 200, 30]))], 1.0);
