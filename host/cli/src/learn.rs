@@ -105,6 +105,9 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     if !(a.keep_variance.is_finite() && a.keep_variance >= 0.0) {
         bail!("--keep-variance {}: a share of a covariance is 0 or more", a.keep_variance);
     }
+    if a.retrain_init == Some(0) {
+        bail!("--retrain-init 0 trains nothing; leave it out to keep the init file");
+    }
     let images = image_files(&a.images)?;
     let mut flags = a.settings.flags();
     // The initializer's points are fitted as `gpmm fit --init` fits them; landmark files as
@@ -133,7 +136,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             shading: a.shape_from_shading.then_some(ShadingSettings::DEFAULT),
             max_albedo_change: albedo_change_limit(0),
             landmarks_dir: a.landmarks_dir.clone(),
-            keep_variance: Some(a.keep_variance),
+            keep_variance: a.keep_variance,
         },
         jobs,
     };
@@ -202,7 +205,6 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         }
     };
     let head = match a.retrain_init {
-        Some(0) => bail!("--retrain-init 0 trains nothing; leave it out to keep the init file"),
         Some(_) => Some(retraining_head(&plan.model, a.head.as_deref(), a.data.as_deref())?),
         None => None,
     };
@@ -214,7 +216,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             gpmm_train::TrainOptions::fine_tuning(plan.settings.fit.seed)
         };
         opts.chunks = chunks;
-        let remote = |error: String| RunError::Remote { iteration: job.iteration, error };
+        let failed = |error: String| RunError::Hook { iteration: job.iteration, error };
         let models = job.models.iter().map(|p| model_io::load(p)).collect::<Result<Vec<_>, _>>()?;
         let refs: Vec<&GpModel> = models.iter().collect();
         let progress = |p: gpmm_train::train::Progress| {
@@ -225,9 +227,9 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             }
         };
         let (bytes, report) = gpmm_train::fine_tune(&refs, head.as_ref(), None, job.init, &opts, progress)
-            .map_err(|e| remote(format!("retraining the initializer: {e}")))?;
+            .map_err(|e| failed(format!("retraining the initializer: {e}")))?;
         let path = iteration_dir(&plan.out, job.iteration).join("init.json");
-        let text = serde_json::to_string_pretty(&report).map_err(|e| remote(e.to_string()))?;
+        let text = serde_json::to_string_pretty(&report).map_err(|e| failed(e.to_string()))?;
         std::fs::write(&path, text + "\n").map_err(|error| RunError::Io { path: path.clone(), error })?;
         note(&bar, format!("iteration {}: initializer retrained ({chunks} chunks): found {:.1} %, landmark error {:.3} of the eye distance on its validation renders", job.iteration, 100.0 * report.found, report.median_landmark_error));
         Ok(bytes)

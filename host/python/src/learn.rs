@@ -171,7 +171,7 @@ pub fn learn_run<'py>(
             shading: shape_from_shading.then_some(ShadingSettings::DEFAULT),
             max_albedo_change: albedo_change_limit(0),
             landmarks_dir: landmarks_dir.clone(),
-            keep_variance: Some(keep_variance),
+            keep_variance,
         },
         jobs,
     };
@@ -219,7 +219,7 @@ pub fn learn_run<'py>(
             let Some(callback) = &wake_all else { return local(job) };
             let views = views(&plan.images, job.settings.mirror);
             Python::attach(|py| remote_wake(py, callback, &job, &views))
-                .map_err(|e| RunError::Remote { iteration: job.iteration, error: keep(e) })
+                .map_err(|e| RunError::Hook { iteration: job.iteration, error: keep(e) })
         };
         let outcome = run_with(&plan, dev_set.as_mut(), &Hooks { wake_all: &remote, retrain: None, events: &events })
             .map_err(|e| run_error(e, &model))?;

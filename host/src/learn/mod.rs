@@ -22,9 +22,9 @@
 //!    template's topology with its landmarks.
 //!
 //! 6. **Development check** ([`dev`], when a set with known truth is given): the new model against its
-//!    predecessor on that set; one that is not better is not kept and the loop stops.
-//!
-//! Not yet part of the loop: retraining the initializer on the learned models.
+//!    predecessor and the best so far on that set; the run keeps the best.
+//! 7. **Retraining** (a call-out of [`run::run_with`]): the finder and initializer fine-tuned on every
+//!    model so far; the next iteration starts from them.
 
 pub mod dev;
 pub mod run;
@@ -83,9 +83,9 @@ pub struct LearnSettings {
     /// Read each image's start points from `DIR/STEM.pts` (a detector's, or any other source)
     /// instead of the init file's initializer; a mirror image's points are mirrored with it.
     pub landmarks_dir: Option<PathBuf>,
-    /// The share of the previous model's covariance the learned model keeps beside its fits'
-    /// (`None` or 0: the fits' PCA alone; see [`crate::eval::models::pca::pca_beside`]).
-    pub keep_variance: Option<f64>,
+    /// The share of the previous model's covariance the learned model keeps beside its fits' (0:
+    /// the fits' PCA alone; see [`crate::eval::models::pca::pca_beside`]).
+    pub keep_variance: f64,
 }
 
 /// What became of one image in one iteration.
@@ -326,12 +326,7 @@ pub enum LearnError {
 
 /// The next model: the PCA of the accepted reconstructions of `wakes`, in `previous`'s topology
 /// with its landmarks, its template's provenance and attribution, and a record of the iteration.
-pub fn learned_model(
-    previous: &GpModel,
-    wakes: &[Wake],
-    keep_variance: Option<f64>,
-    record: LearningRecord,
-) -> Result<GpModel, LearnError> {
+pub fn learned_model(previous: &GpModel, wakes: &[Wake], keep_variance: f64, record: LearningRecord) -> Result<GpModel, LearnError> {
     let examples: Vec<Mesh> = wakes.iter().filter_map(|w| w.reconstruction.clone()).collect();
     if examples.len() < 2 {
         return Err(LearnError::TooFewAccepted { iteration: record.iteration, accepted: examples.len(), images: wakes.len() });
@@ -340,7 +335,7 @@ pub fn learned_model(
     let attribution = previous.metadata.template.attribution.clone().unwrap_or_default();
     // At most as many components as the predecessor has (or the examples give, without it).
     let kept =
-        keep_variance.filter(|&s| s > 0.0).map(|share| KeptCovariance { model: previous, share, max_rank: previous.shape.rank().max(2) });
+        (keep_variance > 0.0).then_some(KeptCovariance { model: previous, share: keep_variance, max_rank: previous.shape.rank().max(2) });
     let mut model = pca_beside(&examples, kept, &previous.triangles, &previous.landmarks, "learned", &source, &attribution)?;
     model.metadata.template = previous.metadata.template.clone();
     model.metadata.landmark_scheme = previous.metadata.landmark_scheme.clone();

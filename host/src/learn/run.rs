@@ -176,9 +176,9 @@ pub enum RunError {
         /// Images (and mirror images) given.
         expected: usize,
     },
-    /// A wake phase elsewhere (a cluster) failed.
+    /// A call-out of the loop (a cluster's wake phase, the retraining) failed.
     #[error("iteration {iteration}: {error}")]
-    Remote {
+    Hook {
         /// The iteration.
         iteration: u32,
         /// Why.
@@ -332,7 +332,8 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
         let dir = iteration_dir(&plan.out, iteration);
         let records_path = dir.join("records.json");
         let next_path = model_path(&plan.out, iteration);
-        if records_path.is_file() && next_path.is_file() {
+        let reused = records_path.is_file() && next_path.is_file();
+        let (file, next) = if reused {
             let text = std::fs::read_to_string(&records_path).map_err(io(&records_path))?;
             let file: IterationFile =
                 serde_json::from_str(&text).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
@@ -342,83 +343,78 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
                 // Measured without a development set: its model stands unmeasured.
                 None => track.forget(),
             }
-            done.push(file);
-            model = model_io::load(&next_path)?;
-            previous_path = next_path;
-            models.push(previous_path.clone());
-            if let (Some(retrain), Some(current)) = (retrain, init.as_deref()) {
-                let path = retrained_init_path(&plan.out, iteration);
-                let bytes = match std::fs::read(&path) {
-                    Ok(bytes) => bytes,
-                    Err(_) => retrain_and_save(retrain, iteration, &models, current, &path)?,
-                };
-                repoint(dev.as_deref_mut(), &bytes, iteration, &mut track)?;
-                init = Some(bytes);
-                init_path = Some(path);
+            let next = model_io::load(&next_path)?;
+            (file, next)
+        } else {
+            let t0 = std::time::Instant::now();
+            // The paper's albedo-change limit tightens with the iterations done.
+            let settings = LearnSettings { max_albedo_change: albedo_change_limit(iteration - 1), ..plan.settings.clone() };
+            let max_albedo_change = settings.shading.is_some().then_some(settings.max_albedo_change);
+            let wakes =
+                wake_all(WakeJob { iteration, model_path: &previous_path, model: &model, init: init.as_deref(), settings: &settings })?;
+            let expected = super::views(&plan.images, settings.mirror).len();
+            if wakes.len() != expected {
+                return Err(RunError::Wakes { iteration, got: wakes.len(), expected });
             }
-            continue;
-        }
-        let t0 = std::time::Instant::now();
-        // The paper's albedo-change limit tightens with the iterations done.
-        let settings = LearnSettings { max_albedo_change: albedo_change_limit(iteration - 1), ..plan.settings.clone() };
-        let max_albedo_change = settings.shading.is_some().then_some(settings.max_albedo_change);
-        let wakes = wake_all(WakeJob { iteration, model_path: &previous_path, model: &model, init: init.as_deref(), settings: &settings })?;
-        let expected = plan.images.len() * if settings.mirror { 2 } else { 1 };
-        if wakes.len() != expected {
-            return Err(RunError::Wakes { iteration, got: wakes.len(), expected });
-        }
-        let records: Vec<ImageRecord> = wakes.iter().map(|w| w.record.clone()).collect();
-        let c = counts(&records);
-        let record = LearningRecord {
-            iteration,
-            previous_model: previous_path.display().to_string(),
-            init: match (&plan.settings.landmarks_dir, &init_path) {
-                (Some(dir), _) => format!("landmark files in {}", dir.display()),
-                (None, Some(path)) => path.display().to_string(),
-                (None, None) => String::new(),
-            },
-            images: records.len(),
-            accepted: c.accepted,
-            rejected_overlap: c.rejected_overlap,
-            rejected_albedo: c.rejected_albedo,
-            failed: c.failed,
-            min_iou: plan.settings.min_iou,
-            max_albedo_change,
-            seed: plan.settings.fit.seed,
+            let records: Vec<ImageRecord> = wakes.iter().map(|w| w.record.clone()).collect();
+            let c = counts(&records);
+            let record = LearningRecord {
+                iteration,
+                previous_model: previous_path.display().to_string(),
+                init: match (&plan.settings.landmarks_dir, &init_path) {
+                    (Some(dir), _) => format!("landmark files in {}", dir.display()),
+                    (None, Some(path)) => path.display().to_string(),
+                    (None, None) => String::new(),
+                },
+                images: records.len(),
+                accepted: c.accepted,
+                rejected_overlap: c.rejected_overlap,
+                rejected_albedo: c.rejected_albedo,
+                failed: c.failed,
+                min_iou: plan.settings.min_iou,
+                max_albedo_change,
+                seed: plan.settings.fit.seed,
+            };
+            std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+            let next = learned_model(&model, &wakes, plan.settings.keep_variance, record)?;
+            model_io::save(&next, &next_path)?;
+            write_samples(&next, &dir.join("samples.png"))?;
+            write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
+            let development = match dev.as_deref() {
+                Some(d) => Some(track.compare(d.dir(), &previous_path, &next_path, &|p: &Path| figure(d, iteration, p))?),
+                None => None,
+            };
+            let file = IterationFile {
+                iteration,
+                previous_model: previous_path.display().to_string(),
+                model: next_path.display().to_string(),
+                images: records.len(),
+                accepted: c.accepted,
+                rejected_overlap: c.rejected_overlap,
+                rejected_albedo: c.rejected_albedo,
+                max_albedo_change,
+                failed: c.failed,
+                seconds: t0.elapsed().as_secs_f64(),
+                development,
+                records,
+            };
+            let text = serde_json::to_string_pretty(&file).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
+            std::fs::write(&records_path, text + "\n").map_err(io(&records_path))?;
+            events(RunEvent::Finished(&file));
+            (file, next)
         };
-        std::fs::create_dir_all(&dir).map_err(io(&dir))?;
-        let next = learned_model(&model, &wakes, plan.settings.keep_variance, record)?;
-        model_io::save(&next, &next_path)?;
-        write_samples(&next, &dir.join("samples.png"))?;
-        write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
-        let development = match dev.as_deref() {
-            Some(d) => Some(track.compare(d.dir(), &previous_path, &next_path, &|p: &Path| figure(d, iteration, p))?),
-            None => None,
-        };
-        let file = IterationFile {
-            iteration,
-            previous_model: previous_path.display().to_string(),
-            model: next_path.display().to_string(),
-            images: records.len(),
-            accepted: c.accepted,
-            rejected_overlap: c.rejected_overlap,
-            rejected_albedo: c.rejected_albedo,
-            max_albedo_change,
-            failed: c.failed,
-            seconds: t0.elapsed().as_secs_f64(),
-            development,
-            records,
-        };
-        let text = serde_json::to_string_pretty(&file).map_err(|error| RunError::Records { path: records_path.clone(), error })?;
-        std::fs::write(&records_path, text + "\n").map_err(io(&records_path))?;
-        events(RunEvent::Finished(&file));
         done.push(file);
         model = next;
         previous_path = next_path;
         models.push(previous_path.clone());
         if let (Some(retrain), Some(current)) = (retrain, init.as_deref()) {
             let path = retrained_init_path(&plan.out, iteration);
-            let bytes = retrain_and_save(retrain, iteration, &models, current, &path)?;
+            // A reused iteration's retraining is on disk too (written after its records); a new
+            // iteration's file, if any, is a leftover of another run.
+            let bytes = match std::fs::read(&path) {
+                Ok(bytes) if reused => bytes,
+                _ => retrain_and_save(retrain, iteration, &models, current, &path)?,
+            };
             repoint(dev.as_deref_mut(), &bytes, iteration, &mut track)?;
             init = Some(bytes);
             init_path = Some(path);
