@@ -145,17 +145,13 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             let pb = crate::progress::spinner(&format!("{}: finding the development faces", dir.display()));
             let data = a.data.clone().unwrap_or_else(gpmm_host::data::default_data_dir);
             let work = a.output.join("development");
-            let d = match (&a.landmarks_dir, &a.dev_landmarks_dir, &a.init) {
-                (Some(_), Some(points), _) => DevSet::prepare(dir, a.dev_identities, &data, DevPoints::Files(points), &work)?,
-                (Some(_), None, _) => {
-                    bail!("--dev with --landmarks-dir needs --dev-landmarks-dir: the development images start as the loop's do")
-                }
-                (None, _, Some(init)) => {
-                    let bytes = std::fs::read(init).with_context(|| format!("cannot read {}", init.display()))?;
-                    DevSet::prepare(dir, a.dev_identities, &data, DevPoints::Init(&bytes), &work)?
-                }
-                (None, _, None) => bail!("--init or --landmarks-dir is needed"),
+            let bytes = match (&a.landmarks_dir, &a.init) {
+                (None, Some(init)) => Some(std::fs::read(init).with_context(|| format!("cannot read {}", init.display()))?),
+                _ => None,
             };
+            let points = DevPoints::like_the_loop(a.landmarks_dir.as_deref(), a.dev_landmarks_dir.as_deref(), bytes.as_deref())
+                .map_err(|e| anyhow::anyhow!("--dev: {e} (--dev-landmarks-dir)"))?;
+            let d = DevSet::prepare(dir, a.dev_identities, &data, points, &work)?;
             pb.finish_and_clear();
             if d.unfound > 0 {
                 eprintln!("{}: no face found in {} development images; they are left out", dir.display(), d.unfound);

@@ -189,19 +189,13 @@ pub fn learn_run<'py>(
             Some(dir) => {
                 let data = data.clone().unwrap_or_else(gpmm_host::data::default_data_dir);
                 let work = output.join("development");
-                let prepared = match (&landmarks_dir, &dev_landmarks_dir, &init) {
-                    (Some(_), Some(points), _) => DevSet::prepare(dir, dev_identities, &data, DevPoints::Files(points), &work),
-                    (Some(_), None, _) => {
-                        return Err(value_error(
-                            "dev with landmarks_dir needs dev_landmarks_dir: the development images start as the loop's do",
-                        ))
-                    }
-                    (None, _, Some(init)) => {
-                        let bytes = std::fs::read(init).map_err(|e| io_error(format!("{}: {e}", init.display()), &e, init))?;
-                        DevSet::prepare(dir, dev_identities, &data, DevPoints::Init(&bytes), &work)
-                    }
-                    (None, _, None) => unreachable!("checked above"),
+                let bytes = match (&landmarks_dir, &init) {
+                    (None, Some(init)) => Some(std::fs::read(init).map_err(|e| io_error(format!("{}: {e}", init.display()), &e, init))?),
+                    _ => None,
                 };
+                let points = DevPoints::like_the_loop(landmarks_dir.as_deref(), dev_landmarks_dir.as_deref(), bytes.as_deref())
+                    .map_err(|e| value_error(format!("dev: {e} (dev_landmarks_dir)")))?;
+                let prepared = DevSet::prepare(dir, dev_identities, &data, points, &work);
                 Some(prepared.map_err(|e| read_error(format!("development set: {e}"), &[dir.as_path(), data.as_path()]))?)
             }
             None => None,

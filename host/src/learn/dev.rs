@@ -41,6 +41,21 @@ pub enum DevPoints<'a> {
     Files(&'a Path),
 }
 
+impl<'a> DevPoints<'a> {
+    /// The development images' points for a loop that reads landmark files from `landmarks_dir`
+    /// (then `dev_files` must give the development set's) or starts from the init file `init`.
+    pub fn like_the_loop(landmarks_dir: Option<&Path>, dev_files: Option<&'a Path>, init: Option<&'a [u8]>) -> Result<Self, &'static str> {
+        match (landmarks_dir, dev_files, init) {
+            (Some(_), Some(points), _) => Ok(Self::Files(points)),
+            (Some(_), None, _) => {
+                Err("a loop that reads landmark files needs the development images' landmark files too: they start as the loop's do")
+            }
+            (None, _, Some(init)) => Ok(Self::Init(init)),
+            (None, _, None) => Err("an init file or landmark files are needed: the fits start from one of them"),
+        }
+    }
+}
+
 /// One model's figures on the development set.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DevFigure {
