@@ -82,18 +82,26 @@ pub struct TrainInitArgs {
     /// without them the finder's box on photos of people came out about twice the face).
     #[arg(long, help_heading = COMPARISONS)]
     pub undressed: bool,
-    /// Folder of face-free photos (.jpg/.png) to draw some scenes over, and to cut face-free
-    /// frames from that the finder learns as "no face" (the hardest of several candidates, by the
-    /// finder's own score, each chunk). `tests/realphotos/backgrounds.py` makes one from Debian's
-    /// wallpaper packages. Default: procedural backgrounds only.
+    /// Folder of photos (.jpg/.png) to draw some scenes over, and to cut face-free frames from
+    /// that the finder learns as "no face" (the hardest of several candidates, by the finder's own
+    /// score, each chunk); repeat for several folders. A photo with a STEM.faces.json beside it
+    /// (the real-photo set format) is a photo of people: no cut touches its faces, so its hands,
+    /// clothes and rooms are learned as background, and its faces are shown to the finder as
+    /// faces (--photo-faces). `tests/realphotos/backgrounds.py` makes a folder from Debian's
+    /// wallpaper packages, `tests/realphotos/make_pool.py` one of people from face projects'
+    /// example photos. Default: procedural backgrounds only.
     #[arg(long, value_name = "DIR")]
-    pub backgrounds: Option<PathBuf>,
+    pub backgrounds: Vec<PathBuf>,
     /// Fraction of scenes drawn over a photo of --backgrounds (the rest over procedural ones).
     #[arg(long, value_name = "F", default_value_t = 0.5, requires = "backgrounds")]
     pub background_share: f64,
     /// Face-free frames per scene with --backgrounds.
     #[arg(long, value_name = "F", requires = "backgrounds")]
     pub face_free: Option<f64>,
+    /// Real faces (from photos of people among --backgrounds) per scene in the finder's batches
+    /// (default 0.25; the initializer learns from rendered faces only).
+    #[arg(long, value_name = "F", requires = "backgrounds")]
+    pub photo_faces: Option<f64>,
 }
 
 /// Runs `gpmm train-init`.
@@ -152,10 +160,25 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     if !(0.0..=1.0).contains(&opts.face_free) {
         bail!("--face-free {} is not a fraction from 0 to 1", opts.face_free);
     }
-    let backgrounds = a.backgrounds.as_deref().map(|dir| Backgrounds::load(dir, a.background_share)).transpose()?;
-    if let (Some(b), Some(dir)) = (&backgrounds, &a.backgrounds) {
-        eprintln!("backgrounds: {} photos from {}", b.len(), dir.display());
+    opts.photo_faces = a.photo_faces.unwrap_or(opts.photo_faces);
+    if !(0.0..=1.0).contains(&opts.photo_faces) {
+        bail!("--photo-faces {} is not a fraction from 0 to 1", opts.photo_faces);
     }
+    let backgrounds = if a.backgrounds.is_empty() {
+        None
+    } else {
+        let dirs: Vec<&Path> = a.backgrounds.iter().map(PathBuf::as_path).collect();
+        let b = Backgrounds::load_all(&dirs, a.background_share)?;
+        let names: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+        eprintln!(
+            "backgrounds: {} photos from {}, {} of them of people with {} known faces",
+            b.len(),
+            names.join(", "),
+            b.people_photos(),
+            b.faces()
+        );
+        Some(b)
+    };
     let from = match &a.from {
         Some(path) => Some(std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?),
         None => None,
@@ -164,7 +187,14 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         let openings: Vec<Openings> = models.iter().map(|m| Openings::of_model(m, &opts.ranges)).collect();
         let faces: Vec<FaceModel<'_>> = models.iter().zip(&openings).map(|(model, openings)| FaceModel { model, openings }).collect();
         let source = SceneSource { faces: &faces, head: head.as_ref(), ranges: &opts.ranges, backgrounds: backgrounds.as_ref() };
-        let grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
+        let mut grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
+        if let Some(faces) = gpmm_train::preview::photo_face_grid(source, opts.seed, 2, 6) {
+            // The real faces below the rendered scenes.
+            let mut both = image::RgbImage::new(grid.width(), grid.height() + faces.height());
+            image::imageops::overlay(&mut both, &grid, 0, 0);
+            image::imageops::overlay(&mut both, &faces, 0, i64::from(grid.height()));
+            grid = both;
+        }
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
             .with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());

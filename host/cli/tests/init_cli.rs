@@ -238,6 +238,40 @@ fn training_over_background_photos_records_them_and_names_a_bad_photo() {
 }
 
 #[test]
+fn photos_of_people_give_the_finder_real_faces_and_their_surroundings() {
+    let Some(f) = fixture() else { return };
+    let people = f.dir.path().join("people");
+    std::fs::create_dir_all(&people).unwrap();
+    // A textured photo with one "face" whose box and 68 points are known.
+    let img = image::RgbImage::from_fn(640, 480, |x, y| {
+        if (300..380).contains(&x) && (150..230).contains(&y) {
+            image::Rgb([210, 160, 130])
+        } else {
+            image::Rgb([((x * 3 + y) % 90) as u8 + 40, 90, ((y * 5) % 120) as u8 + 60])
+        }
+    });
+    img.save(people.join("group.jpg")).unwrap();
+    let points: Vec<[f32; 2]> = (0..68).map(|i| [300.0 + (i % 9) as f32 * 10.0, 150.0 + (i / 9) as f32 * 80.0 / 7.0]).collect();
+    let faces = serde_json::json!({"faces": [{"box": [305, 160, 375, 230], "landmarks": points}]});
+    std::fs::write(people.join("group.faces.json"), faces.to_string()).unwrap();
+    let (init, preview) = (f.dir.path().join("people.init"), f.dir.path().join("people.png"));
+    let args = ["train-init", s(&f.model), "-o", s(&init), "--quick", "--seed", "7", "--backgrounds", s(&people)];
+    ok(&gpmm(&[&args[..], &["--preview", s(&preview)]].concat()));
+    let text = String::from_utf8_lossy(&std::fs::read(&init).unwrap()).into_owned();
+    assert!(text.contains("\"people_photos\":1") && text.contains("\"photo_faces\":1"), "metadata lacks the photos of people");
+    assert!(text.contains("\"photo_face_share\":0.25"), "metadata lacks the share of real faces");
+    // The preview shows two rows of real faces below the four of rendered scenes.
+    let (w, h) = image::image_dimensions(&preview).unwrap();
+    assert_eq!((w, h), (6 * 160, 6 * 160));
+    // Without real faces in the batches the networks differ.
+    let other = f.dir.path().join("people-none.init");
+    ok(&gpmm(&["train-init", s(&f.model), "-o", s(&other), "--quick", "--seed", "7", "--backgrounds", s(&people), "--photo-faces", "0"]));
+    assert_ne!(std::fs::read(&init).unwrap(), std::fs::read(&other).unwrap(), "the real faces changed nothing");
+    let err = fails(&gpmm(&[&args[..], &["--photo-faces", "2"]].concat()));
+    assert!(err.contains("--photo-faces 2"), "{err}");
+}
+
+#[test]
 fn corrupted_or_missing_init_files_are_refused_by_name() {
     let Some(f) = fixture() else { return };
     let image = f.synth.join("0000_yaw00.png");

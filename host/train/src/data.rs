@@ -1,7 +1,7 @@
 //! Training samples: a rendered scene cut into the finder's letterboxed frame and the
 //! initializer's crop exactly as the core cuts them at run time, with their targets.
 
-use crate::scene::{face_free_frame, render_scene, Scene, SceneSource};
+use crate::scene::{face_free_frame, photo_face_frame, render_scene, Scene, SceneSource};
 use gpmm_core::net::face::{landmark_box, mirror_outputs};
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::render::Renderer;
@@ -56,14 +56,7 @@ pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rn
     let mut frame = vec![0i8; geo.frame_side * geo.frame_side * 3];
     sample_rgb(scene.frame.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
     let (cx, cy, size) = landmark_box(&scene.landmarks);
-    let (u, v) = window.from_source(cx, cy);
-    let cell_px = geo.frame_side as f32 / geo.grid as f32;
-    let (gx, gy) = ((u / cell_px).floor(), (v / cell_px).floor());
-    if !(gx >= 0.0 && gy >= 0.0 && gx < geo.grid as f32 && gy < geo.grid as f32 && size > 2.0) {
-        return None;
-    }
-    let place = [u / cell_px - gx, v / cell_px - gy, (size / window.step / geo.frame_side as f32).ln()];
-    let cell = gy as usize * geo.grid + gx as usize;
+    let (cell, place) = finder_target(window, [cx, cy, size], geo)?;
     // The crop the initializer sees at run time comes from an imperfect box: jitter it (standard
     // deviations: the centre by 0.06 face sizes, the size by 0.08 in log).
     let n = Normal::new(0.0f32, 1.0).ok()?;
@@ -81,6 +74,39 @@ pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rn
     target.extend(scene.angles);
     target.extend(scene.light.iter().take(geo.light));
     (target.len() == geo.initializer_outputs()).then_some(Sample { frame, cell, place, crop, target })
+}
+
+/// The finder's target for a face whose landmarks' box is `square` (centre x, y and side in
+/// source pixels) in a frame letterboxed through `window`: its grid cell and the centre within
+/// it and ln(size / frame side). `None` when the centre falls outside the grid.
+fn finder_target(window: Window, [cx, cy, size]: [f32; 3], geo: &Geometry) -> Option<(usize, [f32; 3])> {
+    let (u, v) = window.from_source(cx, cy);
+    let cell_px = geo.frame_side as f32 / geo.grid as f32;
+    let (gx, gy) = ((u / cell_px).floor(), (v / cell_px).floor());
+    if !(gx >= 0.0 && gy >= 0.0 && gx < geo.grid as f32 && gy < geo.grid as f32 && size > 2.0) {
+        return None;
+    }
+    let place = [u / cell_px - gx, v / cell_px - gy, (size / window.step / geo.frame_side as f32).ln()];
+    Some((gy as usize * geo.grid + gx as usize, place))
+}
+
+/// Real faces `start..start + count` of the stream `seed` for the finder alone
+/// ([`crate::scene::photo_face_frame`]): samples with the frame and the finder's target, and no
+/// crop or initializer target (a photo's pose and light are not known). Empty without photos of
+/// people.
+pub fn photo_face_samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, count: u64) -> Vec<Sample> {
+    (start..start + count)
+        .into_par_iter()
+        .filter_map(|i| {
+            let (img, square) = photo_face_frame(source, seed, i)?;
+            let (w, h) = (img.width() as usize, img.height() as usize);
+            let window = Window::letterbox(w, h, geo.frame_side);
+            let mut frame = vec![0i8; geo.frame_side * geo.frame_side * 3];
+            sample_rgb(img.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
+            let (cell, place) = finder_target(window, square, geo)?;
+            Some(Sample { frame, cell, place, crop: Vec::new(), target: Vec::new() })
+        })
+        .collect()
 }
 
 /// Samples `start..start + count` of the stream drawn with `seed` (rendered in parallel; the
@@ -150,6 +176,44 @@ mod tests {
             crop: (0..n).map(|i| (i % 251) as i8).collect(),
             target: (0..geo.initializer_outputs()).map(|i| (i as f32 * 0.37).sin()).collect(),
         }
+    }
+
+    #[test]
+    fn a_real_face_sample_targets_the_face_for_the_finder_alone() {
+        use crate::scene::backgrounds::Backgrounds;
+        use crate::scene::SceneRanges;
+        use gpmm_host::detect::photos::ReferenceFace;
+        use image::{Rgb, RgbImage};
+        // A blue photo with a red square face whose 68 points span the square.
+        let img = RgbImage::from_fn(900, 700, |x, y| {
+            if (400..480).contains(&x) && (300..380).contains(&y) {
+                Rgb([230, 30, 30])
+            } else {
+                Rgb([30, 30, 230])
+            }
+        });
+        let points = (0..68).map(|i| [400.0 + (i % 9) as f32 * 10.0, 300.0 + (i / 9) as f32 * 80.0 / 7.0]).collect();
+        let face = ReferenceFace { bbox: [405.0, 310.0, 475.0, 380.0], landmarks: Some(points) };
+        let b = Backgrounds::from_labelled(vec![(img, vec![face])], 0.5);
+        let ranges = SceneRanges::default();
+        let source = SceneSource { faces: &[], head: None, ranges: &ranges, backgrounds: Some(&b) };
+        let geo = crate::train::geometry(68);
+        let got = photo_face_samples(source, &geo, 4, 0, 40);
+        assert!(got.len() >= 30, "{} of 40", got.len());
+        let cell_px = geo.frame_side as f32 / geo.grid as f32;
+        for s in &got {
+            assert!(s.crop.is_empty() && s.target.is_empty(), "no initializer half");
+            let (gx, gy) = ((s.cell % geo.grid) as f32, (s.cell / geo.grid) as f32);
+            let (u, v) = (((gx + s.place[0]) * cell_px) as usize, ((gy + s.place[1]) * cell_px) as usize);
+            let px = &s.frame[(v * geo.frame_side + u) * 3..(v * geo.frame_side + u) * 3 + 3];
+            assert!(px[0] as i32 > px[2] as i32 + 60, "the target's centre is on the red face: {px:?}");
+            let size = s.place[2].exp() * geo.frame_side as f32;
+            assert!(size > 5.0 && size < 0.9 * geo.frame_side as f32, "face side {size} px of the frame");
+        }
+        // Without photos of people there are none.
+        let plain = Backgrounds::from_photos(vec![RgbImage::new(300, 300)], 0.5);
+        let source = SceneSource { faces: &[], head: None, ranges: &ranges, backgrounds: Some(&plain) };
+        assert!(photo_face_samples(source, &geo, 4, 0, 10).is_empty());
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! A picture grid of training scenes with their landmarks: what the networks learn from.
 
-use crate::scene::{render_scene, SceneSource};
+use crate::scene::{photo_face_frame, render_scene, SceneSource};
 use gpmm_host::render::Renderer;
 use image::{imageops, Rgb, RgbImage};
 
@@ -13,16 +13,46 @@ pub fn scene_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32) -> R
         let Some(scene) = render_scene(source, seed, u64::from(i), &mut renderer) else { continue };
         let mut frame = scene.frame.clone();
         for p in &scene.landmarks {
-            let (x, y) = (p[0].floor() as i64, p[1].floor() as i64);
-            if x >= 0 && y >= 0 && (x as u32) < frame.width() && (y as u32) < frame.height() {
-                frame.put_pixel(x as u32, y as u32, Rgb([0, 255, 0]));
-            }
+            put(&mut frame, p[0], p[1], Rgb([0, 255, 0]));
         }
-        let s = CELL as f32 / frame.width().max(frame.height()) as f32;
-        let (w, h) = (((frame.width() as f32 * s) as u32).max(1), ((frame.height() as f32 * s) as u32).max(1));
-        let small = imageops::resize(&frame, w, h, imageops::FilterType::Triangle);
-        let (cx, cy) = ((i % cols) * CELL + (CELL - w) / 2, (i / cols) * CELL + (CELL - h) / 2);
-        imageops::overlay(&mut grid, &small, i64::from(cx), i64::from(cy));
+        place(&mut grid, &frame, i % cols, i / cols, CELL);
     }
     grid
+}
+
+/// `rows × cols` real faces of the stream `seed` as the finder sees them (photos of people among
+/// the backgrounds), each with its target box in blue; `None` without photos of people.
+pub fn photo_face_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32) -> Option<RgbImage> {
+    const CELL: u32 = 160;
+    source.backgrounds.filter(|b| b.faces() > 0)?;
+    let mut grid = RgbImage::from_pixel(cols * CELL, rows * CELL, Rgb([24, 24, 24]));
+    for i in 0..rows * cols {
+        let Some((mut frame, [cx, cy, size])) = photo_face_frame(source, seed, u64::from(i)) else { continue };
+        let half = size * 0.5;
+        for k in 0..=(2.0 * size) as u32 {
+            let t = -half + k as f32 * 0.5;
+            for (x, y) in [(cx + t, cy - half), (cx + t, cy + half), (cx - half, cy + t), (cx + half, cy + t)] {
+                put(&mut frame, x, y, Rgb([40, 120, 255]));
+            }
+        }
+        place(&mut grid, &frame, i % cols, i / cols, CELL);
+    }
+    Some(grid)
+}
+
+/// Colours pixel (x, y) of `frame` if it lies inside.
+fn put(frame: &mut RgbImage, x: f32, y: f32, c: Rgb<u8>) {
+    let (x, y) = (x.floor() as i64, y.floor() as i64);
+    if x >= 0 && y >= 0 && (x as u32) < frame.width() && (y as u32) < frame.height() {
+        frame.put_pixel(x as u32, y as u32, c);
+    }
+}
+
+/// Draws `frame` letterboxed into cell (`col`, `row`) of `grid`.
+fn place(grid: &mut RgbImage, frame: &RgbImage, col: u32, row: u32, cell: u32) {
+    let s = cell as f32 / frame.width().max(frame.height()) as f32;
+    let (w, h) = (((frame.width() as f32 * s) as u32).max(1), ((frame.height() as f32 * s) as u32).max(1));
+    let small = imageops::resize(frame, w, h, imageops::FilterType::Triangle);
+    let (cx, cy) = (col * cell + (cell - w) / 2, row * cell + (cell - h) / 2);
+    imageops::overlay(grid, &small, i64::from(cx), i64::from(cy));
 }

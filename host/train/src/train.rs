@@ -3,7 +3,7 @@
 //! The scenes' faces come from one model or a mixture of models; the networks start from random
 //! weights or, fine-tuning, from an init file's ([`crate::start`]).
 
-use crate::data::{face_free_frames, samples, Geometry, Sample};
+use crate::data::{face_free_frames, photo_face_samples, samples, Geometry, Sample};
 use crate::encode::{init_file_bytes, EncodeError};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
 use crate::scene::backgrounds::Backgrounds;
@@ -45,6 +45,9 @@ pub struct TrainOptions {
     /// With background photos: face-free frames cut from them per scene, shown to the finder
     /// with every cell "no face" (the hardest of [`MINED_FROM`] candidates each chunk).
     pub face_free: f64,
+    /// With photos of people among the background photos: real faces per scene in the finder's
+    /// batches ([`crate::data::photo_face_samples`]; the initializer sees only rendered faces).
+    pub photo_faces: f64,
 }
 
 /// Face-free frames are the hardest one of this many candidates: those the finder, as trained so
@@ -80,6 +83,7 @@ impl TrainOptions {
             validation: 300,
             ranges: SceneRanges::default(),
             face_free: 0.125,
+            photo_faces: 0.25,
         }
     }
 
@@ -104,6 +108,7 @@ impl TrainOptions {
             validation: 12,
             ranges: SceneRanges::default(),
             face_free: 0.125,
+            photo_faces: 0.25,
         }
     }
 
@@ -477,6 +482,14 @@ pub fn train_on(
         let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
         let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
         let per_batch = if face_free.is_empty() { 0 } else { (opts.batch as f64 * opts.face_free).ceil() as usize };
+        let real = match backgrounds.filter(|b| b.faces() > 0) {
+            Some(_) => {
+                let n = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
+                photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n)
+            }
+            None => Vec::new(),
+        };
+        let real_per_batch = if real.is_empty() { 0 } else { (opts.batch as f64 * opts.photo_faces).ceil() as usize };
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
         for pass in 0..opts.passes.max(opts.init_passes) {
@@ -490,7 +503,12 @@ pub fn train_on(
                         .filter_map(|k| face_free.get((step * per_batch + k) % face_free.len().max(1)))
                         .map(Vec::as_slice)
                         .collect();
-                    let lf = finder_loss(&finder, &batch, &free, &geo, &device).map_err(TrainError::Tensor)?;
+                    let seen: Vec<&Sample> = batch
+                        .iter()
+                        .copied()
+                        .chain((0..real_per_batch).filter_map(|k| real.get((step * real_per_batch + k) % real.len().max(1))))
+                        .collect();
+                    let lf = finder_loss(&finder, &seen, &free, &geo, &device).map_err(TrainError::Tensor)?;
                     opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
                     f = lf.to_scalar::<f32>().map_err(TrainError::Tensor)?;
                     net_done[0] += 1;
@@ -564,6 +582,9 @@ pub fn train_on(
         "background_photos": backgrounds.map_or(0, Backgrounds::len),
         "background_share": backgrounds.map_or(0.0, |b| b.share),
         "face_free_frames": if backgrounds.is_some() { opts.face_free } else { 0.0 },
+        "people_photos": backgrounds.map_or(0, Backgrounds::people_photos),
+        "photo_faces": backgrounds.map_or(0, Backgrounds::faces),
+        "photo_face_share": if backgrounds.is_some_and(|b| b.faces() > 0) { opts.photo_faces } else { 0.0 },
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     });
     // A single model trained from random weights records what it always recorded.
