@@ -117,6 +117,9 @@ impl DevTrack {
         }
         if c.best {
             self.best = Some((next.to_path_buf(), Some(c.learned.clone())));
+        } else if Path::new(&c.best_model) == previous {
+            // The predecessor, measured again from new points, took the lead.
+            self.best = Some((previous.to_path_buf(), Some(c.previous.clone())));
         }
         self.last = Some(c.learned.clone());
     }
@@ -142,6 +145,9 @@ impl DevTrack {
             }
             _ => (previous.to_path_buf(), before.clone()),
         };
+        // Measured again from new points, the predecessor may now lead the old best.
+        let (best_path, best_figure) =
+            if before.median_mm < best_figure.median_mm { (previous.to_path_buf(), before.clone()) } else { (best_path, best_figure) };
         let learned = measure(next)?;
         let better = learned.median_mm < before.median_mm;
         let best = learned.median_mm < best_figure.median_mm;
@@ -292,5 +298,32 @@ mod tests {
             again.reuse(c, Path::new(p), Path::new(n));
         }
         assert_eq!(again.best(), Some(Path::new("m3")));
+    }
+
+    #[test]
+    fn measured_from_new_points_the_predecessor_can_become_the_best() {
+        // With the first points the start leads; with the second, m1 reads better than the start,
+        // and m2, worse than m1, must not be called the best.
+        let second = std::cell::Cell::new(false);
+        let measure = |p: &Path| -> Result<DevFigure, ()> {
+            let table =
+                if second.get() { [("start", 1.50), ("m1", 1.44), ("m2", 1.47)] } else { [("start", 1.45), ("m1", 1.46), ("m2", 9.0)] };
+            Ok(fig(p, table.iter().find(|(n, _)| Path::new(n) == p).map_or(f64::NAN, |m| m.1)))
+        };
+        let set = Path::new("dev");
+        let mut t = DevTrack::default();
+        let c1 = t.compare(set, Path::new("start"), Path::new("m1"), &measure).unwrap();
+        assert!(!c1.better && !c1.best && c1.best_model == "start");
+        t.forget();
+        second.set(true);
+        let c2 = t.compare(set, Path::new("m1"), Path::new("m2"), &measure).unwrap();
+        assert!(!c2.better && !c2.best, "{c2:?}");
+        assert_eq!((c2.best_model.as_str(), c2.best_median_mm), ("m1", 1.44));
+        assert_eq!(t.best(), Some(Path::new("m1")));
+        // Read back from disk, the run ends with the same best.
+        let mut again = DevTrack::default();
+        again.reuse(&c1, Path::new("start"), Path::new("m1"));
+        again.reuse(&c2, Path::new("m1"), Path::new("m2"));
+        assert_eq!(again.best(), Some(Path::new("m1")));
     }
 }
