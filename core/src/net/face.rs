@@ -251,7 +251,7 @@ fn look<const A: usize>(
 }
 
 /// Runs the finder on `window` of the frame into `out`; its cells.
-fn run_finder<'o, const A: usize>(
+pub(crate) fn run_finder<'o, const A: usize>(
     init: &InitFile<'_>,
     (rgb, w, h): (&[u8], usize, usize),
     window: Window,

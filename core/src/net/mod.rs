@@ -16,6 +16,7 @@
 pub mod crop;
 pub mod face;
 pub mod resample;
+pub mod scan;
 
 use crate::format::bytes::Reader;
 use crate::format::FormatError;

@@ -38,13 +38,18 @@ pub struct DetectArgs {
     /// Smallest finder score (0..1) counted as a face.
     #[arg(long, default_value_t = DEFAULT_MIN_SCORE)]
     pub min_score: f32,
+    /// Smallest face (px) looked for: beside the finder's view of the whole image, windows half
+    /// its shorter side wide, a quarter, … are scanned while a face this small still fills too
+    /// little of the last one (small images: none). `inf`: the whole image only, as a board does.
+    #[arg(long, value_name = "PX", default_value_t = gpmm_host::detect::DEFAULT_SMALLEST_FACE)]
+    pub smallest_face: f32,
 }
 
 /// Runs `gpmm detect`.
 pub fn detect(a: DetectArgs) -> Result<()> {
     let mut detector = Detector::load(&a.init)?;
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
-    let faces = detector.detect_all(&image, a.min_score, Reading { refine: a.refine, mirror: !a.single_read })?;
+    let faces = detector.scan_all(&image, a.min_score, a.smallest_face, Reading { refine: a.refine, mirror: !a.single_read })?;
     if faces.is_empty() {
         bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
     }
@@ -90,7 +95,7 @@ fn pick(image: &Path, faces: &[Detection], index: Option<usize>) -> Result<usize
 pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: Option<usize>) -> Result<PathBuf> {
     let mut detector = Detector::load(init_path)?;
     let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
-    let faces = detector.detect_all(&image, DEFAULT_MIN_SCORE, Reading::DEFAULT)?;
+    let faces = detector.scan_all(&image, DEFAULT_MIN_SCORE, gpmm_host::detect::DEFAULT_SMALLEST_FACE, Reading::DEFAULT)?;
     if faces.is_empty() {
         bail!("{}: no face found by {}", image_path.display(), init_path.display());
     }
@@ -184,6 +189,8 @@ pub struct PhotoSetRun<'a> {
     pub init: &'a Path,
     /// Smallest finder score counted as a face.
     pub min_score: f32,
+    /// Smallest face (px) the scan looks for.
+    pub smallest_face: f32,
     /// How the initializer reads each face.
     pub reading: Reading,
     /// Where to draw each photo's boxes, if anywhere.
@@ -195,7 +202,7 @@ pub struct PhotoSetRun<'a> {
 /// `gpmm eval detect` on a real-photo set: prints the summary, writes DIR/detect.json (unless
 /// --no-write) and the pictures (--draw-dir).
 pub fn eval_photo_set(detector: &mut Detector, a: &PhotoSetRun<'_>) -> Result<()> {
-    let (summary, results) = gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.reading)?;
+    let (summary, results) = gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.smallest_face, a.reading)?;
     if let Some(dir) = a.draw_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in &results {

@@ -107,6 +107,11 @@ pub struct DetectEvalArgs {
     /// Real-photo sets: the smallest finder score counted as a face.
     #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE)]
     pub min_score: f32,
+    /// Real-photo sets: the smallest face (px) looked for. Beside the finder's view of the whole
+    /// photo, windows half its shorter side wide, a quarter, … are scanned until a face this small
+    /// fills enough of one; `inf`: no scan.
+    #[arg(long, value_name = "PX", default_value_t = gpmm_host::detect::DEFAULT_SMALLEST_FACE)]
+    pub smallest_face: f32,
     /// Real-photo sets: write each photo with its boxes drawn to DRAW_DIR/STEM.png.
     #[arg(long, value_name = "DRAW_DIR")]
     pub draw_dir: Option<PathBuf>,
@@ -383,6 +388,7 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
             dir: &a.dir,
             init: &a.init,
             min_score: a.min_score,
+            smallest_face: a.smallest_face,
             reading: gpmm_core::net::face::Reading { refine: a.refine, mirror: !a.single_read },
             draw_dir: a.draw_dir.as_deref(),
             write: !a.no_write,

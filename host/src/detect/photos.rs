@@ -255,19 +255,20 @@ pub struct PhotoResult {
     pub scored: PhotoImage,
 }
 
-/// Detects every face of every image of the set in `dir` ([`list_photo_set`]) at `min_score` and
-/// scores them.
+/// Detects every face of every image of the set in `dir` ([`list_photo_set`]) at `min_score`,
+/// scanning for faces down to `smallest_face` px ([`Detector::scan_all`]), and scores them.
 pub fn evaluate_photos(
     detector: &mut Detector,
     dir: &Path,
     min_score: f32,
+    smallest_face: f32,
     reading: Reading,
 ) -> Result<(PhotoSummary, Vec<PhotoResult>), DetectError> {
     let mut results = Vec::new();
     for (path, json) in list_photo_set(dir)? {
         let faces = read_faces_file(&json)?.faces;
         let image = image::open(&path).map_err(|e| DetectError::Io { path: path.clone(), error: std::io::Error::other(e) })?.to_rgb8();
-        let dets = detector.detect_all(&image, min_score, reading)?;
+        let dets = detector.scan_all(&image, min_score, smallest_face, reading)?;
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let scored = score_image(name, &faces, &dets);
         results.push(PhotoResult { path, faces, scored });
