@@ -15,8 +15,15 @@ use rand::{Rng, RngExt};
 use std::path::{Path, PathBuf};
 
 /// Face-free photos are kept at most this many pixels on their shorter side (scene frames are
-/// 128-256 px).
-const SHORTER_SIDE: u32 = 512;
+/// 128-256 px; a view can be a tenth of a photo, as a scan's smallest windows are).
+const SHORTER_SIDE: u32 = 1024;
+
+/// The smallest part of a photo a background view shows, as a share of the largest window of the
+/// view's aspect: a photo scanned for small faces shows the finder windows down to a tenth of its
+/// side, whose textures, blown up, it must learn as "no face" too (false positives per face-free
+/// development photo of a scan down to 32 px: 1.27 with parts of half a photo or more, 0.64 with
+/// this).
+const SMALLEST_PART: f32 = 0.1;
 
 /// Photos of people are kept at most this many pixels on their longer side: their faces are
 /// often small, and a face view needs the face at 15-80 % of a frame.
@@ -175,10 +182,10 @@ impl Backgrounds {
         self.targets.len()
     }
 
-    /// A `w × h` view of a random photo: a random part (a quarter to all of the largest window of
-    /// that aspect a face-free photo holds; down to a fortieth of a photo of people, where the
-    /// part touches none of its faces), sometimes mirrored, scaled to the frame. `None` when no
-    /// part without a face was found.
+    /// A `w × h` view of a random photo: a random part ([`SMALLEST_PART`] to all of the side of
+    /// the largest window of that aspect the photo holds; on a photo of people a part that
+    /// touches none of its faces), sometimes mirrored, scaled to the frame. `None` when no part
+    /// without a face was found.
     pub fn view(&self, w: u32, h: u32, rng: &mut impl Rng) -> Option<RgbImage> {
         let aspect = w as f32 / h.max(1) as f32;
         for _ in 0..ATTEMPTS {
@@ -186,7 +193,7 @@ impl Backgrounds {
             let (pw, ph) = photo.image.dimensions();
             let (fw, fh) =
                 if pw as f32 / ph.max(1) as f32 > aspect { (ph as f32 * aspect, ph as f32) } else { (pw as f32, pw as f32 / aspect) };
-            let s = if photo.faces.is_empty() { rng.random_range(0.5f32..=1.0) } else { rng.random_range(0.15f32..=1.0) };
+            let s = rng.random_range(SMALLEST_PART..=1.0);
             let (cw, ch) = (((fw * s) as u32).clamp(1, pw), ((fh * s) as u32).clamp(1, ph));
             let (x, y) = (rng.random_range(0..=pw - cw), rng.random_range(0..=ph - ch));
             let window = [x as f32, y as f32, (x + cw) as f32, (y + ch) as f32];
