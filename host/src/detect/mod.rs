@@ -5,7 +5,7 @@
 pub mod eval;
 pub mod photos;
 
-use gpmm_core::net::face::{detect, detect_faces, read_landmarks, Detection, FaceBox, InitFile, Reading};
+use gpmm_core::net::face::{detect, read_landmarks, Detection, FaceBox, InitFile, Reading};
 use gpmm_core::net::scan::scan_faces;
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
@@ -88,15 +88,6 @@ impl Detector {
         detect(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(DetectError::Run)
     }
 
-    /// Finds every face in `image` whose finder score reaches `min_score` and reads each as
-    /// `reading` says; best first (the first is [`Self::detect`]'s face).
-    pub fn detect_all(&mut self, image: &RgbImage, min_score: f32, reading: Reading) -> Result<Vec<Detection>, DetectError> {
-        let (file, scratch) = self.parts()?;
-        let (w, h) = image.dimensions();
-        let faces = detect_faces(&file, image.as_raw(), w as usize, h as usize, min_score, reading, scratch).map_err(DetectError::Run)?;
-        Ok(faces.into_iter().collect())
-    }
-
     /// Finds every face in a photo whose finder score reaches `min_score`, scanning windows at
     /// several scales for faces down to `smallest_face` pixels ([`gpmm_core::net::scan`]), and
     /// reads each as `reading` says; best first.
@@ -146,7 +137,7 @@ pub const DEFAULT_SMALLEST_FACE: f32 = 96.0;
 pub const LARGEST_AMONG_SCORE_SHARE: f32 = 0.95;
 
 /// Which face of several a command takes: `index` if it names one (the order
-/// [`Detector::detect_all`] gives, from 0), else the largest of the faces scoring at least
+/// [`Detector::scan_all`] gives, from 0), else the largest of the faces scoring at least
 /// [`LARGEST_AMONG_SCORE_SHARE`] of the best one (the finder's near-ties; the earliest on equal
 /// sizes); `None` if there is no such face.
 pub fn choose_face(faces: &[Detection], index: Option<usize>) -> Option<usize> {

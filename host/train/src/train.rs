@@ -482,13 +482,9 @@ pub fn train_on(
         let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
         let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
         let per_batch = if face_free.is_empty() { 0 } else { (opts.batch as f64 * opts.face_free).ceil() as usize };
-        let real = match backgrounds.filter(|b| b.faces() > 0) {
-            Some(_) => {
-                let n = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
-                photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n)
-            }
-            None => Vec::new(),
-        };
+        // Empty without photos of people.
+        let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
+        let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
         let real_per_batch = if real.is_empty() { 0 } else { (opts.batch as f64 * opts.photo_faces).ceil() as usize };
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);

@@ -65,7 +65,7 @@ impl Default for SceneRanges {
             // development faces on frames twice as tall as wide, with them 75 and 88 % on two
             // seeds.
             aspects: vec![1.0, 4.0 / 3.0, 3.0 / 4.0, 16.0 / 9.0, 9.0 / 16.0, 0.5],
-            face_fraction: (0.15, 0.8),
+            face_fraction: gpmm_core::net::scan::TRAINED_FACE_FRACTION,
             components: 60,
             open_eyes: true,
             dressed: true,
