@@ -98,8 +98,9 @@ pub struct TrainInitArgs {
     /// Face-free frames per scene with --backgrounds.
     #[arg(long, value_name = "F", requires = "backgrounds")]
     pub face_free: Option<f64>,
-    /// Real faces (from photos of people among --backgrounds) per scene in the finder's batches
-    /// (default 0.25; the initializer learns from rendered faces only).
+    /// Real faces (from photos of people among --backgrounds) per scene in both networks'
+    /// batches (default 0.25): the finder learns them as faces, the initializer their reference
+    /// points (their pose and light are unknown, so those it learns from renders only).
     #[arg(long, value_name = "F", requires = "backgrounds")]
     pub photo_faces: Option<f64>,
 }

@@ -57,23 +57,41 @@ pub fn sample_of_scene(scene: &Scene, geo: &Geometry, jitter: &mut impl rand::Rn
     sample_rgb(scene.frame.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
     let (cx, cy, size) = landmark_box(&scene.landmarks);
     let (cell, place) = finder_target(window, [cx, cy, size], geo)?;
-    // The crop the initializer sees at run time comes from an imperfect box: jitter it (standard
-    // deviations: the centre by 0.06 face sizes, the size by 0.08 in log).
+    let (crop, mut target) = initializer_crop(scene.frame.as_raw(), w, h, &scene.landmarks, geo, jitter)?;
+    target.extend(scene.angles);
+    target.extend(scene.light.iter().take(geo.light));
+    (target.len() == geo.initializer_outputs()).then_some(Sample { frame, cell, place, crop, target })
+}
+
+/// The initializer's crop of a `w × h` RGB frame about the box of the face's `points` and the
+/// points in it (−1..1 across the crop), as the core cuts it at run time from an imperfect box:
+/// `jitter` moves the centre (standard deviation 0.06 face sizes) and scales the size (0.08 in
+/// log). `None` without `geo.landmarks` points.
+fn initializer_crop(
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    points: &[[f32; 2]],
+    geo: &Geometry,
+    jitter: &mut impl rand::Rng,
+) -> Option<(Vec<i8>, Vec<f32>)> {
+    if points.len() < geo.landmarks {
+        return None;
+    }
+    let (cx, cy, size) = landmark_box(points);
     let n = Normal::new(0.0f32, 1.0).ok()?;
     let (shift, spread) = (0.06, 0.08);
     let (jx, jy, js) = (n.sample(jitter) * shift * size, n.sample(jitter) * shift * size, (n.sample(jitter) * spread).exp());
     let crop_window = Window::square(cx + jx, cy + jy, size * js * geo.crop_margin, geo.crop_side);
     let mut crop = vec![0i8; geo.crop_side * geo.crop_side * 3];
-    sample_rgb(scene.frame.as_raw(), w, h, crop_window, geo.crop_side, &mut crop).ok()?;
+    sample_rgb(rgb, w, h, crop_window, geo.crop_side, &mut crop).ok()?;
     let half = geo.crop_side as f32 * 0.5;
     let mut target = Vec::with_capacity(geo.initializer_outputs());
-    for p in scene.landmarks.iter().take(geo.landmarks) {
+    for p in points.iter().take(geo.landmarks) {
         let (a, b) = crop_window.from_source(p[0], p[1]);
         target.extend([a / half - 1.0, b / half - 1.0]);
     }
-    target.extend(scene.angles);
-    target.extend(scene.light.iter().take(geo.light));
-    (target.len() == geo.initializer_outputs()).then_some(Sample { frame, cell, place, crop, target })
+    Some((crop, target))
 }
 
 /// The finder's target for a face whose landmarks' box is `square` (centre x, y and side in
@@ -90,21 +108,30 @@ fn finder_target(window: Window, [cx, cy, size]: [f32; 3], geo: &Geometry) -> Op
     Some((gy as usize * geo.grid + gx as usize, place))
 }
 
-/// Real faces `start..start + count` of the stream `seed` for the finder alone
-/// ([`crate::scene::photo_face_frame`]): samples with the frame and the finder's target, and no
-/// crop or initializer target (a photo's pose and light are not known). Empty without photos of
-/// people.
+/// Real faces `start..start + count` of the stream `seed` ([`crate::scene::photo_face_frame`]):
+/// the frame and the finder's target, and, where the reference read the face's points, the
+/// initializer's crop with those points as its target; a photo's pose and light are not known,
+/// so their targets are NaN, which [`crate::train::output_loss`] leaves out. Empty without photos
+/// of people.
 pub fn photo_face_samples(source: SceneSource<'_>, geo: &Geometry, seed: u64, start: u64, count: u64) -> Vec<Sample> {
     (start..start + count)
         .into_par_iter()
         .filter_map(|i| {
-            let (img, square) = photo_face_frame(source, seed, i)?;
-            let (w, h) = (img.width() as usize, img.height() as usize);
+            let view = photo_face_frame(source, seed, i)?;
+            let (w, h) = (view.image.width() as usize, view.image.height() as usize);
             let window = Window::letterbox(w, h, geo.frame_side);
             let mut frame = vec![0i8; geo.frame_side * geo.frame_side * 3];
-            sample_rgb(img.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
-            let (cell, place) = finder_target(window, square, geo)?;
-            Some(Sample { frame, cell, place, crop: Vec::new(), target: Vec::new() })
+            sample_rgb(view.image.as_raw(), w, h, window, geo.frame_side, &mut frame).ok()?;
+            let (cell, place) = finder_target(window, view.square, geo)?;
+            let mut jitter = Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(0x9E0) ^ i.wrapping_mul(0xA24B_AED4_963E_E407));
+            let (crop, target) = match initializer_crop(view.image.as_raw(), w, h, &view.points, geo, &mut jitter) {
+                Some((crop, mut target)) => {
+                    target.resize(geo.initializer_outputs(), f32::NAN);
+                    (crop, target)
+                }
+                None => (Vec::new(), Vec::new()),
+            };
+            Some(Sample { frame, cell, place, crop, target })
         })
         .collect()
 }
@@ -179,7 +206,7 @@ mod tests {
     }
 
     #[test]
-    fn a_real_face_sample_targets_the_face_for_the_finder_alone() {
+    fn a_real_face_sample_targets_the_face_and_its_points() {
         use crate::scene::backgrounds::Backgrounds;
         use crate::scene::SceneRanges;
         use gpmm_host::detect::photos::ReferenceFace;
@@ -192,7 +219,9 @@ mod tests {
                 Rgb([30, 30, 230])
             }
         });
-        let points = (0..68).map(|i| [400.0 + (i % 9) as f32 * 10.0, 300.0 + (i / 9) as f32 * 80.0 / 7.0]).collect();
+        let mut points: Vec<[f32; 2]> = (0..68).map(|i| [400.0 + (i % 9) as f32 * 10.0, 300.0 + (i / 9) as f32 * 80.0 / 7.0]).collect();
+        // The outer eye corners: 36 on the photo's left, 45 on its right.
+        (points[36], points[45]) = ([410.0, 320.0], [470.0, 320.0]);
         let face = ReferenceFace { bbox: [405.0, 310.0, 475.0, 380.0], landmarks: Some(points) };
         let b = Backgrounds::from_labelled(vec![(img, vec![face])], 0.5);
         let ranges = SceneRanges::default();
@@ -202,7 +231,16 @@ mod tests {
         assert!(got.len() >= 30, "{} of 40", got.len());
         let cell_px = geo.frame_side as f32 / geo.grid as f32;
         for s in &got {
-            assert!(s.crop.is_empty() && s.target.is_empty(), "no initializer half");
+            assert_eq!(s.crop.len(), geo.crop_side * geo.crop_side * 3);
+            assert_eq!(s.target.len(), geo.initializer_outputs());
+            let (points, rest) = s.target.split_at(2 * geo.landmarks);
+            assert!(points.iter().all(|v| v.abs() < 1.3), "every point in or near the crop (jittered): {points:?}");
+            assert!(rest.iter().all(|v| v.is_nan()), "pose and light unknown");
+            // Mirrored views swap the partners: 36 stays left of 45.
+            assert!(points[72] < points[90] - 0.3, "36 at x {} left of 45 at {}", points[72], points[90]);
+            // The crop's centre is on the red face.
+            let c = (geo.crop_side / 2 * geo.crop_side + geo.crop_side / 2) * 3;
+            assert!(s.crop[c] as i32 > s.crop[c + 2] as i32 + 60, "crop centre red: {:?}", &s.crop[c..c + 3]);
             let (gx, gy) = ((s.cell % geo.grid) as f32, (s.cell / geo.grid) as f32);
             let (u, v) = (((gx + s.place[0]) * cell_px) as usize, ((gy + s.place[1]) * cell_px) as usize);
             let px = &s.frame[(v * geo.frame_side + u) * 3..(v * geo.frame_side + u) * 3 + 3];

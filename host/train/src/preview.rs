@@ -21,13 +21,18 @@ pub fn scene_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32) -> R
 }
 
 /// `rows × cols` real faces of the stream `seed` as the finder sees them (photos of people among
-/// the backgrounds), each with its target box in blue; `None` without photos of people.
+/// the backgrounds), each with its target box in blue and the initializer's points in green;
+/// `None` without photos of people.
 pub fn photo_face_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32) -> Option<RgbImage> {
     const CELL: u32 = 160;
     source.backgrounds.filter(|b| b.faces() > 0)?;
     let mut grid = RgbImage::from_pixel(cols * CELL, rows * CELL, Rgb([24, 24, 24]));
     for i in 0..rows * cols {
-        let Some((mut frame, [cx, cy, size])) = photo_face_frame(source, seed, u64::from(i)) else { continue };
+        let Some(view) = photo_face_frame(source, seed, u64::from(i)) else { continue };
+        let (mut frame, [cx, cy, size]) = (view.image, view.square);
+        for p in &view.points {
+            put(&mut frame, p[0], p[1], Rgb([0, 255, 0]));
+        }
         let half = size * 0.5;
         for k in 0..=(2.0 * size) as u32 {
             let t = -half + k as f32 * 0.5;

@@ -45,8 +45,9 @@ pub struct TrainOptions {
     /// With background photos: face-free frames cut from them per scene, shown to the finder
     /// with every cell "no face" (the hardest of [`MINED_FROM`] candidates each chunk).
     pub face_free: f64,
-    /// With photos of people among the background photos: real faces per scene in the finder's
-    /// batches ([`crate::data::photo_face_samples`]; the initializer sees only rendered faces).
+    /// With photos of people among the background photos: real faces per scene in both networks'
+    /// batches ([`crate::data::photo_face_samples`]; the initializer learns their points, not
+    /// their unknown pose and light).
     pub photo_faces: f64,
 }
 
@@ -359,23 +360,30 @@ pub fn initializer_loss(net: &Net, batch: &[&Sample], geo: &Geometry, device: &D
     output_loss(out, batch, geo, device)
 }
 
-/// The initializer's loss of outputs `out` (`[batch, outputs]`): weighted L1 against the targets.
+/// The initializer's loss of outputs `out` (`[batch, outputs]`): weighted L1 against the targets;
+/// a NaN target (a real face's unknown pose and light) adds nothing.
 pub fn output_loss(out: Tensor, batch: &[&Sample], geo: &Geometry, device: &Device) -> candle_core::Result<Tensor> {
     let d = geo.initializer_outputs();
-    let target = Tensor::from_vec(batch.iter().flat_map(|s| s.target.iter().copied()).collect::<Vec<f32>>(), (batch.len(), d), device)?;
-    let weights: Vec<f32> = (0..d)
-        .map(|i| {
-            if i < 2 * geo.landmarks {
-                1.0
-            } else if i < 2 * geo.landmarks + 3 {
-                2.0
-            } else {
-                0.3
-            }
-        })
-        .collect();
-    let w = Tensor::from_vec(weights, (1, d), device)?;
-    (out - target)?.abs()?.broadcast_mul(&w)?.mean_all()? * (d as f64 / (2 * geo.landmarks) as f64)
+    let weight = |i: usize| -> f32 {
+        if i < 2 * geo.landmarks {
+            1.0
+        } else if i < 2 * geo.landmarks + 3 {
+            2.0
+        } else {
+            0.3
+        }
+    };
+    let (mut target, mut weights) = (Vec::with_capacity(batch.len() * d), Vec::with_capacity(batch.len() * d));
+    for s in batch {
+        for i in 0..d {
+            let t = s.target.get(i).copied().unwrap_or(f32::NAN);
+            target.push(if t.is_nan() { 0.0 } else { t });
+            weights.push(if t.is_nan() { 0.0 } else { weight(i) });
+        }
+    }
+    let target = Tensor::from_vec(target, (batch.len(), d), device)?;
+    let w = Tensor::from_vec(weights, (batch.len(), d), device)?;
+    ((out - target)?.abs()? * w)?.mean_all()? * (d as f64 / (2 * geo.landmarks) as f64)
 }
 
 /// Trains both networks on renders of `model` (faces on `head` when given) over procedural
@@ -486,6 +494,9 @@ pub fn train_on(
         let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
         let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
         let real_per_batch = if real.is_empty() { 0 } else { (opts.batch as f64 * opts.photo_faces).ceil() as usize };
+        // The real faces whose points the reference read teach the initializer those points.
+        let real_crops: Vec<&Sample> = real.iter().filter(|s| !s.crop.is_empty()).collect();
+        let real_crops_per_batch = if real_crops.is_empty() { 0 } else { real_per_batch };
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
         for pass in 0..opts.passes.max(opts.init_passes) {
@@ -511,11 +522,19 @@ pub fn train_on(
                 }
                 if train_i {
                     opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
+                    let with_real: Vec<&Sample> = batch
+                        .iter()
+                        .copied()
+                        .chain(
+                            (0..real_crops_per_batch)
+                                .filter_map(|k| real_crops.get((step * real_crops_per_batch + k) % real_crops.len().max(1)).copied()),
+                        )
+                        .collect();
                     let li = if opts.mirror && pass % 2 == 1 {
-                        let seen: Vec<Sample> = batch.iter().filter_map(|s| s.mirrored(&geo)).collect();
+                        let seen: Vec<Sample> = with_real.iter().filter_map(|s| s.mirrored(&geo)).collect();
                         initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(TrainError::Tensor)?
                     } else {
-                        initializer_loss(&initializer, &batch, &geo, &device).map_err(TrainError::Tensor)?
+                        initializer_loss(&initializer, &with_real, &geo, &device).map_err(TrainError::Tensor)?
                     };
                     opt_i.backward_step(&li).map_err(TrainError::Tensor)?;
                     i = li.to_scalar::<f32>().map_err(TrainError::Tensor)?;
@@ -649,4 +668,35 @@ pub fn validate(source: SceneSource<'_>, seed: u64, count: usize, detector: &mut
         landmark_error: quantile(errors, 0.5),
         yaw_error: quantile(yaws, 0.5),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn unknown_targets_add_nothing_to_the_initializers_loss() {
+        let geo = geometry(68);
+        let d = geo.initializer_outputs();
+        let device = Device::Cpu;
+        let known: Vec<f32> = (0..d).map(|i| (i as f32 * 0.61).sin()).collect();
+        let out = Tensor::from_vec((0..2 * d).map(|i| (i as f32 * 0.23).cos()).collect::<Vec<f32>>(), (2, d), &device).unwrap();
+        let sample = |target: Vec<f32>| Sample { frame: Vec::new(), cell: 0, place: [0.0; 3], crop: Vec::new(), target };
+        let loss = |a: &Sample, b: &Sample| output_loss(out.clone(), &[a, b], &geo, &device).unwrap().to_scalar::<f32>().unwrap();
+        let full = sample(known.clone());
+        // The second sample's pose and light unknown: its points alone count.
+        let mut points_only = known.clone();
+        points_only.iter_mut().skip(2 * geo.landmarks).for_each(|v| *v = f32::NAN);
+        let partial = sample(points_only);
+        let with_nan = loss(&full, &partial);
+        assert!(with_nan.is_finite());
+        // Against the outputs themselves, the unknown entries' error would be zero: the same loss.
+        let outs = out.to_vec2::<f32>().unwrap();
+        let mut filled = known.clone();
+        filled.iter_mut().enumerate().skip(2 * geo.landmarks).for_each(|(i, v)| *v = outs[1][i]);
+        assert!((with_nan - loss(&full, &sample(filled))).abs() < 1e-6);
+        // And less than with the known targets there.
+        assert!(with_nan < loss(&full, &full));
+    }
 }

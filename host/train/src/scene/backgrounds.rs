@@ -9,6 +9,7 @@
 //! views of it never touch a face, so its hands, clothes and rooms become background, and its
 //! faces with points become real faces for the finder ([`Backgrounds::face_view`]).
 
+use gpmm_core::model::ibug::{ibug68_partner, IBUG68_POINTS};
 use gpmm_host::detect::photos::{read_faces_file, ReferenceFace};
 use image::{imageops, RgbImage};
 use rand::{Rng, RngExt};
@@ -68,13 +69,15 @@ pub enum BackgroundsError {
 }
 
 /// A known face of a photo of people, in the kept photo's pixels.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 struct KnownFace {
     /// x0, y0, x1, y1 that no background view may touch.
     area: [f32; 4],
     /// The finder's target (centre x, y and side of the landmarks' box), where the reference read
     /// the face's points.
     square: Option<[f32; 3]>,
+    /// The reference's points (the initializer's target), where it read them.
+    points: Vec<[f32; 2]>,
 }
 
 /// A photograph and the faces known in it (none for a face-free photo).
@@ -84,13 +87,17 @@ struct Photo {
     faces: Vec<KnownFace>,
 }
 
-/// A view of a real face ([`Backgrounds::face_view`]): the frame and the face's landmark box in it.
+/// A view of a real face ([`Backgrounds::face_view`]): the frame and the face's landmark box and
+/// points in it.
 #[derive(Debug, Clone)]
 pub struct FaceView {
     /// The frame.
     pub image: RgbImage,
     /// Centre x, y and side (px) of the face's landmarks' box in the frame.
     pub square: [f32; 3],
+    /// The reference's points in the frame, in their scheme's order also when the view is a
+    /// mirror image (the iBUG-68 partners swapped; other schemes are not mirrored).
+    pub points: Vec<[f32; 2]>,
 }
 
 /// Photographs, decoded and scaled down once: face-free ones, and photos of people whose faces
@@ -237,7 +244,17 @@ impl Backgrounds {
             let image = cut(&photo.image, (x0 as u32, y0 as u32, cwu, chu), w, h, flip);
             let (sx, sy) = (w as f32 / cwu as f32, h as f32 / chu as f32);
             let (vx, vy) = ((cx - x0) * sx, (cy - y0) * sy);
-            return Some(FaceView { image, square: [if flip { w as f32 - vx } else { vx }, vy, size * sx.max(sy)] });
+            let place = |p: &[f32; 2]| {
+                let (px, py) = ((p[0] - x0) * sx, (p[1] - y0) * sy);
+                [if flip { w as f32 - px } else { px }, py]
+            };
+            let known = &photo.faces.get(k)?.points;
+            let points = match (flip, known.len()) {
+                (false, _) => known.iter().map(place).collect(),
+                (true, IBUG68_POINTS) => (0..IBUG68_POINTS).filter_map(|i| known.get(ibug68_partner(i)).map(place)).collect(),
+                (true, _) => Vec::new(),
+            };
+            return Some(FaceView { image, square: [if flip { w as f32 - vx } else { vx }, vy, size * sx.max(sy)], points });
         }
         None
     }
@@ -277,6 +294,7 @@ fn labelled(img: RgbImage, faces: &[ReferenceFace]) -> Photo {
             KnownFace {
                 area: [cx - half, cy - half, cx + half, cy + half].map(|v| v * s),
                 square: f.landmarks.is_some().then_some([square.cx * s, square.cy * s, square.size * s]),
+                points: f.landmarks.iter().flatten().map(|p| p.map(|v| v * s)).collect(),
             }
         })
         .collect();

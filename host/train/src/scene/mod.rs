@@ -14,7 +14,7 @@ pub mod dress;
 pub mod eyes;
 pub mod head;
 
-use backgrounds::Backgrounds;
+use backgrounds::{Backgrounds, FaceView};
 use eyes::OpenEyes;
 use gpmm_core::net::face::landmark_box;
 use gpmm_core::render::light::SH_COEFFS;
@@ -262,16 +262,17 @@ pub fn face_free_frame(source: SceneSource<'_>, seed: u64, index: u64) -> RgbIma
 
 /// Real face `index` of the stream `seed`: a view of a known face of a photo of people
 /// ([`Backgrounds::face_view`]) at a scene's size and face size, through the same camera effects,
-/// and the face's landmarks' box in it (centre x, y, side). `None` without photos of people or
-/// when no window fits.
-pub fn photo_face_frame(source: SceneSource<'_>, seed: u64, index: u64) -> Option<(RgbImage, [f32; 3])> {
+/// with the face's landmarks' box and points in it. `None` without photos of people or when no
+/// window fits.
+pub fn photo_face_frame(source: SceneSource<'_>, seed: u64, index: u64) -> Option<FaceView> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ index.wrapping_mul(0x5851_F42D_4C95_7F2D) ^ 0xFACE);
     let ranges = source.ranges;
     let long = rng.random_range(ranges.frame_side.0..=ranges.frame_side.1);
     let aspect = ranges.aspects.get(rng.random_range(0..ranges.aspects.len().max(1))).copied().unwrap_or(1.0);
     let (w, h) = frame_size(long, aspect);
     let view = source.backgrounds?.face_view(w, h, ranges.face_fraction, &mut rng)?;
-    Some((camera_effects(&RgbaImage::new(w, h), &view.image, &mut rng), view.square))
+    let image = camera_effects(&RgbaImage::new(w, h), &view.image, &mut rng);
+    Some(FaceView { image, ..view })
 }
 
 /// Renders scene `index` of the set drawn with `seed`.
