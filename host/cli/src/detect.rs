@@ -122,8 +122,7 @@ pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: 
     Ok(pts)
 }
 
-/// Smallest finder score `gpmm fit --init` accepts as a face.
-pub const DEFAULT_MIN_SCORE: f32 = 0.05;
+pub use gpmm_host::detect::DEFAULT_MIN_SCORE;
 
 /// Writes the initializer's landmarks as an iBUG .pts file for a `width × height` image. Points a
 /// little past the image's edge (a face cut by the frame) are written as read; one beyond the

@@ -129,6 +129,10 @@ impl Detector {
 /// scored above the true faces, push real faces out of the finder's list.
 pub const DEFAULT_SMALLEST_FACE: f32 = 96.0;
 
+/// The least finder score a command takes as a face by default (`gpmm detect`, `fit --init`,
+/// `learn`).
+pub const DEFAULT_MIN_SCORE: f32 = 0.05;
+
 /// The share of the best face's finder score a face needs for [`choose_face`] to take it for
 /// being larger. On the realistic development set the largest face above the minimum score was a
 /// weak false positive in 120 of 210 renders; the largest within 0.95 of the best score is the

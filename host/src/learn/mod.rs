@@ -37,7 +37,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::detect::Detector;
+use crate::detect::{choose_face, Detector, DEFAULT_MIN_SCORE, DEFAULT_SMALLEST_FACE};
 use crate::eval::models::pca::{pca_beside, KeptCovariance};
 use crate::fit::{fit_prepared, prepare, FitOptions};
 use crate::gp::model::{GpModel, LearningRecord};
@@ -62,9 +62,6 @@ pub fn albedo_change_limit(done: u32) -> f32 {
 /// development set its fits identified 76.7 % of the probes (exact landmarks) where the template
 /// model's identified 70.0 %, a model of the fits alone 17.2 % and a share of 1 72.8 %.
 pub const DEFAULT_KEEP_VARIANCE: f64 = 0.5;
-
-/// The least finder score taken as a face.
-pub const MIN_SCORE: f32 = 0.05;
 
 /// How a learning run fits its images (serializable, so that workers elsewhere fit alike).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -236,11 +233,13 @@ fn fit_and_check(
     Ok(Some(detail.applied_to(&mesh)))
 }
 
-/// The start of a fit without a landmark file: the finder's best face in `photo` and the
-/// initializer's points on it (those beyond the fit's margin moved onto the frame), with its score.
+/// The start of a fit without a landmark file: the face `gpmm fit --init` takes in `photo` (a
+/// photo is scanned for faces down to [`DEFAULT_SMALLEST_FACE`] px, [`choose_face`] picks one) and
+/// the initializer's points on it (those beyond the fit's margin moved onto the frame), with its
+/// score.
 pub fn start_points(detector: &mut Detector, photo: &image::RgbImage) -> Result<(Vec<[f32; 2]>, f32), String> {
-    let detection = detector.detect(photo, MIN_SCORE, Reading::DEFAULT).map_err(|e| e.to_string())?;
-    let Some(det) = detection else { return Err("no face found".into()) };
+    let faces = detector.scan_all(photo, DEFAULT_MIN_SCORE, DEFAULT_SMALLEST_FACE, Reading::DEFAULT).map_err(|e| e.to_string())?;
+    let Some(det) = choose_face(&faces, None).and_then(|i| faces.get(i)) else { return Err("no face found".into()) };
     let (points, _) = crate::photo::pts::within_margin(&det.landmarks, photo.width(), photo.height());
     Ok((points, det.face.score))
 }
