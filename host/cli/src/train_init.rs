@@ -103,6 +103,11 @@ pub struct TrainInitArgs {
     /// points (their pose and light are unknown, so those it learns from renders only).
     #[arg(long, value_name = "F", requires = "backgrounds")]
     pub photo_faces: Option<f64>,
+    /// The initializer learns from rendered faces only, not the real faces' reference points
+    /// (those points carry the reference detector's habits: a model learned from fits that start
+    /// from them identified fewer faces, docs/learning.md).
+    #[arg(long, requires = "backgrounds")]
+    pub no_photo_points: bool,
 }
 
 /// Runs `gpmm train-init`.
@@ -165,6 +170,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     if !(0.0..=1.0).contains(&opts.photo_faces) {
         bail!("--photo-faces {} is not a fraction from 0 to 1", opts.photo_faces);
     }
+    opts.photo_points = !a.no_photo_points;
     let backgrounds = if a.backgrounds.is_empty() {
         None
     } else {

@@ -260,6 +260,7 @@ fn photos_of_people_give_the_finder_real_faces_and_their_surroundings() {
     let text = String::from_utf8_lossy(&std::fs::read(&init).unwrap()).into_owned();
     assert!(text.contains("\"people_photos\":1") && text.contains("\"photo_faces\":1"), "metadata lacks the photos of people");
     assert!(text.contains("\"photo_face_share\":0.25"), "metadata lacks the share of real faces");
+    assert!(text.contains("\"photo_points\":true"), "metadata lacks the initializer's real points");
     // The preview shows two rows of real faces below the four of rendered scenes.
     let (w, h) = image::image_dimensions(&preview).unwrap();
     assert_eq!((w, h), (6 * 160, 6 * 160));
@@ -267,6 +268,23 @@ fn photos_of_people_give_the_finder_real_faces_and_their_surroundings() {
     let other = f.dir.path().join("people-none.init");
     ok(&gpmm(&["train-init", s(&f.model), "-o", s(&other), "--quick", "--seed", "7", "--backgrounds", s(&people), "--photo-faces", "0"]));
     assert_ne!(std::fs::read(&init).unwrap(), std::fs::read(&other).unwrap(), "the real faces changed nothing");
+    // Nor when the initializer leaves their points out.
+    let renders_only = f.dir.path().join("people-renders-only.init");
+    ok(&gpmm(&[
+        "train-init",
+        s(&f.model),
+        "-o",
+        s(&renders_only),
+        "--quick",
+        "--seed",
+        "7",
+        "--backgrounds",
+        s(&people),
+        "--no-photo-points",
+    ]));
+    let bytes = std::fs::read(&renders_only).unwrap();
+    assert_ne!(std::fs::read(&init).unwrap(), bytes, "the real points changed nothing");
+    assert!(String::from_utf8_lossy(&bytes).contains("\"photo_points\":false"));
     let err = fails(&gpmm(&[&args[..], &["--photo-faces", "2"]].concat()));
     assert!(err.contains("--photo-faces 2"), "{err}");
 }

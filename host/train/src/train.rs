@@ -49,6 +49,8 @@ pub struct TrainOptions {
     /// batches ([`crate::data::photo_face_samples`]; the initializer learns their points, not
     /// their unknown pose and light).
     pub photo_faces: f64,
+    /// The initializer learns the reference points of those real faces too (else renders only).
+    pub photo_points: bool,
 }
 
 /// Face-free frames are the hardest one of this many candidates: those the finder, as trained so
@@ -85,6 +87,7 @@ impl TrainOptions {
             ranges: SceneRanges::default(),
             face_free: 0.125,
             photo_faces: 0.25,
+            photo_points: true,
         }
     }
 
@@ -110,6 +113,7 @@ impl TrainOptions {
             ranges: SceneRanges::default(),
             face_free: 0.125,
             photo_faces: 0.25,
+            photo_points: true,
         }
     }
 
@@ -495,7 +499,7 @@ pub fn train_on(
         let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
         let real_per_batch = if real.is_empty() { 0 } else { (opts.batch as f64 * opts.photo_faces).ceil() as usize };
         // The real faces whose points the reference read teach the initializer those points.
-        let real_crops: Vec<&Sample> = real.iter().filter(|s| !s.crop.is_empty()).collect();
+        let real_crops: Vec<&Sample> = real.iter().filter(|s| opts.photo_points && !s.crop.is_empty()).collect();
         let real_crops_per_batch = if real_crops.is_empty() { 0 } else { real_per_batch };
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
@@ -600,6 +604,7 @@ pub fn train_on(
         "people_photos": backgrounds.map_or(0, Backgrounds::people_photos),
         "photo_faces": backgrounds.map_or(0, Backgrounds::faces),
         "photo_face_share": if backgrounds.is_some_and(|b| b.faces() > 0) { opts.photo_faces } else { 0.0 },
+        "photo_points": opts.photo_points && backgrounds.is_some_and(|b| b.faces() > 0) && opts.photo_faces > 0.0,
         "created_by": concat!("gpmm-train ", env!("CARGO_PKG_VERSION")),
     });
     // A single model trained from random weights records what it always recorded.
