@@ -339,6 +339,13 @@ fn mine_face_free(
     Ok(order.into_iter().take(keep).filter_map(|i| slots.get_mut(i).and_then(Option::take)).collect())
 }
 
+/// Batch `step`'s `per_batch` of `items`, taken in turn and from the start again when used up
+/// (none of an empty list).
+fn cycled<T>(items: &[T], per_batch: usize, step: usize) -> impl Iterator<Item = &T> {
+    let n = if items.is_empty() { 0 } else { per_batch };
+    (0..n).filter_map(move |k| items.get((step * per_batch + k) % items.len()))
+}
+
 /// The learning rate after `done` of `total` steps: a cosine from `peak` down to 5 % of it.
 pub fn cosine_lr(peak: f64, done: usize, total: usize) -> f64 {
     peak * (0.05 + 0.95 * 0.5 * (1.0 + (std::f64::consts::PI * done as f64 / total.max(1) as f64).cos()))
@@ -493,14 +500,13 @@ pub fn train_on(
         }
         let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
         let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
-        let per_batch = if face_free.is_empty() { 0 } else { (opts.batch as f64 * opts.face_free).ceil() as usize };
+        let per_batch = (opts.batch as f64 * opts.face_free).ceil() as usize;
         // Empty without photos of people.
         let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
         let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
-        let real_per_batch = if real.is_empty() { 0 } else { (opts.batch as f64 * opts.photo_faces).ceil() as usize };
+        let real_per_batch = (opts.batch as f64 * opts.photo_faces).ceil() as usize;
         // The real faces whose points the reference read teach the initializer those points.
         let real_crops: Vec<&Sample> = real.iter().filter(|s| opts.photo_points && !s.crop.is_empty()).collect();
-        let real_crops_per_batch = if real_crops.is_empty() { 0 } else { real_per_batch };
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
         for pass in 0..opts.passes.max(opts.init_passes) {
@@ -510,15 +516,8 @@ pub fn train_on(
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
                 if train_f {
                     opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
-                    let free: Vec<&[i8]> = (0..per_batch)
-                        .filter_map(|k| face_free.get((step * per_batch + k) % face_free.len().max(1)))
-                        .map(Vec::as_slice)
-                        .collect();
-                    let seen: Vec<&Sample> = batch
-                        .iter()
-                        .copied()
-                        .chain((0..real_per_batch).filter_map(|k| real.get((step * real_per_batch + k) % real.len().max(1))))
-                        .collect();
+                    let free: Vec<&[i8]> = cycled(&face_free, per_batch, step).map(Vec::as_slice).collect();
+                    let seen: Vec<&Sample> = batch.iter().copied().chain(cycled(&real, real_per_batch, step)).collect();
                     let lf = finder_loss(&finder, &seen, &free, &geo, &device).map_err(TrainError::Tensor)?;
                     opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
                     f = lf.to_scalar::<f32>().map_err(TrainError::Tensor)?;
@@ -526,14 +525,7 @@ pub fn train_on(
                 }
                 if train_i {
                     opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
-                    let with_real: Vec<&Sample> = batch
-                        .iter()
-                        .copied()
-                        .chain(
-                            (0..real_crops_per_batch)
-                                .filter_map(|k| real_crops.get((step * real_crops_per_batch + k) % real_crops.len().max(1)).copied()),
-                        )
-                        .collect();
+                    let with_real: Vec<&Sample> = batch.iter().copied().chain(cycled(&real_crops, real_per_batch, step).copied()).collect();
                     let li = if opts.mirror && pass % 2 == 1 {
                         let seen: Vec<Sample> = with_real.iter().filter_map(|s| s.mirrored(&geo)).collect();
                         initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(TrainError::Tensor)?
