@@ -12,7 +12,9 @@
 
 use heapless::Vec;
 
-use super::face::{find_faces, iou, run_finder, FaceBox, Faces, InitFile, MAX_NET_OUTPUT, SAME_FACE_IOU};
+use super::face::{
+    find_faces, iou, is_face, run_finder, same_face, second_look, FaceBox, FinderCells, InitFile, MAX_NET_OUTPUT, SAME_FACE_IOU,
+};
 use super::resample::Window;
 use super::{NetError, NetScratch};
 
@@ -21,7 +23,7 @@ use super::{NetError, NetScratch};
 pub const TRAINED_FACE_FRACTION: (f32, f32) = (0.15, 0.8);
 
 /// Faces a scan holds before its suppression (the best by score when there are more).
-pub const MAX_CANDIDATES: usize = 64;
+pub const MAX_CANDIDATES: usize = 256;
 
 /// Smallest window a scan looks at, in finder input pixels: a smaller one would be upsampled and
 /// show the finder nothing the larger window did not.
@@ -50,14 +52,24 @@ fn keep(faces: &mut Vec<FaceBox, MAX_CANDIDATES>, face: FaceBox) {
     }
 }
 
-/// Finds the faces at `min_score` or above in an RGB photo (`w × h`): the whole frame's faces
-/// ([`find_faces`], with their second looks), then levels of windows (half the shorter side, a
-/// quarter, …), each window's faces kept when their size is in [`TRAINED_FACE_FRACTION`] of the
-/// window; then one non-maximum suppression (intersection over union above [`SAME_FACE_IOU`] is
-/// one face), best first, at most [`super::face::MAX_FACES`]. Levels are added while the smallest face the
-/// last one reads is larger than `smallest_face` pixels, and none is smaller than the finder's
-/// input; an infinite `smallest_face` gives [`find_faces`]'s faces.
-pub fn scan_faces<const A: usize>(
+/// A face mostly inside a face kept before it is part of that face (an eye, a mouth read as a
+/// small face): dropped when more than this share of its box lies inside the other's.
+pub const WITHIN_SHARE: f32 = 0.6;
+
+/// Finds the faces at `min_score` or above in an RGB photo (`w × h`), at most `N`: the whole
+/// frame's faces ([`find_faces`], with their second looks), then levels of windows (half the
+/// shorter side, a quarter, …), each window's faces kept when their size is in
+/// [`TRAINED_FACE_FRACTION`] of the window. Levels are added while the smallest face the last one
+/// reads is larger than `smallest_face` pixels, and none is smaller than the finder's input; an
+/// infinite `smallest_face` gives [`find_faces`]'s faces.
+///
+/// Then one non-maximum suppression, best score first ([`overlaps_kept`]), in which each window's
+/// face is **confirmed** before it is kept: the finder looks again at a square
+/// [`super::face::SECOND_LOOK_ZOOM`] face sizes wide around it, where the face fills a third of
+/// its view as in the training scenes, and that look's score and box replace the window's
+/// ([`confirmed`]). Textures, hands and parts of faces that score high in a small window mostly do
+/// not in that view (docs/real-photos.md). Listed best first by the score kept.
+pub fn scan_faces<const A: usize, const N: usize>(
     init: &InitFile<'_>,
     rgb: &[u8],
     w: usize,
@@ -65,7 +77,7 @@ pub fn scan_faces<const A: usize>(
     min_score: f32,
     smallest_face: f32,
     scratch: &mut NetScratch<A>,
-) -> Result<Faces, NetError> {
+) -> Result<Vec<FaceBox, N>, NetError> {
     let mut candidates: Vec<FaceBox, MAX_CANDIDATES> = Vec::new();
     for face in find_faces(init, rgb, w, h, min_score, scratch)? {
         keep(&mut candidates, face);
@@ -89,20 +101,60 @@ pub fn scan_faces<const A: usize>(
         s *= 0.5;
     }
     candidates.sort_unstable_by(|a, b| b.score.total_cmp(&a.score));
-    let mut faces = Faces::new();
+    let mut faces: Vec<FaceBox, N> = Vec::new();
     for face in candidates {
         if faces.is_full() {
             break;
         }
-        if !faces.iter().any(|k| iou(k, &face) > SAME_FACE_IOU) {
+        if overlaps_kept(&faces, &face) {
+            continue;
+        }
+        // The whole frame's faces have had their second look; a window's face gets it here.
+        let window = if face.looks == 1 { second_look(&face, w, h, side) } else { None };
+        let face = match window {
+            Some(window) => match confirmed(&face, &run_finder(init, (rgb, w, h), window, scratch, &mut out)?) {
+                Some(face) => face,
+                None => continue,
+            },
+            None => face,
+        };
+        if is_face(&face, min_score) && !overlaps_kept(&faces, &face) {
             let _ = faces.push(face);
         }
     }
+    faces.sort_unstable_by(|a, b| b.score.total_cmp(&a.score));
     Ok(faces)
 }
 
+/// A window's face as its confirming look (`second`, the finder's view around it) reads it: the
+/// best of that look's cells that is the same face ([`same_face`]), with its box and score;
+/// `None` if no cell is.
+pub fn confirmed(face: &FaceBox, second: &FinderCells<'_>) -> Option<FaceBox> {
+    second.best(|f| same_face(face, f)).map(|f| FaceBox { looks: 2, ..f })
+}
+
+/// Whether `face` is one of `kept`: their boxes overlap by an intersection over union above
+/// [`SAME_FACE_IOU`], or more than [`WITHIN_SHARE`] of its box lies inside a kept one.
+pub fn overlaps_kept(kept: &[FaceBox], face: &FaceBox) -> bool {
+    kept.iter().any(|k| iou(k, face) > SAME_FACE_IOU || share_within(face, k) > WITHIN_SHARE)
+}
+
+/// The share of `a`'s area that lies inside `b` (0 for boxes that are not numbers or have no area).
+pub fn share_within(a: &FaceBox, b: &FaceBox) -> f32 {
+    let area = a.size * a.size;
+    if !(area > 0.0 && area.is_finite() && [a.cx, a.cy, b.cx, b.cy, b.size].iter().all(|v| v.is_finite())) {
+        return 0.0;
+    }
+    let overlap = |ca: f32, cb: f32| {
+        let lo = (ca - 0.5 * a.size).max(cb - 0.5 * b.size);
+        let hi = (ca + 0.5 * a.size).min(cb + 0.5 * b.size);
+        (hi - lo).max(0.0)
+    };
+    overlap(a.cx, b.cx) * overlap(a.cy, b.cy) / area
+}
+
 #[cfg(test)]
-#[allow(clippy::unwrap_used)]
+#[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 
@@ -129,5 +181,62 @@ mod tests {
         assert!(v.iter().all(|f| f.score >= 0.5), "a worse face does not displace one");
         keep(&mut v, face(0.99));
         assert!(v.iter().any(|f| f.score == 0.99) && !v.iter().any(|f| f.score == 0.5));
+    }
+
+    fn face(cx: f32, cy: f32, size: f32, score: f32) -> FaceBox {
+        FaceBox { cx, cy, size, score, looks: 1 }
+    }
+
+    #[test]
+    fn a_part_of_a_kept_face_is_the_same_face_but_a_neighbour_is_not() {
+        let kept = [face(100.0, 100.0, 80.0, 0.99)];
+        // An eye read as a small face: wholly inside, tiny IoU.
+        let eye = face(85.0, 90.0, 20.0, 0.95);
+        assert!(iou(&kept[0], &eye) < SAME_FACE_IOU && share_within(&eye, &kept[0]) == 1.0);
+        assert!(overlaps_kept(&kept, &eye));
+        // A face beside it touching its edge: a quarter inside, kept.
+        let beside = face(150.0, 100.0, 40.0, 0.9);
+        assert_eq!(share_within(&beside, &kept[0]), 0.25);
+        assert!(!overlaps_kept(&kept, &beside));
+        // Boxes that are not numbers overlap nothing.
+        assert!(!overlaps_kept(&kept, &face(f32::NAN, 100.0, 20.0, 0.9)));
+        assert_eq!(share_within(&face(100.0, 100.0, 0.0, 0.9), &kept[0]), 0.0);
+    }
+
+    /// A confirming look: a 4 × 4 grid over a 64 px input seeing a 64 px frame 1:1, every cell's
+    /// logit `rest`, but for `cells` (index, logit); each cell's face 16 px at its centre.
+    fn look(cells: &[(usize, f32)], rest: f32) -> [f32; 64] {
+        let mut values = [0f32; 64];
+        for c in values.chunks_exact_mut(4) {
+            c.copy_from_slice(&[rest, 0.5, 0.5, libm::logf(0.25)]);
+        }
+        for &(i, logit) in cells {
+            values[i * 4] = logit;
+        }
+        values
+    }
+
+    #[test]
+    fn the_confirming_look_gives_the_window_face_its_score_and_box() {
+        fn cells(values: &[f32]) -> FinderCells<'_> {
+            FinderCells { values, grid_w: 4, side: 64, window: Window { x0: 0.0, y0: 0.0, step: 1.0 } }
+        }
+        // A window's face at (24, 24), 16 px, score 0.99.
+        let small = face(24.0, 24.0, 16.0, 0.99);
+        // The closer look scores it low: the window's score is replaced, and a low one then fails
+        // the minimum score.
+        let values = look(&[(5, -2.0)], -6.0);
+        let seen = confirmed(&small, &cells(&values)).unwrap();
+        assert_eq!((seen.cx, seen.cy, seen.looks), (24.0, 24.0, 2));
+        assert!(seen.score < 0.2 && !is_face(&seen, 0.5));
+        // A stronger face elsewhere in the look does not stand in for it: the best cell that is
+        // the same face (centre within half its size) is taken.
+        let values = look(&[(5, 3.0), (15, 6.0)], -6.0);
+        let seen = confirmed(&small, &cells(&values)).unwrap();
+        assert_eq!((seen.cx, seen.cy), (24.0, 24.0));
+        assert!(seen.score > 0.9 && seen.score < 0.99);
+        // A look with no cell near it confirms nothing.
+        let far = face(200.0, 200.0, 16.0, 0.99);
+        assert!(confirmed(&far, &cells(&values)).is_none());
     }
 }

@@ -40,7 +40,9 @@ pub struct DetectArgs {
     pub min_score: f32,
     /// Smallest face (px) looked for: beside the finder's view of the whole image, windows half
     /// its shorter side wide, a quarter, … are scanned while a face this small still fills too
-    /// little of the last one (small images: none). `inf`: the whole image only, as a board does.
+    /// little of the last one (small images: none); a window's face is kept only if the finder,
+    /// looking again at three face sizes around it, still scores it. `inf`: the whole image only,
+    /// as a board does.
     #[arg(long, value_name = "PX", default_value_t = gpmm_host::detect::DEFAULT_SMALLEST_FACE)]
     pub smallest_face: f32,
 }

@@ -109,7 +109,7 @@ pub struct DetectEvalArgs {
     pub min_score: f32,
     /// Real-photo sets: the smallest face (px) looked for. Beside the finder's view of the whole
     /// photo, windows half its shorter side wide, a quarter, … are scanned until a face this small
-    /// fills enough of one; `inf`: no scan.
+    /// fills enough of one, each window's face confirmed by a closer look; `inf`: no scan.
     #[arg(long, value_name = "PX", default_value_t = gpmm_host::detect::DEFAULT_SMALLEST_FACE)]
     pub smallest_face: f32,
     /// Real-photo sets: write each photo with its boxes drawn to DRAW_DIR/STEM.png.

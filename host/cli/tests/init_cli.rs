@@ -77,7 +77,7 @@ fn detect_writes_68_landmarks_and_a_picture() {
     let out = ok(&gpmm(&["detect", s(&image), "--init", s(&f.init), "-o", s(&pts), "--draw", s(&png)]));
     let json: serde_json::Value = serde_json::from_str(&out).unwrap();
     let faces = json["faces"].as_array().unwrap();
-    assert!(!faces.is_empty() && faces.len() <= gpmm_core::net::face::MAX_FACES);
+    assert!(!faces.is_empty() && faces.len() <= gpmm_host::detect::PHOTO_MAX_FACES);
     for face in faces {
         assert_eq!(face["landmarks"].as_array().unwrap().len(), 68);
         assert!(face["box"]["score"].as_f64().unwrap() >= 0.0);

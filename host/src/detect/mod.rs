@@ -14,6 +14,10 @@ use std::path::{Path, PathBuf};
 /// Bytes of each activation buffer the host gives the networks.
 pub const HOST_NET_SCRATCH: usize = 64 * 1024;
 
+/// Most faces a scan of a photo reports ([`Detector::scan_all`]): a group photo has more than the
+/// core's [`gpmm_core::net::face::MAX_FACES`] for a camera frame.
+pub const PHOTO_MAX_FACES: usize = 32;
+
 /// Landmark σ (fraction of the fit's image side) for landmarks read by the initializer: the
 /// core's one definition, which `gpmm fit --init` and `gpmm device-fit --init` both default to.
 pub use gpmm_core::fit::INIT_LANDMARK_SIGMA;
@@ -100,7 +104,8 @@ impl Detector {
     ) -> Result<Vec<Detection>, DetectError> {
         let (file, scratch) = self.parts()?;
         let (w, h) = (image.width() as usize, image.height() as usize);
-        let faces = scan_faces(&file, image.as_raw(), w, h, min_score, smallest_face, scratch).map_err(DetectError::Run)?;
+        let faces: heapless::Vec<FaceBox, PHOTO_MAX_FACES> =
+            scan_faces(&file, image.as_raw(), w, h, min_score, smallest_face, scratch).map_err(DetectError::Run)?;
         let mut out = Vec::with_capacity(faces.len());
         for face in faces {
             out.push(read_landmarks(&file, image.as_raw(), w, h, face, reading, scratch).map_err(DetectError::Run)?);
@@ -123,11 +128,13 @@ impl Detector {
 }
 
 /// The smallest face (px) a scan of a photo looks for by default ([`Detector::scan_all`]). Chosen
-/// on the real-photo development set (faces of 64 px and more found at minimum score 0.9, false
-/// positives per face-free photo): 32 px 11 of 16, 1.27; 64 px 11, 0.18; 96 px 14, 0.09; 128 px
-/// 14, 0.09; 192 px 7, 0.09; no scan 6, 0.09. Smaller sizes add windows whose false positives,
-/// scored above the true faces, push real faces out of the finder's list.
-pub const DEFAULT_SMALLEST_FACE: f32 = 96.0;
+/// at minimum score 0.9 on photos of people the finder of the recipe's training never saw (the
+/// pool's photos beyond its first four repositories: 232 photos, 316 faces of 64 px and more, 170
+/// of 32–64 px) and on the real-photo development set, with each window's face confirmed by a
+/// closer look: 32 px finds 266 and 98 of them (dev 13 of 16, 0.09 false positives per face-free
+/// photo), 48 px 252 and 69 (dev 11), 96 px 170 and 6 (dev 12). Without the confirming look,
+/// smaller sizes added windows whose false positives outscored true faces.
+pub const DEFAULT_SMALLEST_FACE: f32 = 32.0;
 
 /// The least finder score a command takes as a face by default (`gpmm detect`, `fit --init`,
 /// `learn`).
