@@ -340,18 +340,23 @@ pub fn iou(a: &FaceBox, b: &FaceBox) -> f32 {
     if ![a.cx, a.cy, a.size, b.cx, b.cy, b.size].iter().all(|v| v.is_finite()) {
         return 0.0;
     }
-    let overlap = |ca: f32, cb: f32| {
-        let lo = (ca - 0.5 * a.size).max(cb - 0.5 * b.size);
-        let hi = (ca + 0.5 * a.size).min(cb + 0.5 * b.size);
-        (hi - lo).max(0.0)
-    };
-    let inter = overlap(a.cx, b.cx) * overlap(a.cy, b.cy);
+    let inter = intersection(a, b);
     let union = a.size * a.size + b.size * b.size - inter;
     if union > 0.0 {
         inter / union
     } else {
         0.0
     }
+}
+
+/// The area two square boxes share (px²; their coordinates taken as numbers).
+pub(crate) fn intersection(a: &FaceBox, b: &FaceBox) -> f32 {
+    let overlap = |ca: f32, cb: f32| {
+        let lo = (ca - 0.5 * a.size).max(cb - 0.5 * b.size);
+        let hi = (ca + 0.5 * a.size).min(cb + 0.5 * b.size);
+        (hi - lo).max(0.0)
+    };
+    overlap(a.cx, b.cx) * overlap(a.cy, b.cy)
 }
 
 /// Runs the finder on an RGB frame (`w × h`) and keeps every face at `min_score` or above: the

@@ -13,7 +13,8 @@
 use heapless::Vec;
 
 use super::face::{
-    find_faces, iou, is_face, run_finder, same_face, second_look, FaceBox, FinderCells, InitFile, MAX_NET_OUTPUT, SAME_FACE_IOU,
+    find_faces, intersection, iou, is_face, run_finder, same_face, second_look, FaceBox, FinderCells, InitFile, MAX_NET_OUTPUT,
+    SAME_FACE_IOU,
 };
 use super::resample::Window;
 use super::{NetError, NetScratch};
@@ -145,12 +146,7 @@ pub fn share_within(a: &FaceBox, b: &FaceBox) -> f32 {
     if !(area > 0.0 && area.is_finite() && [a.cx, a.cy, b.cx, b.cy, b.size].iter().all(|v| v.is_finite())) {
         return 0.0;
     }
-    let overlap = |ca: f32, cb: f32| {
-        let lo = (ca - 0.5 * a.size).max(cb - 0.5 * b.size);
-        let hi = (ca + 0.5 * a.size).min(cb + 0.5 * b.size);
-        (hi - lo).max(0.0)
-    };
-    overlap(a.cx, b.cx) * overlap(a.cy, b.cy) / area
+    intersection(a, b) / area
 }
 
 #[cfg(test)]

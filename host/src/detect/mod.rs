@@ -104,8 +104,8 @@ impl Detector {
     ) -> Result<Vec<Detection>, DetectError> {
         let (file, scratch) = self.parts()?;
         let (w, h) = (image.width() as usize, image.height() as usize);
-        let faces: heapless::Vec<FaceBox, PHOTO_MAX_FACES> =
-            scan_faces(&file, image.as_raw(), w, h, min_score, smallest_face, scratch).map_err(DetectError::Run)?;
+        let faces = scan_faces::<HOST_NET_SCRATCH, PHOTO_MAX_FACES>(&file, image.as_raw(), w, h, min_score, smallest_face, scratch)
+            .map_err(DetectError::Run)?;
         let mut out = Vec::with_capacity(faces.len());
         for face in faces {
             out.push(read_landmarks(&file, image.as_raw(), w, h, face, reading, scratch).map_err(DetectError::Run)?);
