@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Face-free photographs for `gpmm train-init --backgrounds DIR`, from Debian's wallpaper packages.
 
-    python backgrounds.py OUT [--cache DIR]
+    python backgrounds.py OUT [--cache DIR] [--packages P ...]
 
 downloads PACKAGES with `apt-get download` (nothing is installed), takes one picture per
 wallpaper (the size closest to 1920 px wide), scales it to at most 1024 px on its longer side,
@@ -18,6 +18,10 @@ sys.path.insert(0, HERE)
 import make_set  # noqa: E402  (fetching packages and the reference face detector)
 
 PACKAGES = ["plasma-workspace-wallpapers", "mate-backgrounds", "ukui-wallpapers"]
+# Face-free pictures no training command uses: the face-free half of the unseen tuning photos
+# (docs/real-photos.md), made with --packages.
+HELD_PACKAGES = ["lomiri-wallpapers", "lomiri-wallpapers-16.04", "lomiri-wallpapers-20.04",
+                 "sway-backgrounds"]
 LONGER_SIDE = 1024
 
 
@@ -48,12 +52,15 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out")
     ap.add_argument("--cache", default=None, help="where downloads are kept (default OUT/downloads)")
+    ap.add_argument("--packages", nargs="+", default=PACKAGES,
+                    help=f"Debian packages to take pictures from (default: {' '.join(PACKAGES)}; the held-out "
+                         f"pictures for tuning false positives: {' '.join(HELD_PACKAGES)})")
     a = ap.parse_args()
     from PIL import Image
     cache = a.cache or os.path.join(a.out, "downloads")
     os.makedirs(a.out, exist_ok=True)
     report = {"packages": {}, "kept": [], "dropped": []}
-    for package in PACKAGES:
+    for package in a.packages:
         deb = make_set.fetch("deb", package, cache)
         tree = deb + ".files"
         if not os.path.isdir(tree):
