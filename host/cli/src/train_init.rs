@@ -108,6 +108,13 @@ pub struct TrainInitArgs {
     /// from them identified fewer faces, docs/learning.md).
     #[arg(long, requires = "backgrounds")]
     pub no_photo_points: bool,
+    /// Fine-tuning: the finder of --from first scans every --backgrounds photo as `gpmm detect`
+    /// scans a photo (score 0.5 and up, faces down to 32 px), and each box it keeps on a face-free
+    /// part (on a photo of people, touching none of its known faces) is shown as "no face" at
+    /// three zooms and mirrored (4 in a batch of 64 scenes): the scan's own mistakes on small
+    /// windows, which random views of the photos rarely show it (docs/real-photos.md)
+    #[arg(long, requires_all = ["backgrounds", "from"])]
+    pub scan_mistakes: bool,
 }
 
 /// Runs `gpmm train-init`.
@@ -171,6 +178,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         bail!("--photo-faces {} is not a fraction from 0 to 1", opts.photo_faces);
     }
     opts.photo_points = !a.no_photo_points;
+    opts.scan_mistakes = a.scan_mistakes.then(gpmm_train::mistakes::MistakeScan::default);
     let backgrounds = if a.backgrounds.is_empty() {
         None
     } else {
@@ -214,6 +222,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
             bar.set_position(done as u64);
             bar.set_message(format!("loss {finder:.3} / {initializer:.3}"));
         }
+        gpmm_train::train::Progress::Scanning => bar.set_message("scanning the backgrounds for the finder's mistakes".to_string()),
         gpmm_train::train::Progress::Validating => bar.set_message("quantizing and validating".to_string()),
     };
     let (bytes, report) =

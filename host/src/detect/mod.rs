@@ -102,15 +102,23 @@ impl Detector {
         smallest_face: f32,
         reading: Reading,
     ) -> Result<Vec<Detection>, DetectError> {
+        let faces = self.scan_boxes(image, min_score, smallest_face)?;
         let (file, scratch) = self.parts()?;
         let (w, h) = (image.width() as usize, image.height() as usize);
-        let faces = scan_faces::<HOST_NET_SCRATCH, PHOTO_MAX_FACES>(&file, image.as_raw(), w, h, min_score, smallest_face, scratch)
-            .map_err(DetectError::Run)?;
         let mut out = Vec::with_capacity(faces.len());
         for face in faces {
             out.push(read_landmarks(&file, image.as_raw(), w, h, face, reading, scratch).map_err(DetectError::Run)?);
         }
         Ok(out)
+    }
+
+    /// The boxes of [`Detector::scan_all`]'s faces, unread (the finder only); best first.
+    pub fn scan_boxes(&mut self, image: &RgbImage, min_score: f32, smallest_face: f32) -> Result<Vec<FaceBox>, DetectError> {
+        let (file, scratch) = self.parts()?;
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        let faces = scan_faces::<HOST_NET_SCRATCH, PHOTO_MAX_FACES>(&file, image.as_raw(), w, h, min_score, smallest_face, scratch)
+            .map_err(DetectError::Run)?;
+        Ok(faces.into_iter().collect())
     }
 
     /// Reads the face in a given box (no finder run), as `reading` says.

@@ -5,6 +5,7 @@
 
 use crate::data::{face_free_frames, photo_face_samples, samples, Geometry, Sample};
 use crate::encode::{init_file_bytes, EncodeError};
+use crate::mistakes::{scan_mistakes, MistakeScan, Mistakes};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
 use crate::scene::backgrounds::Backgrounds;
 use crate::scene::head::HeadContext;
@@ -51,6 +52,10 @@ pub struct TrainOptions {
     pub photo_faces: f64,
     /// The initializer learns the reference points of those real faces too (else renders only).
     pub photo_points: bool,
+    /// Fine-tuning with background photos: the start file's finder scans them first, and every
+    /// box it keeps away from their known faces is shown with every cell "no face"
+    /// ([`crate::mistakes`]).
+    pub scan_mistakes: Option<MistakeScan>,
 }
 
 /// Face-free frames are the hardest one of this many candidates: those the finder, as trained so
@@ -88,6 +93,7 @@ impl TrainOptions {
             face_free: 0.125,
             photo_faces: 0.25,
             photo_points: true,
+            scan_mistakes: None,
         }
     }
 
@@ -114,6 +120,7 @@ impl TrainOptions {
             face_free: 0.125,
             photo_faces: 0.25,
             photo_points: true,
+            scan_mistakes: None,
         }
     }
 
@@ -153,6 +160,9 @@ pub struct TrainReport {
     pub render_seconds: f64,
     /// Seconds spent in optimizer steps.
     pub train_seconds: f64,
+    /// Boxes the start file's finder kept on face-free parts of the background photos
+    /// ([`TrainOptions::scan_mistakes`]; 0 without that scan).
+    pub scan_mistakes: usize,
 }
 
 /// What training reports as it goes.
@@ -174,6 +184,8 @@ pub enum Progress {
         /// Initializer loss of the step.
         initializer: f32,
     },
+    /// The start file's finder is scanning the background photos for its mistakes.
+    Scanning,
     /// Quantizing and validating.
     Validating,
 }
@@ -209,6 +221,9 @@ pub enum TrainError {
     /// Mirroring crops needs the symmetric iBUG-68 scheme.
     #[error("mirrored crops need the 68 iBUG landmarks; the model has {0}")]
     MirrorNeedsIbug68(usize),
+    /// Scanning for the finder's mistakes needs the file it starts from and background photos.
+    #[error("scanning for the finder's mistakes needs an init file to start from and background photos")]
+    MistakesNeedStart,
     /// A chunk of scenes rendered empty.
     #[error("no training scene could be rendered (is the model's landmark list valid?)")]
     NoScenes,
@@ -488,6 +503,14 @@ pub fn train_on(
     let (mut render_seconds, mut train_seconds) = (0.0, 0.0);
     // Each network's learning rate follows the cosine over its own steps.
     let lr_at = |done: usize, total: usize| cosine_lr(opts.lr, done, total);
+    let mistakes = match (opts.scan_mistakes, from, backgrounds) {
+        (None, _, _) => Mistakes::default(),
+        (Some(scan), Some(bytes), Some(b)) => {
+            progress(Progress::Scanning);
+            scan_mistakes(bytes, b, geo.frame_side, scan).map_err(TrainError::InitFile)?
+        }
+        (Some(_), _, _) => return Err(TrainError::MistakesNeedStart),
+    };
     for chunk in 0..opts.chunks {
         progress(Progress::Rendering { chunk });
         let start = (chunk * opts.chunk_scenes) as u64;
@@ -501,6 +524,7 @@ pub fn train_on(
         let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
         let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
         let per_batch = (opts.batch as f64 * opts.face_free).ceil() as usize;
+        let mistakes_per_batch = opts.scan_mistakes.map_or(0, |m| (opts.batch as f64 * m.per_scene).ceil() as usize);
         // Empty without photos of people.
         let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
         let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
@@ -516,7 +540,11 @@ pub fn train_on(
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
                 if train_f {
                     opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
-                    let free: Vec<&[i8]> = cycled(&face_free, per_batch, step).map(Vec::as_slice).collect();
+                    // The mistakes in turn over the whole training, not from the start each pass.
+                    let free: Vec<&[i8]> = cycled(&face_free, per_batch, step)
+                        .chain(cycled(&mistakes.frames, mistakes_per_batch, net_done[0]))
+                        .map(Vec::as_slice)
+                        .collect();
                     let seen: Vec<&Sample> = batch.iter().copied().chain(cycled(&real, real_per_batch, step)).collect();
                     let lf = finder_loss(&finder, &seen, &free, &geo, &device).map_err(TrainError::Tensor)?;
                     opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
@@ -606,6 +634,16 @@ pub fn train_on(
             .map(|m| serde_json::json!({ "kernel": m.metadata.kernel, "learning_iteration": m.metadata.learning.as_ref().map(|l| l.iteration) }))
             .collect();
     }
+    if let Some(scan) = opts.scan_mistakes {
+        metadata["scan_mistakes"] = serde_json::json!({
+            "min_score": scan.min_score,
+            "smallest_face": scan.smallest_face,
+            "per_scene": scan.per_scene,
+            "photos": mistakes.photos,
+            "boxes": mistakes.boxes,
+            "frames": mistakes.frames.len(),
+        });
+    }
     if let Some(from) = from_metadata {
         metadata["fine_tuned_from"] = serde_json::from_str(&from).unwrap_or(serde_json::Value::String(from));
     }
@@ -627,6 +665,7 @@ pub fn train_on(
         bytes: bytes.len(),
         render_seconds,
         train_seconds,
+        scan_mistakes: mistakes.boxes,
     };
     Ok((bytes, report))
 }

@@ -1,17 +1,21 @@
 //! Training on a mixture of models and fine-tuning an init file: scenes come from every model of
 //! the mixture, an init file dequantized and re-quantized without training detects as it did,
-//! and networks or models that do not fit the training are refused with the reason.
+//! networks or models that do not fit the training are refused with the reason, and a fine-tuning
+//! can show the finder its own mistakes on a scan of the background photos.
 
 mod common;
 
 use gpmm_core::net::face::{landmark_box, FaceBox, InitFile, Reading};
 use gpmm_core::net::{NetScratch, Shape};
+use gpmm_host::detect::photos::ReferenceFace;
 use gpmm_host::detect::Detector;
 use gpmm_host::gp::model::GpModel;
 use gpmm_host::render::Renderer;
 use gpmm_train::data::sample_of_scene;
 use gpmm_train::encode::{decode_network, encode_network, init_file_bytes};
+use gpmm_train::mistakes::{scan_mistakes, MistakeScan, MISTAKE_ZOOMS};
 use gpmm_train::nets::{finder_specs, initializer_specs, ArchitectureMismatch, Net};
+use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::{face_model_index, render_scene, FaceModel, Openings, SceneRanges, SceneSource};
 use gpmm_train::start::StartError;
 use gpmm_train::train::MixtureMismatch;
@@ -197,4 +201,45 @@ fn an_init_file_of_other_landmarks_or_models_of_another_topology_are_refused() {
     assert!(matches!(err, TrainError::Mixture { index: 1, error: MixtureMismatch::Vertices { .. } }), "{err}");
     let err = train_on(&[model, model, &five], None, None, None, &quick(), |_| {}).map(|r| r.1).unwrap_err();
     assert!(matches!(err, TrainError::Mixture { index: 2, error: MixtureMismatch::Landmarks { found: 5, expected: 68 } }), "{err}");
+}
+
+/// Face-free photos with some structure for a finder to take for faces: blobs on stripes.
+fn patterned_photos() -> Vec<image::RgbImage> {
+    (0..2u32)
+        .map(|k| {
+            image::RgbImage::from_fn(480, 360, |x, y| {
+                let blob = ((x % 60) as i32 - 30).pow(2) + ((y % 50) as i32 - 25).pow(2) < 120;
+                let v = if blob { 30 } else { 90 + ((x / (8 + k) + y / 11) % 2) as u8 * 120 };
+                image::Rgb([v, (v as u32 * 3 / 4) as u8, v / 2])
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn a_fine_tuning_shows_the_finder_its_own_mistakes_on_the_backgrounds_but_never_a_known_face() {
+    let Some(model) = model() else { return };
+    let original = trained(model);
+    // Every box counts at score 0: a scan surely keeps some on the patterns.
+    let scan = MistakeScan { min_score: 0.0, ..MistakeScan::default() };
+    let free = Backgrounds::from_photos(patterned_photos(), 0.5);
+    let found = scan_mistakes(original, &free, 96, scan).unwrap();
+    assert_eq!(found.photos, 2);
+    assert!(found.boxes > 0, "no mistake at score 0");
+    assert_eq!(found.frames.len(), found.boxes * 2 * MISTAKE_ZOOMS.len());
+    assert!(found.frames.iter().all(|f| f.len() == 96 * 96 * 3));
+    // The same photos each with a known face whose area covers them: nothing is a mistake.
+    let everywhere = ReferenceFace { bbox: [60.0, 20.0, 420.0, 340.0], landmarks: None };
+    let people = Backgrounds::from_labelled(patterned_photos().into_iter().map(|p| (p, vec![everywhere.clone()])).collect(), 0.5);
+    let none = scan_mistakes(original, &people, 96, scan).unwrap();
+    assert_eq!((none.photos, none.boxes, none.frames.len()), (2, 0, 0));
+    // A fine-tuning with the scan records what it found; without a file to start from it is refused.
+    let opts = TrainOptions { chunks: 1, scan_mistakes: Some(scan), ..quick() };
+    let (bytes, report) = train_on(&[model], None, Some(&free), Some(original), &opts, |_| {}).unwrap();
+    assert_eq!(report.scan_mistakes, found.boxes);
+    let metadata: serde_json::Value = serde_json::from_str(InitFile::parse(&bytes).unwrap().metadata).unwrap();
+    assert_eq!(metadata["scan_mistakes"]["boxes"], found.boxes, "{metadata}");
+    assert_eq!(metadata["scan_mistakes"]["frames"], found.frames.len(), "{metadata}");
+    let err = train_on(&[model], None, Some(&free), None, &opts, |_| {}).map(|r| r.1).unwrap_err();
+    assert!(matches!(err, TrainError::MistakesNeedStart), "{err}");
 }

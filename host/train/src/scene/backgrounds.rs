@@ -189,6 +189,12 @@ impl Backgrounds {
         self.targets.len()
     }
 
+    /// Every photo with the areas of its known faces (x0, y0, x1, y1 in its pixels: a reference
+    /// box grown by [`FACE_AREA_GROWTH`]), which no face-free part of it may touch.
+    pub fn photos_and_face_areas(&self) -> impl Iterator<Item = (&RgbImage, Vec<[f32; 4]>)> + '_ {
+        self.photos.iter().map(|p| (&p.image, p.faces.iter().map(|f| f.area).collect()))
+    }
+
     /// A `w × h` view of a random photo: a random part ([`SMALLEST_PART`] to all of the side of
     /// the largest window of that aspect the photo holds; on a photo of people a part that
     /// touches none of its faces), sometimes mirrored, scaled to the frame. `None` when no part
@@ -271,7 +277,7 @@ fn cut(photo: &RgbImage, (x, y, cw, ch): (u32, u32, u32, u32), w: u32, h: u32, f
 }
 
 /// Whether two x0, y0, x1, y1 boxes share any area.
-fn overlaps(a: [f32; 4], b: [f32; 4]) -> bool {
+pub(crate) fn overlaps(a: [f32; 4], b: [f32; 4]) -> bool {
     a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3]
 }
 
