@@ -111,7 +111,7 @@ pub struct TrainInitArgs {
     /// Fine-tuning: the finder of --from first scans every --backgrounds photo as `gpmm detect`
     /// scans a photo (score 0.5 and up, faces down to 32 px), and each box it keeps on a face-free
     /// part (on a photo of people, touching none of its known faces) is shown as "no face" at
-    /// three zooms and mirrored (4 in a batch of 64 scenes): the scan's own mistakes on small
+    /// three zooms and mirrored (2 in a batch of 64 scenes): the scan's own mistakes on small
     /// windows, which random views of the photos rarely show it (docs/real-photos.md)
     #[arg(long, requires_all = ["backgrounds", "from"])]
     pub scan_mistakes: bool,

@@ -32,9 +32,9 @@ pub struct MistakeScan {
     pub per_scene: f64,
 }
 
-/// Mistake frames per scene of a batch by default (4 in a batch of 64). Chosen on photos no
-/// training saw (docs/real-photos.md): with 16 the finder also lost many true faces.
-pub const MISTAKES_PER_SCENE: f64 = 0.0625;
+/// Mistake frames per scene of a batch by default (2 in a batch of 64). Chosen on photos no
+/// training saw (docs/real-photos.md): with 8 or 16 the finder also lost many true faces.
+pub const MISTAKES_PER_SCENE: f64 = 0.03125;
 
 impl Default for MistakeScan {
     /// Scores from 0.5, faces down to the scan's default smallest face, [`MISTAKES_PER_SCENE`].
