@@ -9,9 +9,9 @@
 //! every cell "no face".
 
 use crate::scene::backgrounds::{overlaps, Backgrounds};
+use crate::train::TrainError;
 use gpmm_core::net::face::FaceBox;
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
-use gpmm_core::net::NetError;
 use gpmm_host::detect::Detector;
 use image::RgbImage;
 use rayon::prelude::*;
@@ -56,22 +56,23 @@ pub struct Mistakes {
 
 /// Scans every photo of `backgrounds` with the finder of init file `init` and cuts each box that
 /// touches no known face into `side`-pixel frames ([`mistake_frames`]); photos in parallel, the
-/// result in photo order.
-pub fn scan_mistakes(init: &[u8], backgrounds: &Backgrounds, side: usize, scan: MistakeScan) -> Result<Mistakes, NetError> {
+/// result in photo order. A refused file ([`TrainError::InitFile`]) or a photo the networks refuse
+/// ([`TrainError::Detect`]) is an error.
+pub fn scan_mistakes(init: &[u8], backgrounds: &Backgrounds, side: usize, scan: MistakeScan) -> Result<Mistakes, TrainError> {
     // Refused files are refused once, here, not per photo.
-    Detector::from_bytes(init)?;
+    Detector::from_bytes(init).map_err(TrainError::InitFile)?;
     let photos: Vec<(&RgbImage, Vec<[f32; 4]>)> = backgrounds.photos_and_face_areas().collect();
-    let found: Vec<Vec<FaceBox>> = photos
+    let found = photos
         .par_iter()
         .map_init(
-            || Detector::from_bytes(init).ok(),
-            |detector, (image, areas)| {
-                let Some(detector) = detector.as_mut() else { return Vec::new() };
-                let boxes = detector.scan_boxes(image, scan.min_score, scan.smallest_face).unwrap_or_default();
-                boxes.into_iter().filter(|b| !areas.iter().any(|&a| overlaps(a, corners(b)))).collect()
+            || Detector::from_bytes(init),
+            |detector, (image, areas)| -> Result<Vec<FaceBox>, TrainError> {
+                let detector = detector.as_mut().map_err(|e| TrainError::InitFile(*e))?;
+                let boxes = detector.scan_boxes(image, scan.min_score, scan.smallest_face).map_err(TrainError::Detect)?;
+                Ok(boxes.into_iter().filter(|b| !areas.iter().any(|&a| overlaps(a, corners(b)))).collect())
             },
         )
-        .collect();
+        .collect::<Result<Vec<_>, _>>()?;
     let mut out = Mistakes { photos: photos.len(), ..Mistakes::default() };
     for ((image, areas), boxes) in photos.iter().zip(&found) {
         for b in boxes {

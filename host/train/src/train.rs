@@ -507,10 +507,11 @@ pub fn train_on(
         (None, _, _) => Mistakes::default(),
         (Some(scan), Some(bytes), Some(b)) => {
             progress(Progress::Scanning);
-            scan_mistakes(bytes, b, geo.frame_side, scan).map_err(TrainError::InitFile)?
+            scan_mistakes(bytes, b, geo.frame_side, scan)?
         }
         (Some(_), _, _) => return Err(TrainError::MistakesNeedStart),
     };
+    let mistakes_per_batch = opts.scan_mistakes.map_or(0, |m| (opts.batch as f64 * m.per_scene).ceil() as usize);
     for chunk in 0..opts.chunks {
         progress(Progress::Rendering { chunk });
         let start = (chunk * opts.chunk_scenes) as u64;
@@ -524,7 +525,6 @@ pub fn train_on(
         let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
         let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
         let per_batch = (opts.batch as f64 * opts.face_free).ceil() as usize;
-        let mistakes_per_batch = opts.scan_mistakes.map_or(0, |m| (opts.batch as f64 * m.per_scene).ceil() as usize);
         // Empty without photos of people.
         let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
         let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
