@@ -155,6 +155,14 @@ pub struct FaceBox {
     pub looks: u8,
 }
 
+impl FaceBox {
+    /// The box's left, top, right and bottom edges (px).
+    pub fn corners(&self) -> [f32; 4] {
+        let half = 0.5 * self.size;
+        [self.cx - half, self.cy - half, self.cx + half, self.cy + half]
+    }
+}
+
 /// What the initializer read from a face.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detection {
@@ -710,6 +718,7 @@ mod tests {
         assert_eq!(iou(&a, &face(15.0, 10.0, 10.0)), 50.0 / 150.0);
         assert_eq!(iou(&a, &face(30.0, 10.0, 10.0)), 0.0);
         assert_eq!(iou(&a, &face(f32::NAN, 10.0, 10.0)), 0.0);
+        assert_eq!(face(15.0, 10.0, 10.0).corners(), [10.0, 5.0, 20.0, 15.0]);
     }
 
     #[test]

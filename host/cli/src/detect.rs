@@ -144,9 +144,7 @@ pub fn write_pts(path: &Path, points: &[[f32; 2]], width: u32, height: u32) -> R
 /// The image with the finder's box (blue) and the landmarks (green) drawn.
 pub fn draw_detection(image: &RgbImage, det: &Detection) -> RgbImage {
     let mut out = image.clone();
-    let half = det.face.size * 0.5;
-    let (cx, cy) = (det.face.cx, det.face.cy);
-    draw_box(&mut out, [cx - half, cy - half, cx + half, cy + half], Rgb([40, 120, 255]), 1);
+    draw_box(&mut out, det.face.corners(), Rgb([40, 120, 255]), 1);
     let (w, h) = (out.width() as i64, out.height() as i64);
     let r = (w.max(h) / 200).max(1);
     for p in &det.landmarks {

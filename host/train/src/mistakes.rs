@@ -71,7 +71,7 @@ pub fn scan_mistakes(init: &[u8], backgrounds: &Backgrounds, side: usize, scan: 
             |detector, (image, areas)| -> Result<Vec<FaceBox>, TrainError> {
                 let detector = detector.as_mut().map_err(|e| TrainError::InitFile(*e))?;
                 let boxes = detector.scan_boxes(image, scan.min_score, scan.smallest_face).map_err(TrainError::Detect)?;
-                Ok(boxes.into_iter().filter(|b| !areas.iter().any(|&a| overlaps(a, corners(b)))).collect())
+                Ok(boxes.into_iter().filter(|b| !areas.iter().any(|&a| overlaps(a, b.corners()))).collect())
             },
         )
         .collect::<Result<Vec<_>, _>>()?;
@@ -128,12 +128,6 @@ pub fn train_then_learn_mistakes(
     Ok((bytes, report))
 }
 
-/// A box's x0, y0, x1, y1.
-fn corners(b: &FaceBox) -> [f32; 4] {
-    let half = 0.5 * b.size;
-    [b.cx - half, b.cy - half, b.cx + half, b.cy + half]
-}
-
 /// The finder's views of `mistake` in `image`: a square of each of [`MISTAKE_ZOOMS`] box sizes
 /// around it that touches none of the known faces' `areas` (x0, y0, x1, y1; a wide view of a
 /// mistake beside a face would show that face), and each mirrored (none for a box that is not a
@@ -146,7 +140,7 @@ pub fn mistake_frames(image: &RgbImage, mistake: &FaceBox, areas: &[[f32; 4]], s
         if !(size.is_finite() && size >= 1.0 && mistake.cx.is_finite() && mistake.cy.is_finite()) {
             continue;
         }
-        let view = corners(&FaceBox { size, ..*mistake });
+        let view = FaceBox { size, ..*mistake }.corners();
         if areas.iter().any(|&a| overlaps(a, view)) {
             continue;
         }
