@@ -108,15 +108,12 @@ pub struct TrainInitArgs {
     /// from them identified fewer faces, docs/learning.md).
     #[arg(long, requires = "backgrounds")]
     pub no_photo_points: bool,
-    /// The finder learns its own mistakes on the --backgrounds photos: a finder scans each as
-    /// `gpmm detect` scans a photo (score 0.5 and up, faces down to 32 px), and each box it keeps
-    /// on a face-free part (on a photo of people, touching none of its known faces) is shown as
-    /// "no face" at three zooms and mirrored (2 in a batch of 64 scenes): the scan's mistakes on
-    /// small windows, which random views of the photos rarely show it. With --from, the start
-    /// file's finder scans before the fine-tuning; without, the training's last 4 chunks are such
-    /// a fine-tuning (a quarter of the learning rate) of the finder its first chunks trained, in
-    /// about the same time (docs/real-photos.md)
-    #[arg(long, requires = "backgrounds")]
+    /// Fine-tuning: the finder of --from first scans every --backgrounds photo as `gpmm detect`
+    /// scans a photo (score 0.5 and up, faces down to 32 px), and each box it keeps on a face-free
+    /// part (on a photo of people, touching none of its known faces) is shown as "no face" at
+    /// three zooms and mirrored (2 in a batch of 64 scenes): the scan's own mistakes on small
+    /// windows, which random views of the photos rarely show it (docs/real-photos.md)
+    #[arg(long, requires_all = ["backgrounds", "from"])]
     pub scan_mistakes: bool,
 }
 

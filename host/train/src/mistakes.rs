@@ -9,12 +9,10 @@
 //! every cell "no face".
 
 use crate::scene::backgrounds::{overlaps, Backgrounds};
-use crate::scene::head::HeadContext;
-use crate::train::{train_on, Progress, TrainError, TrainOptions, TrainReport, FINE_TUNE_CHUNKS, FINE_TUNE_LR_SHARE};
+use crate::train::TrainError;
 use gpmm_core::net::face::FaceBox;
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::detect::Detector;
-use gpmm_host::gp::model::GpModel;
 use image::RgbImage;
 use rayon::prelude::*;
 
@@ -83,49 +81,6 @@ pub fn scan_mistakes(init: &[u8], backgrounds: &Backgrounds, side: usize, scan: 
         }
     }
     Ok(out)
-}
-
-/// A training from random weights that ends on its own mistakes: the first chunks train as usual
-/// and are quantized, that finder scans the background photos ([`scan_mistakes`]), and the last
-/// [`FINE_TUNE_CHUNKS`] (half the chunks, if fewer) fine-tune both networks with those mistakes, at
-/// [`FINE_TUNE_LR_SHARE`] of the learning rate and on the next chunks of the same scene stream.
-/// As long as a training of `opts.chunks` chunks, plus one scan; the steps are reported as one
-/// count, and the file records the first stage under `"fine_tuned_from"`.
-pub fn train_then_learn_mistakes(
-    models: &[&GpModel],
-    head: Option<&HeadContext>,
-    backgrounds: Option<&Backgrounds>,
-    opts: &TrainOptions,
-    progress: &mut dyn FnMut(Progress),
-) -> Result<(Vec<u8>, TrainReport), TrainError> {
-    let last = FINE_TUNE_CHUNKS.min(opts.chunks / 2);
-    if last == 0 {
-        return Err(TrainError::MistakesNeedChunks(opts.chunks));
-    }
-    // The first stage is not validated: the file that comes out of the second is.
-    let first = TrainOptions { chunks: opts.chunks - last, scan_mistakes: None, validation: 0, ..opts.clone() };
-    let second =
-        TrainOptions { chunks: last, first_chunk: opts.first_chunk + first.chunks, lr: opts.lr * FINE_TUNE_LR_SHARE, ..opts.clone() };
-    let (total, offset) = (first.steps() + second.steps(), first.steps());
-    let (start, early) = train_on(models, head, backgrounds, None, &first, |p| {
-        progress(match p {
-            Progress::Step { done, finder, initializer, .. } => Progress::Step { done, total, finder, initializer },
-            // Its quantizing is the scan's start.
-            Progress::Validating => Progress::Scanning,
-            p => p,
-        })
-    })?;
-    let (bytes, mut report) = train_on(models, head, backgrounds, Some(&start), &second, |p| {
-        progress(match p {
-            Progress::Rendering { chunk } => Progress::Rendering { chunk: chunk + first.chunks },
-            Progress::Step { done, finder, initializer, .. } => Progress::Step { done: done + offset, total, finder, initializer },
-            p => p,
-        })
-    })?;
-    report.steps = total;
-    report.render_seconds += early.render_seconds;
-    report.train_seconds += early.train_seconds;
-    Ok((bytes, report))
 }
 
 /// The finder's views of `mistake` in `image`: a square of each of [`MISTAKE_ZOOMS`] box sizes

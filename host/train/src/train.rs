@@ -5,7 +5,7 @@
 
 use crate::data::{face_free_frames, photo_face_samples, samples, Geometry, Sample};
 use crate::encode::{init_file_bytes, EncodeError};
-use crate::mistakes::{scan_mistakes, train_then_learn_mistakes, MistakeScan, Mistakes};
+use crate::mistakes::{scan_mistakes, MistakeScan, Mistakes};
 use crate::nets::{batch_tensor, finder_specs, initializer_specs, Net};
 use crate::scene::backgrounds::Backgrounds;
 use crate::scene::head::HeadContext;
@@ -27,9 +27,6 @@ pub struct TrainOptions {
     pub seed: u64,
     /// Chunks of fresh scenes.
     pub chunks: usize,
-    /// Chunks of the scene stream passed over first: a training's later stage renders the
-    /// stream's chunks from here on, not its first ones again.
-    pub first_chunk: usize,
     /// Scenes rendered per chunk.
     pub chunk_scenes: usize,
     /// Passes over each chunk.
@@ -55,10 +52,9 @@ pub struct TrainOptions {
     pub photo_faces: f64,
     /// The initializer learns the reference points of those real faces too (else renders only).
     pub photo_points: bool,
-    /// With background photos: a finder scans them, and every box it keeps away from their known
-    /// faces is shown with every cell "no face" ([`crate::mistakes`]). A fine-tuning scans with the
-    /// start file's finder first; a training from random weights ends on a fine-tuning that scans
-    /// with the finder trained so far ([`crate::mistakes::train_then_learn_mistakes`]).
+    /// Fine-tuning with background photos: the start file's finder scans them first, and every
+    /// box it keeps away from their known faces is shown with every cell "no face"
+    /// ([`crate::mistakes`]).
     pub scan_mistakes: Option<MistakeScan>,
 }
 
@@ -86,7 +82,6 @@ impl TrainOptions {
         Self {
             seed,
             chunks: 40,
-            first_chunk: 0,
             chunk_scenes: 2048,
             passes: 3,
             init_passes: 3,
@@ -114,7 +109,6 @@ impl TrainOptions {
         Self {
             seed,
             chunks: 2,
-            first_chunk: 0,
             chunk_scenes: 48,
             passes: 1,
             init_passes: 1,
@@ -227,13 +221,9 @@ pub enum TrainError {
     /// Mirroring crops needs the symmetric iBUG-68 scheme.
     #[error("mirrored crops need the 68 iBUG landmarks; the model has {0}")]
     MirrorNeedsIbug68(usize),
-    /// Scanning for the finder's mistakes needs background photos to scan.
-    #[error("scanning for the finder's mistakes needs background photos to scan")]
-    MistakesNeedBackgrounds,
-    /// A training from random weights that learns its mistakes needs a chunk before the scan and
-    /// one after it.
-    #[error("learning the finder's mistakes in a training from random weights needs at least 2 chunks, not {0}")]
-    MistakesNeedChunks(usize),
+    /// Scanning for the finder's mistakes needs the file it starts from and background photos.
+    #[error("scanning for the finder's mistakes needs an init file to start from and background photos")]
+    MistakesNeedStart,
     /// A chunk of scenes rendered empty.
     #[error("no training scene could be rendered (is the model's landmark list valid?)")]
     NoScenes,
@@ -515,17 +505,16 @@ pub fn train_on(
     let lr_at = |done: usize, total: usize| cosine_lr(opts.lr, done, total);
     let mistakes = match (opts.scan_mistakes, from, backgrounds) {
         (None, _, _) => Mistakes::default(),
-        (Some(_), _, None) => return Err(TrainError::MistakesNeedBackgrounds),
         (Some(scan), Some(bytes), Some(b)) => {
             progress(Progress::Scanning);
             scan_mistakes(bytes, b, geo.frame_side, scan)?
         }
-        (Some(_), None, Some(_)) => return train_then_learn_mistakes(models, head, backgrounds, opts, &mut progress),
+        (Some(_), _, _) => return Err(TrainError::MistakesNeedStart),
     };
     let mistakes_per_batch = opts.scan_mistakes.map_or(0, |m| (opts.batch as f64 * m.per_scene).ceil() as usize);
     for chunk in 0..opts.chunks {
         progress(Progress::Rendering { chunk });
-        let start = ((opts.first_chunk + chunk) * opts.chunk_scenes) as u64;
+        let start = (chunk * opts.chunk_scenes) as u64;
         let t0 = std::time::Instant::now();
         let data = samples(source, &geo, opts.seed, start, opts.chunk_scenes as u64);
         render_seconds += t0.elapsed().as_secs_f64();
@@ -545,7 +534,7 @@ pub fn train_on(
         let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
         let (mut f, mut i) = (last_f, last_i);
         for pass in 0..opts.passes.max(opts.init_passes) {
-            let order = pass_order(opts.seed, opts.first_chunk + chunk, pass, data.len());
+            let order = pass_order(opts.seed, chunk, pass, data.len());
             let (train_f, train_i) = (pass < opts.passes, pass < opts.init_passes);
             for (step, idx) in order.chunks(opts.batch).enumerate() {
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();

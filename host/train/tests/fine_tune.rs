@@ -1,8 +1,7 @@
 //! Training on a mixture of models and fine-tuning an init file: scenes come from every model of
 //! the mixture, an init file dequantized and re-quantized without training detects as it did,
 //! networks or models that do not fit the training are refused with the reason, and a fine-tuning
-//! can show the finder its own mistakes on a scan of the background photos, as can the last chunks
-//! of a training from random weights.
+//! can show the finder its own mistakes on a scan of the background photos.
 
 mod common;
 
@@ -19,7 +18,7 @@ use gpmm_train::nets::{finder_specs, initializer_specs, ArchitectureMismatch, Ne
 use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::{face_model_index, render_scene, FaceModel, Openings, SceneRanges, SceneSource};
 use gpmm_train::start::StartError;
-use gpmm_train::train::{MixtureMismatch, Progress};
+use gpmm_train::train::MixtureMismatch;
 use gpmm_train::{train_on, TrainError, TrainOptions};
 use rand::SeedableRng;
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -241,39 +240,6 @@ fn a_fine_tuning_shows_the_finder_its_own_mistakes_on_the_backgrounds_but_never_
     let metadata: serde_json::Value = serde_json::from_str(InitFile::parse(&bytes).unwrap().metadata).unwrap();
     assert_eq!(metadata["scan_mistakes"]["boxes"], found.boxes, "{metadata}");
     assert_eq!(metadata["scan_mistakes"]["frames"], found.frames.len(), "{metadata}");
-    let err = train_on(&[model], None, None, Some(original), &opts, |_| {}).map(|r| r.1).unwrap_err();
-    assert!(matches!(err, TrainError::MistakesNeedBackgrounds), "{err}");
-}
-
-#[test]
-fn a_training_from_random_weights_ends_on_a_fine_tuning_with_its_own_mistakes() {
-    let Some(model) = model() else { return };
-    let scan = MistakeScan { min_score: 0.0, ..MistakeScan::default() };
-    let free = Backgrounds::from_photos(patterned_photos(), 0.5);
-    let opts = TrainOptions { scan_mistakes: Some(scan), ..quick() };
-    let mut steps = Vec::new();
-    let mut scanned = false;
-    let (bytes, report) = train_on(&[model], None, Some(&free), None, &opts, |p| match p {
-        Progress::Step { done, total, .. } => steps.push((done, total)),
-        Progress::Scanning => scanned = true,
-        _ => {}
-    })
-    .unwrap();
-    // One count of steps over both stages, ending where a training of these chunks ends.
-    let total = opts.steps();
-    assert_eq!(report.steps, total);
-    assert!(steps.iter().all(|&(_, t)| t == total), "{steps:?}");
-    assert_eq!(steps.iter().map(|s| s.0).collect::<Vec<_>>(), (1..=total).collect::<Vec<_>>());
-    assert!(scanned && report.scan_mistakes > 0, "no mistakes scanned at score 0");
-    // The file is the second stage's: a fine-tuning of the first, on the stream's next chunk.
-    let metadata: serde_json::Value = serde_json::from_str(InitFile::parse(&bytes).unwrap().metadata).unwrap();
-    assert_eq!(metadata["scan_mistakes"]["boxes"], report.scan_mistakes, "{metadata}");
-    assert_eq!(metadata["fine_tuned_from"]["scenes"], opts.chunk_scenes, "{metadata}");
-    assert!(metadata["fine_tuned_from"].get("scan_mistakes").is_none(), "the first stage scans nothing: {metadata}");
-    // A single chunk cannot be split; nothing to scan is refused.
-    let one = TrainOptions { chunks: 1, ..opts.clone() };
-    let err = train_on(&[model], None, Some(&free), None, &one, |_| {}).map(|r| r.1).unwrap_err();
-    assert!(matches!(err, TrainError::MistakesNeedChunks(1)), "{err}");
-    let err = train_on(&[model], None, None, None, &opts, |_| {}).map(|r| r.1).unwrap_err();
-    assert!(matches!(err, TrainError::MistakesNeedBackgrounds), "{err}");
+    let err = train_on(&[model], None, Some(&free), None, &opts, |_| {}).map(|r| r.1).unwrap_err();
+    assert!(matches!(err, TrainError::MistakesNeedStart), "{err}");
 }
