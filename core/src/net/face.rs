@@ -2,6 +2,7 @@
 //! locates the face in the whole frame, the initializer reads the 68 landmarks, the head pose and
 //! the low-order light from a crop around it.
 
+use super::agreement::{mean_gap, ReadingAgreement};
 use super::resample::{flip_rows, sample_rgb, Window};
 use super::{NetError, NetScratch, Network};
 use crate::format::bytes::{check_crc, Reader, Writer};
@@ -535,6 +536,20 @@ pub fn read_landmarks<const A: usize>(
     reading: Reading,
     scratch: &mut NetScratch<A>,
 ) -> Result<Detection, NetError> {
+    read_landmarks_measured(init, rgb, w, h, face, reading, scratch).map(|(det, _)| det)
+}
+
+/// [`read_landmarks`], with how well the reading agrees with its mirror image and the box
+/// ([`ReadingAgreement`]; `None` without the mirrored reading). The same runs, the same bits.
+pub fn read_landmarks_measured<const A: usize>(
+    init: &InitFile<'_>,
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    face: FaceBox,
+    reading: Reading,
+    scratch: &mut NetScratch<A>,
+) -> Result<(Detection, Option<ReadingAgreement>), NetError> {
     let mut det = Detection::unread(face);
     let mut crop = (face.cx, face.cy, face.size);
     for pass in 0..=reading.refine {
@@ -551,9 +566,11 @@ pub fn read_landmarks<const A: usize>(
             }
         }
     }
+    let mut agreement = None;
     if reading.mirror && init.landmarks == IBUG68_POINTS {
         let mut seen = Detection::unread(face);
         read_face(init, (rgb, w, h), crop, true, scratch, &mut seen)?;
+        let gap = mean_gap(&det.landmarks, &seen.landmarks);
         let mean = |a: &mut f32, b: f32| *a = 0.5 * (*a + b);
         for (p, q) in det.landmarks.iter_mut().zip(&seen.landmarks) {
             mean(&mut p[0], q[0]);
@@ -561,8 +578,9 @@ pub fn read_landmarks<const A: usize>(
         }
         det.angles.iter_mut().zip(seen.angles).for_each(|(a, b)| mean(a, b));
         det.light.iter_mut().zip(&seen.light).for_each(|(a, &b)| mean(a, b));
+        agreement = gap.and_then(|gap| ReadingAgreement::measure(&face, gap, &det.landmarks));
     }
-    Ok(det)
+    Ok((det, agreement))
 }
 
 /// How far re-centring may take the crop's size from the finder's box, either way (a factor: the

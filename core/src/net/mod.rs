@@ -13,6 +13,7 @@
 //! (1, 3 or 5), stride 1 or 2 and zero padding `kernel / 2` (output side `(in + 2·pad − k) / s + 1`),
 //! and a dense layer over the whole flattened tensor (`(y·W + x)·C + c` order).
 
+pub mod agreement;
 pub mod crop;
 pub mod face;
 pub mod resample;
@@ -255,6 +256,11 @@ impl<'a> Network<'a> {
         let len = r.position();
         let body = bytes.get(..len).ok_or(FormatError::Truncated { needed: len, available: bytes.len() })?;
         Ok((Self { bytes: body, layers, input, output: shape, largest }, len))
+    }
+
+    /// The network's bytes (its section of the init file, without padding).
+    pub fn bytes(&self) -> &'a [u8] {
+        self.bytes
     }
 
     /// Shape of the input tensor.

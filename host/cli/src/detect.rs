@@ -45,11 +45,18 @@ pub struct DetectArgs {
     /// as a board does.
     #[arg(long, value_name = "PX", default_value_t = gpmm_host::detect::DEFAULT_SMALLEST_FACE)]
     pub smallest_face: f32,
+    /// Keep photos' faces that fail the init file's face check (`gpmm check-init`), for
+    /// comparisons; files without a check are not checked anyway.
+    #[arg(long)]
+    pub no_face_check: bool,
 }
 
 /// Runs `gpmm detect`.
 pub fn detect(a: DetectArgs) -> Result<()> {
     let mut detector = Detector::load(&a.init)?;
+    if a.no_face_check {
+        detector.set_check(None);
+    }
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
     let faces = detector.scan_all(&image, a.min_score, a.smallest_face, Reading { refine: a.refine, mirror: !a.single_read })?;
     if faces.is_empty() {
@@ -97,7 +104,7 @@ fn pick(image: &Path, faces: &[Detection], index: Option<usize>) -> Result<usize
 pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: Option<usize>) -> Result<PathBuf> {
     let mut detector = Detector::load(init_path)?;
     let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
-    let faces = detector.scan_all(&image, DEFAULT_MIN_SCORE, gpmm_host::detect::DEFAULT_SMALLEST_FACE, Reading::DEFAULT)?;
+    let faces = detector.scan_for_fit(&image, DEFAULT_MIN_SCORE, gpmm_host::detect::DEFAULT_SMALLEST_FACE, Reading::DEFAULT)?;
     if faces.is_empty() {
         bail!("{}: no face found by {}", image_path.display(), init_path.display());
     }
@@ -200,8 +207,13 @@ pub struct PhotoSetRun<'a> {
 
 /// `gpmm eval detect` on a real-photo set: prints the summary, writes DIR/detect.json (unless
 /// --no-write) and the pictures (--draw-dir).
-pub fn eval_photo_set(detector: &mut Detector, a: &PhotoSetRun<'_>) -> Result<()> {
-    let (summary, results) = gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.smallest_face, a.reading)?;
+pub fn eval_photo_set(detector: &Detector, a: &PhotoSetRun<'_>) -> Result<()> {
+    let total = gpmm_host::detect::photos::list_photo_set(a.dir)?.len();
+    let pb = crate::progress::counter(total, "photos");
+    let progress = |done: usize, _: usize| pb.set_position(done as u64);
+    let (summary, results) =
+        gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.smallest_face, a.reading, &progress)?;
+    pb.finish_and_clear();
     if let Some(dir) = a.draw_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in &results {

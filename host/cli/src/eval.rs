@@ -112,6 +112,10 @@ pub struct DetectEvalArgs {
     /// fills enough of one, each window's face confirmed by a closer look; `inf`: no scan.
     #[arg(long, value_name = "PX", default_value_t = gpmm_host::detect::DEFAULT_SMALLEST_FACE)]
     pub smallest_face: f32,
+    /// Keep photos' faces that fail the init file's face check (`gpmm check-init`), for
+    /// comparisons; files without a check are not checked anyway.
+    #[arg(long)]
+    pub no_face_check: bool,
     /// Real-photo sets: write each photo with its boxes drawn to DRAW_DIR/STEM.png.
     #[arg(long, value_name = "DRAW_DIR")]
     pub draw_dir: Option<PathBuf>,
@@ -383,6 +387,9 @@ pub fn eval(a: EvalArgs) -> Result<()> {
 /// Runs `gpmm eval detect`.
 fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     let mut init = gpmm_host::detect::Detector::load(&a.init)?;
+    if a.no_face_check {
+        init.set_check(None);
+    }
     if !gpmm_host::detect::photos::list_photo_set(&a.dir)?.is_empty() {
         let run = crate::detect::PhotoSetRun {
             dir: &a.dir,
@@ -393,7 +400,7 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
             draw_dir: a.draw_dir.as_deref(),
             write: !a.no_write,
         };
-        return crate::detect::eval_photo_set(&mut init, &run);
+        return crate::detect::eval_photo_set(&init, &run);
     }
     let images = gpmm_host::detect::eval::list_images(&a.dir, a.reference_dir.as_deref())?;
     if images.is_empty() {

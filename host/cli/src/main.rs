@@ -3,6 +3,7 @@
 
 mod build;
 mod calibrate;
+mod check_init;
 mod demo;
 mod detect;
 mod device;
@@ -82,6 +83,17 @@ pub enum Command {
     /// nose tip sits off the eyes' midpoint, and writes it as JSON. `gpmm fit`, `bench-fit` and
     /// `eval recognition` take it with --landmark-calibration and correct the points before the fit.
     CalibrateLandmarks(calibrate::CalibrateArgs),
+    /// Learn an init file's face check from photos with known faces.
+    ///
+    /// The finder scores some hands, textures and parts of faces as high as faces; their readings
+    /// mostly do not look like a face's: the initializer reads them differently in the mirror
+    /// image, and their landmarks do not fill the finder's box. This scans every photo of the sets
+    /// (down to --smallest-face, boxes scoring 0.5 or more), reads each box, and fits a logistic
+    /// regression of "one of the photo's known faces" on the finder's score and those measures. The
+    /// threshold keeps --kept-share of the known faces. The check is written into the init file's
+    /// metadata; `gpmm detect`, `fit --init` and `eval detect` then leave out photos' faces that
+    /// fail it (--no-face-check: keep them). docs/real-photos.md, "The reading's check".
+    CheckInit(check_init::CheckInitArgs),
     /// Evaluate models like the paper: recognition across yaw, specificity / generalization / compactness.
     Eval(eval::EvalArgs),
     /// Learn a model from unlabelled images: no landmark files, labels or poses.
@@ -204,6 +216,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Fit(a) => fit::fit(a),
         Command::BenchFit(a) => fit::bench_fit(a),
         Command::CalibrateLandmarks(a) => calibrate::calibrate(a),
+        Command::CheckInit(a) => check_init::check_init(a),
         Command::Eval(a) => eval::eval(a),
         Command::Learn(a) => learn::learn(*a),
         Command::Register(a) => register::register_mesh(a),

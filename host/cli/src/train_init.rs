@@ -115,6 +115,11 @@ pub struct TrainInitArgs {
     /// windows, which random views of the photos rarely show it (docs/real-photos.md)
     #[arg(long, requires_all = ["backgrounds", "from"])]
     pub scan_mistakes: bool,
+    /// Do not fit the face check: by default, when --backgrounds holds photos of people, the
+    /// trained file's finder scans every --backgrounds photo and a check of its readings is fitted
+    /// and written into the file's metadata, as `gpmm check-init` does (about a minute).
+    #[arg(long, requires = "backgrounds", help_heading = COMPARISONS)]
+    pub no_face_check: bool,
 }
 
 /// Runs `gpmm train-init`.
@@ -232,11 +237,43 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
                 (e, _) => anyhow::anyhow!("cannot train on {}: {e}", first.display()),
             }
         })?;
+    let bytes = match &backgrounds {
+        Some(b) if b.people_photos() > 0 && !a.no_face_check => {
+            bar.set_message("fitting the face check on the backgrounds".to_string());
+            with_face_check(bytes, &a.backgrounds, &bar)?
+        }
+        _ => bytes,
+    };
     bar.finish_and_clear();
     std::fs::write(&a.output, &bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
+}
+
+/// `bytes` (a trained init file) with a face check fitted on the photos of `dirs`
+/// ([`gpmm_host::detect::check_fit::fit_check`]); unchanged, with a note, when too few boxes
+/// were found to fit one.
+fn with_face_check(bytes: Vec<u8>, dirs: &[PathBuf], bar: &ProgressBar) -> Result<Vec<u8>> {
+    use gpmm_host::detect::check::{CheckError, KEPT_FACE_SHARE};
+    use gpmm_host::detect::check_fit::{fit_check, with_metadata, CheckFitError};
+    let detector = gpmm_host::detect::Detector::from_bytes(&bytes).map_err(|e| anyhow::anyhow!("the trained file: {e}"))?;
+    let dirs: Vec<&Path> = dirs.iter().map(PathBuf::as_path).collect();
+    let smallest = gpmm_host::detect::DEFAULT_SMALLEST_FACE;
+    let reading = gpmm_core::net::face::Reading::DEFAULT;
+    match fit_check(&detector, &dirs, smallest, reading, KEPT_FACE_SHARE, &|_, _| {}) {
+        Ok(check) => {
+            let file = detector.file().map_err(|e| anyhow::anyhow!("the trained file: {e}"))?;
+            let metadata = check.into_metadata(file.metadata)?;
+            note(bar, format!("face check: fitted on {} known faces and {} other boxes", check.faces, check.others));
+            with_metadata(&bytes, &metadata).map_err(|e| anyhow::anyhow!("the trained file with its face check: {e}"))
+        }
+        Err(CheckFitError::Check(e @ CheckError::TooFew { .. })) => {
+            note(bar, format!("no face check: {e}"));
+            Ok(bytes)
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// The mesh (the directory's only .ply) and `landmarks_ibug68.json` of a template directory.

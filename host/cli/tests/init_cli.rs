@@ -256,7 +256,12 @@ fn photos_of_people_give_the_finder_real_faces_and_their_surroundings() {
     std::fs::write(people.join("group.faces.json"), faces.to_string()).unwrap();
     let (init, preview) = (f.dir.path().join("people.init"), f.dir.path().join("people.png"));
     let args = ["train-init", s(&f.model), "-o", s(&init), "--quick", "--seed", "7", "--backgrounds", s(&people)];
-    ok(&gpmm(&[&args[..], &["--preview", s(&preview)]].concat()));
+    let run = gpmm(&[&args[..], &["--preview", s(&preview)]].concat());
+    ok(&run);
+    // One photo of people gives too few boxes to fit a face check: said, and the file has none.
+    let said = String::from_utf8_lossy(&run.stderr);
+    assert!(said.contains("no face check: too few boxes"), "{said}");
+    assert!(gpmm_host::detect::Detector::load(&init).unwrap().check().is_none());
     let text = String::from_utf8_lossy(&std::fs::read(&init).unwrap()).into_owned();
     assert!(text.contains("\"people_photos\":1") && text.contains("\"photo_faces\":1"), "metadata lacks the photos of people");
     assert!(text.contains("\"photo_face_share\":0.25"), "metadata lacks the share of real faces");
@@ -461,4 +466,23 @@ fn fine_tuning_on_a_mixture_writes_a_file_detect_reads_and_refuses_what_does_not
     // Zero chunks re-quantize --from's networks, and mean nothing without it.
     let err = fails(&gpmm(&["train-init", s(&f.model), "--chunks", "0", "--quick", "-o", s(&f.dir.path().join("x.init"))]));
     assert!(err.contains("--chunks 0"), "{err}");
+}
+
+#[test]
+fn check_init_refuses_too_few_boxes_and_an_empty_folder_by_name() {
+    let Some(f) = fixture() else { return };
+    let set = f.dir.path().join("check-set");
+    std::fs::create_dir_all(&set).unwrap();
+    image::RgbImage::from_pixel(200, 150, image::Rgb([128, 128, 128])).save(set.join("gray.png")).unwrap();
+    std::fs::write(set.join("gray.faces.json"), r#"{"faces": []}"#).unwrap();
+    let out = f.dir.path().join("checked.init");
+    let err = fails(&gpmm(&["check-init", s(&f.init), "--photos", s(&set), "-o", s(&out)]));
+    assert!(err.contains("too few boxes") && err.contains("0 true faces"), "{err}");
+    assert!(!out.exists());
+    let empty = f.dir.path().join("check-empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    let err = fails(&gpmm(&["check-init", s(&f.init), "--photos", s(&empty), "-o", s(&out)]));
+    assert!(err.contains("no photo") && err.contains("check-empty"), "{err}");
+    let err = fails(&gpmm(&["check-init", s(&f.init), "--photos", s(&set), "-o", s(&out), "--kept-share", "1.5"]));
+    assert!(err.contains("--kept-share"), "{err}");
 }

@@ -2,10 +2,14 @@
 //! core ([`Detector`]), and measured on images with reference landmarks ([`eval`]). Training
 //! them and writing init files is the `gpmm-train` crate's job.
 
+pub mod check;
+pub mod check_fit;
 pub mod eval;
 pub mod photos;
 
-use gpmm_core::net::face::{detect, read_landmarks, Detection, FaceBox, InitFile, Reading};
+use check::FaceCheck;
+use gpmm_core::net::agreement::ReadingAgreement;
+use gpmm_core::net::face::{detect, read_landmarks, read_landmarks_measured, Detection, FaceBox, InitFile, Reading};
 use gpmm_core::net::scan::scan_faces;
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
@@ -41,37 +45,61 @@ pub enum DetectError {
         /// What the core's reader refused.
         error: NetError,
     },
+    /// The file's face check (its metadata) is not readable.
+    #[error("{path}: {error}")]
+    Check {
+        /// The file.
+        path: PathBuf,
+        /// What was wrong.
+        error: check::CheckError,
+    },
     /// A run of the networks failed.
     #[error("the face networks refused the image: {0}")]
     Run(NetError),
 }
 
 /// The finder and the initializer of an init file, loaded into a 4-aligned buffer with scratch
-/// for their runs.
-#[derive(Debug)]
+/// for their runs (a clone has its own scratch, for another thread).
+#[derive(Debug, Clone)]
 pub struct Detector {
     words: Vec<u32>,
     len: usize,
     scratch: Box<NetScratch<HOST_NET_SCRATCH>>,
+    check: Option<FaceCheck>,
 }
 
 impl Detector {
     /// Reads and validates an init file.
     pub fn load(path: &Path) -> Result<Self, DetectError> {
         let bytes = std::fs::read(path).map_err(|error| DetectError::Io { path: path.to_owned(), error })?;
-        Self::from_bytes(&bytes).map_err(|error| DetectError::Invalid { path: path.to_owned(), error })
+        let detector = Self::from_bytes(&bytes).map_err(|error| DetectError::Invalid { path: path.to_owned(), error })?;
+        let metadata = detector.file().map(|f| f.metadata).unwrap_or("");
+        FaceCheck::from_metadata(metadata).map_err(|error| DetectError::Check { path: path.to_owned(), error })?;
+        Ok(detector)
     }
 
     /// Validates init-file bytes (copied into an aligned buffer).
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetError> {
         let mut words = vec![0u32; bytes.len().div_ceil(4)];
         bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-        let model = Self { words, len: bytes.len(), scratch: Box::new(NetScratch::new()) };
+        let mut model = Self { words, len: bytes.len(), scratch: Box::new(NetScratch::new()), check: None };
         let file = model.file()?;
         if file.scratch_bytes() > HOST_NET_SCRATCH {
             return Err(NetError::ScratchTooSmall { needed: file.scratch_bytes() });
         }
+        // A check that cannot be read is reported by `load`; here the file is used without it.
+        model.check = FaceCheck::from_metadata(file.metadata).ok().flatten();
         Ok(model)
+    }
+
+    /// The file's face check ([`check`]), if it has one and it is in use.
+    pub fn check(&self) -> Option<&FaceCheck> {
+        self.check.as_ref()
+    }
+
+    /// Uses `check` for photos' faces instead of the file's (`None`: no check).
+    pub fn set_check(&mut self, check: Option<FaceCheck>) {
+        self.check = check;
     }
 
     /// The file's bytes.
@@ -94,7 +122,8 @@ impl Detector {
 
     /// Finds every face in a photo whose finder score reaches `min_score`, scanning windows at
     /// several scales for faces down to `smallest_face` pixels ([`gpmm_core::net::scan`]), and
-    /// reads each as `reading` says; best first.
+    /// reads each as `reading` says; best first. With a face check ([`Detector::check`]), a face
+    /// whose reading fails it is left out.
     pub fn scan_all(
         &mut self,
         image: &RgbImage,
@@ -102,12 +131,45 @@ impl Detector {
         smallest_face: f32,
         reading: Reading,
     ) -> Result<Vec<Detection>, DetectError> {
+        let check = self.check;
+        let found = self.scan_measured(image, min_score, smallest_face, reading)?;
+        let passes = |(det, a): &(Detection, Option<ReadingAgreement>)| check.is_none_or(|c| c.passes(det.face.score, a.as_ref()));
+        Ok(found.into_iter().filter(passes).map(|(det, _)| det).collect())
+    }
+
+    /// The faces a command that fits one face chooses from (`gpmm fit --init`, `learn`):
+    /// [`Detector::scan_all`]'s, or, when the face check leaves none, every face the finder found
+    /// (the image was given as a face's; a true face the check refuses is better fitted than
+    /// none).
+    pub fn scan_for_fit(
+        &mut self,
+        image: &RgbImage,
+        min_score: f32,
+        smallest_face: f32,
+        reading: Reading,
+    ) -> Result<Vec<Detection>, DetectError> {
+        let check = self.check;
+        let found = self.scan_measured(image, min_score, smallest_face, reading)?;
+        let passes = |(det, a): &(Detection, Option<ReadingAgreement>)| check.is_none_or(|c| c.passes(det.face.score, a.as_ref()));
+        let any_passes = found.iter().any(passes);
+        Ok(found.into_iter().filter(|f| !any_passes || passes(f)).map(|(det, _)| det).collect())
+    }
+
+    /// [`Detector::scan_all`]'s faces before the face check, each with how well its reading
+    /// agrees with its mirror image and the box (`None` without the mirrored reading).
+    pub fn scan_measured(
+        &mut self,
+        image: &RgbImage,
+        min_score: f32,
+        smallest_face: f32,
+        reading: Reading,
+    ) -> Result<Vec<(Detection, Option<ReadingAgreement>)>, DetectError> {
         let faces = self.scan_boxes(image, min_score, smallest_face)?;
         let (file, scratch) = self.parts()?;
         let (w, h) = (image.width() as usize, image.height() as usize);
         let mut out = Vec::with_capacity(faces.len());
         for face in faces {
-            out.push(read_landmarks(&file, image.as_raw(), w, h, face, reading, scratch).map_err(DetectError::Run)?);
+            out.push(read_landmarks_measured(&file, image.as_raw(), w, h, face, reading, scratch).map_err(DetectError::Run)?);
         }
         Ok(out)
     }

@@ -82,6 +82,11 @@ pub fn read_faces_file(path: &Path) -> Result<FacesFile, DetectError> {
 /// The images of a real-photo set: every .jpg/.jpeg/.png/.ppm with a `.faces.json` of its stem,
 /// sorted by name.
 pub fn list_photo_set(dir: &Path) -> Result<Vec<(PathBuf, PathBuf)>, DetectError> {
+    Ok(list_photos(dir)?.into_iter().filter_map(|(photo, json)| Some((photo, json?))).collect())
+}
+
+/// Every .jpg/.jpeg/.png/.ppm of `dir`, sorted by name, with its `STEM.faces.json` if it has one.
+pub fn list_photos(dir: &Path) -> Result<Vec<(PathBuf, Option<PathBuf>)>, DetectError> {
     let io = |error| DetectError::Io { path: dir.to_owned(), error };
     let mut entries: Vec<PathBuf> = std::fs::read_dir(dir).map_err(io)?.filter_map(|e| e.ok().map(|e| e.path())).collect();
     entries.sort();
@@ -90,9 +95,10 @@ pub fn list_photo_set(dir: &Path) -> Result<Vec<(PathBuf, PathBuf)>, DetectError
         .filter(|p| {
             matches!(p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref(), Some("png" | "jpg" | "jpeg" | "ppm"))
         })
-        .filter_map(|p| {
-            let json = p.with_file_name(format!("{}.faces.json", p.file_stem()?.to_str()?));
-            json.exists().then_some((p, json))
+        .map(|p| {
+            let json = p.file_stem().and_then(|s| s.to_str()).map(|stem| p.with_file_name(format!("{stem}.faces.json")));
+            let json = json.filter(|j| j.exists());
+            (p, json)
         })
         .collect())
 }
@@ -256,25 +262,51 @@ pub struct PhotoResult {
 }
 
 /// Detects every face of every image of the set in `dir` ([`list_photo_set`]) at `min_score`,
-/// scanning for faces down to `smallest_face` px ([`Detector::scan_all`]), and scores them.
+/// scanning for faces down to `smallest_face` px ([`Detector::scan_all`]), and scores them. The
+/// photos are shared among the local cores, each with its own copy of `detector`'s networks;
+/// `progress(done, total)` is called after each photo. Results keep the set's order.
 pub fn evaluate_photos(
-    detector: &mut Detector,
+    detector: &Detector,
     dir: &Path,
     min_score: f32,
     smallest_face: f32,
     reading: Reading,
+    progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(PhotoSummary, Vec<PhotoResult>), DetectError> {
-    let mut results = Vec::new();
-    for (path, json) in list_photo_set(dir)? {
-        let faces = read_faces_file(&json)?.faces;
-        let image = image::open(&path).map_err(|e| DetectError::Io { path: path.clone(), error: std::io::Error::other(e) })?.to_rgb8();
-        let dets = detector.scan_all(&image, min_score, smallest_face, reading)?;
-        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let scored = score_image(name, &faces, &dets);
-        results.push(PhotoResult { path, faces, scored });
-    }
+    use rayon::prelude::*;
+    let photos = list_photo_set(dir)?;
+    let total = photos.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let results = photos
+        .into_par_iter()
+        .map_init(
+            || detector.clone(),
+            |detector, (path, json)| {
+                let result = evaluate_photo(detector, path, &json, min_score, smallest_face, reading);
+                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
+                result
+            },
+        )
+        .collect::<Result<Vec<_>, _>>()?;
     let rows: Vec<PhotoImage> = results.iter().map(|r| r.scored.clone()).collect();
     Ok((summarize(&rows, min_score), results))
+}
+
+/// One photo of a set, detected and scored against its faces file `json`.
+fn evaluate_photo(
+    detector: &mut Detector,
+    path: PathBuf,
+    json: &Path,
+    min_score: f32,
+    smallest_face: f32,
+    reading: Reading,
+) -> Result<PhotoResult, DetectError> {
+    let faces = read_faces_file(json)?.faces;
+    let image = image::open(&path).map_err(|e| DetectError::Io { path: path.clone(), error: std::io::Error::other(e) })?.to_rgb8();
+    let dets = detector.scan_all(&image, min_score, smallest_face, reading)?;
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let scored = score_image(name, &faces, &dets);
+    Ok(PhotoResult { path, faces, scored })
 }
 
 #[cfg(test)]

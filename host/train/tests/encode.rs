@@ -265,3 +265,40 @@ fn corrupted_or_truncated_init_files_are_refused() {
     let err = Detector::load(std::path::Path::new("/nonexistent/x.init")).unwrap_err().to_string();
     assert!(err.contains("/nonexistent/x.init"), "{err}");
 }
+
+#[test]
+fn a_face_check_written_into_an_init_file_is_read_back_and_filters_a_scan() {
+    use gpmm_host::detect::check::FaceCheck;
+    use gpmm_host::detect::check_fit::with_metadata;
+    let bytes = init_bytes(5);
+    let mut plain = Detector::from_bytes(&bytes).unwrap();
+    assert!(plain.check().is_none());
+    let img = RgbImage::from_fn(48, 40, |x, y| image::Rgb([(x * 5) as u8, (y * 6) as u8, 90]));
+    let measured = plain.scan_measured(&img, 0.0, f32::INFINITY, Reading::DEFAULT).unwrap();
+    assert!(!measured.is_empty() && measured.iter().all(|(_, a)| a.is_some_and(|a| a.is_finite())));
+    // A check no box passes, written into the metadata beside what was there.
+    let none = FaceCheck { weights: [0.0; 4], bias: -10.0, threshold: 0.5, faces: 10, others: 10 };
+    let metadata = none.into_metadata(plain.file().unwrap().metadata).unwrap();
+    let checked = with_metadata(&bytes, &metadata).unwrap();
+    let mut detector = Detector::from_bytes(&checked).unwrap();
+    assert_eq!(detector.check(), Some(&none));
+    let file = detector.file().unwrap();
+    assert!(file.metadata.contains("\"format\":\"gpmm-init\""));
+    let was = plain.file().unwrap();
+    assert_eq!((file.finder.bytes(), file.initializer.bytes()), (was.finder.bytes(), was.initializer.bytes()));
+    assert!(detector.scan_all(&img, 0.0, f32::INFINITY, Reading::DEFAULT).unwrap().is_empty());
+    // A command that fits one face still gets every face when the check leaves none.
+    assert_eq!(detector.scan_for_fit(&img, 0.0, f32::INFINITY, Reading::DEFAULT).unwrap().len(), measured.len());
+    // The same boxes as before without it, and with a check every box passes.
+    detector.set_check(None);
+    assert_eq!(detector.scan_all(&img, 0.0, f32::INFINITY, Reading::DEFAULT).unwrap().len(), measured.len());
+    detector.set_check(Some(FaceCheck { bias: 10.0, ..none }));
+    assert_eq!(detector.scan_all(&img, 0.0, f32::INFINITY, Reading::DEFAULT).unwrap().len(), measured.len());
+    // A check the metadata cannot hold as one is refused by name when the file is loaded.
+    let broken = with_metadata(&bytes, r#"{"face_check": {"weights": [1, 2]}}"#).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("broken.init");
+    std::fs::write(&path, broken).unwrap();
+    let err = Detector::load(&path).unwrap_err().to_string();
+    assert!(err.contains("broken.init") && err.contains("face_check"), "{err}");
+}
