@@ -53,7 +53,7 @@ pub fn check_init(a: CheckInitArgs) -> Result<()> {
     let bytes = with_metadata(detector.bytes(), &metadata).with_context(|| format!("{}: cannot rewrite", a.init.display()))?;
     std::fs::write(&a.output, bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     report(&check);
-    eprintln!("wrote {} (use it with --min-score {FIT_MIN_SCORE} or more)", a.output.display());
+    eprintln!("wrote {} (fitted on boxes scoring {FIT_MIN_SCORE} or more; for photos use --min-score 0.9)", a.output.display());
     Ok(())
 }
 

@@ -8,7 +8,7 @@ use gpmm_core::net::face::{write_init_file, InitFile, Reading};
 use gpmm_core::net::NetError;
 use std::path::Path;
 
-/// The least finder score of the boxes a check is fitted on (and the minimum score to use it with).
+/// The least finder score of the boxes a check is fitted on (it is meant for boxes scoring as much).
 pub const FIT_MIN_SCORE: f32 = 0.5;
 
 /// Why a check could not be fitted.
