@@ -268,7 +268,7 @@ fn with_face_check(bytes: Vec<u8>, dirs: &[PathBuf], bar: &ProgressBar) -> Resul
             note(bar, format!("face check: fitted on {} known faces and {} other boxes", check.faces, check.others));
             with_metadata(&bytes, &metadata).map_err(|e| anyhow::anyhow!("the trained file with its face check: {e}"))
         }
-        Err(CheckFitError::Check(e @ CheckError::TooFew { .. })) => {
+        Err(CheckFitError::Check(e @ (CheckError::TooFew { .. } | CheckError::NoMirror(_)))) => {
             note(bar, format!("no face check: {e}"));
             Ok(bytes)
         }

@@ -46,6 +46,9 @@ pub enum CheckError {
         /// Other boxes given.
         others: usize,
     },
+    /// The initializer does not read the 68 iBUG points, so it has no mirrored reading to compare.
+    #[error("a face check needs an initializer of the 68 iBUG points (its mirrored reading); this one reads {0}")]
+    NoMirror(usize),
     /// The regression did not converge to finite weights.
     #[error("the face check's regression did not converge")]
     Diverged,

@@ -93,6 +93,10 @@ pub fn fit_check(
     kept_share: f64,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<FaceCheck, CheckFitError> {
+    let landmarks = detector.file().map_err(DetectError::Run)?.landmarks;
+    if landmarks != gpmm_core::model::ibug::IBUG68_POINTS {
+        return Err(CheckError::NoMirror(landmarks).into());
+    }
     let samples = check_samples(detector, dirs, smallest_face, reading, progress)?;
     Ok(FaceCheck::fit(&samples, kept_share)?)
 }

@@ -152,6 +152,10 @@ fn large_receptive_fields_follow_the_float_network() {
 }
 
 fn init_bytes(seed: u64) -> Vec<u8> {
+    init_bytes_with(seed, 68)
+}
+
+fn init_bytes_with(seed: u64, landmarks: u16) -> Vec<u8> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let finder = FloatNet {
         input: Shape { h: 32, w: 32, c: 3 },
@@ -169,7 +173,7 @@ fn init_bytes(seed: u64) -> Vec<u8> {
             layer(&mut rng, LayerKind::Conv, 1, 1, false, 4, FINDER_CHANNELS),
         ],
     };
-    let outputs = 2 * 68 + 3 + 12;
+    let outputs = 2 * usize::from(landmarks) + 3 + 12;
     let initializer = FloatNet {
         input: Shape { h: 16, w: 16, c: 3 },
         layers: vec![
@@ -181,7 +185,7 @@ fn init_bytes(seed: u64) -> Vec<u8> {
             layer(&mut rng, LayerKind::Dense, 1, 1, false, 8 * 8 * 4, outputs),
         ],
     };
-    init_file_bytes(&finder, &initializer, 1.4, 68, 12, "{\"format\":\"gpmm-init\"}").unwrap()
+    init_file_bytes(&finder, &initializer, 1.4, landmarks, 12, "{\"format\":\"gpmm-init\"}").unwrap()
 }
 
 #[test]
@@ -301,4 +305,9 @@ fn a_face_check_written_into_an_init_file_is_read_back_and_filters_a_scan() {
     std::fs::write(&path, broken).unwrap();
     let err = Detector::load(&path).unwrap_err().to_string();
     assert!(err.contains("broken.init") && err.contains("face_check"), "{err}");
+    // An initializer without the 68 points has no mirrored reading to check: said before any scan.
+    let five = Detector::from_bytes(&init_bytes_with(5, 5)).unwrap();
+    let fitted = gpmm_host::detect::check_fit::fit_check(&five, &[dir.path()], 32.0, Reading::DEFAULT, 0.98, &|_, _| {});
+    let err = fitted.unwrap_err().to_string();
+    assert!(err.contains("68 iBUG points") && err.contains("reads 5"), "{err}");
 }
