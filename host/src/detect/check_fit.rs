@@ -2,7 +2,7 @@
 //! the init file with it (`gpmm check-init`).
 
 use super::check::{features, CheckError, FaceCheck};
-use super::photos::{list_photos, read_faces_file, score_image};
+use super::photos::{list_photos, on_each_photo, score_image};
 use super::{DetectError, Detector};
 use gpmm_core::net::face::{write_init_file, InitFile, Reading};
 use gpmm_core::net::NetError;
@@ -24,10 +24,9 @@ pub enum CheckFitError {
 
 /// The boxes the finder gives at [`FIT_MIN_SCORE`] on every photo of the folders `dirs` (a photo
 /// with a `STEM.faces.json` has those faces, one without is face-free, as `gpmm train-init
-/// --backgrounds` reads folders), scanned down to
-/// `smallest_face` px and read as `reading` (with the mirrored reading), before any check: each
-/// box's features and whether it is one of the photo's known faces (intersection over union ≥
-/// 0.5). Boxes on no known face, faces the reference missed among them, count as false faces.
+/// --backgrounds` reads folders), scanned down to `smallest_face` px and read as `reading` (with
+/// the mirrored reading), before any check: each box's features and whether it is one of the
+/// photo's known faces (intersection over union ≥ 0.5). Boxes on no known face, faces the reference missed among them, count as false faces.
 /// `progress(done, total)` after each photo.
 pub fn check_samples(
     detector: &Detector,
@@ -36,37 +35,21 @@ pub fn check_samples(
     reading: Reading,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Vec<([f64; 4], bool)>, DetectError> {
-    use rayon::prelude::*;
     let mut photos = Vec::new();
     for dir in dirs {
         photos.extend(list_photos(dir)?);
     }
-    let total = photos.len();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let per_photo = photos
-        .into_par_iter()
-        .map_init(
-            || detector.clone(),
-            |detector, (path, json)| -> Result<Vec<([f64; 4], bool)>, DetectError> {
-                let faces = match &json {
-                    Some(json) => read_faces_file(json)?.faces,
-                    None => Vec::new(),
-                };
-                let image =
-                    image::open(&path).map_err(|e| DetectError::Io { path: path.clone(), error: std::io::Error::other(e) })?.to_rgb8();
-                let found = detector.scan_measured(&image, FIT_MIN_SCORE, smallest_face, reading)?;
-                let dets: Vec<_> = found.iter().map(|(d, _)| d.clone()).collect();
-                let scored = score_image(String::new(), &faces, &dets);
-                let samples = found
-                    .iter()
-                    .zip(&scored.detections)
-                    .filter_map(|((d, a), s)| a.filter(|a| a.is_finite()).map(|a| (features(d.face.score, &a), s.matched.is_some())))
-                    .collect();
-                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
-                Ok(samples)
-            },
-        )
-        .collect::<Result<Vec<_>, _>>()?;
+    let per_photo = on_each_photo(detector, photos, progress, |detector, _, faces, image| {
+        let found = detector.scan_measured(image, FIT_MIN_SCORE, smallest_face, reading)?;
+        let dets: Vec<_> = found.iter().map(|(d, _)| d.clone()).collect();
+        let scored = score_image(String::new(), &faces, &dets);
+        let samples: Vec<([f64; 4], bool)> = found
+            .iter()
+            .zip(&scored.detections)
+            .filter_map(|((d, a), s)| a.filter(|a| a.is_finite()).map(|a| (features(d.face.score, &a), s.matched.is_some())))
+            .collect();
+        Ok(samples)
+    })?;
     Ok(per_photo.into_iter().flatten().collect())
 }
 

@@ -131,10 +131,7 @@ impl Detector {
         smallest_face: f32,
         reading: Reading,
     ) -> Result<Vec<Detection>, DetectError> {
-        let check = self.check;
-        let found = self.scan_measured(image, min_score, smallest_face, reading)?;
-        let passes = |(det, a): &(Detection, Option<ReadingAgreement>)| check.is_none_or(|c| c.passes(det.face.score, a.as_ref()));
-        Ok(found.into_iter().filter(passes).map(|(det, _)| det).collect())
+        self.scan_checked(image, (min_score, smallest_face), reading, false)
     }
 
     /// The faces a command that fits one face chooses from (`gpmm fit --init`, `learn`):
@@ -148,11 +145,23 @@ impl Detector {
         smallest_face: f32,
         reading: Reading,
     ) -> Result<Vec<Detection>, DetectError> {
+        self.scan_checked(image, (min_score, smallest_face), reading, true)
+    }
+
+    /// [`Detector::scan_measured`]'s faces that pass the face check; all of them if there is no
+    /// check, or if none passes and `all_if_none`.
+    fn scan_checked(
+        &mut self,
+        image: &RgbImage,
+        (min_score, smallest_face): (f32, f32),
+        reading: Reading,
+        all_if_none: bool,
+    ) -> Result<Vec<Detection>, DetectError> {
         let check = self.check;
         let found = self.scan_measured(image, min_score, smallest_face, reading)?;
         let passes = |(det, a): &(Detection, Option<ReadingAgreement>)| check.is_none_or(|c| c.passes(det.face.score, a.as_ref()));
-        let any_passes = found.iter().any(passes);
-        Ok(found.into_iter().filter(|f| !any_passes || passes(f)).map(|(det, _)| det).collect())
+        let keep_all = all_if_none && !found.iter().any(passes);
+        Ok(found.into_iter().filter(|f| keep_all || passes(f)).map(|(det, _)| det).collect())
     }
 
     /// [`Detector::scan_all`]'s faces before the face check, each with how well its reading

@@ -262,9 +262,9 @@ pub struct PhotoResult {
 }
 
 /// Detects every face of every image of the set in `dir` ([`list_photo_set`]) at `min_score`,
-/// scanning for faces down to `smallest_face` px ([`Detector::scan_all`]), and scores them. The
-/// photos are shared among the local cores, each with its own copy of `detector`'s networks;
-/// `progress(done, total)` is called after each photo. Results keep the set's order.
+/// scanning for faces down to `smallest_face` px ([`Detector::scan_all`]), and scores them, on
+/// all local cores ([`on_each_photo`]); `progress(done, total)` after each photo. Results keep the
+/// set's order.
 pub fn evaluate_photos(
     detector: &Detector,
     dir: &Path,
@@ -273,40 +273,47 @@ pub fn evaluate_photos(
     reading: Reading,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(PhotoSummary, Vec<PhotoResult>), DetectError> {
-    use rayon::prelude::*;
-    let photos = list_photo_set(dir)?;
-    let total = photos.len();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let results = photos
-        .into_par_iter()
-        .map_init(
-            || detector.clone(),
-            |detector, (path, json)| {
-                let result = evaluate_photo(detector, path, &json, min_score, smallest_face, reading);
-                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
-                result
-            },
-        )
-        .collect::<Result<Vec<_>, _>>()?;
+    let photos = list_photo_set(dir)?.into_iter().map(|(photo, json)| (photo, Some(json))).collect();
+    let results = on_each_photo(detector, photos, progress, |detector, path, faces, image| {
+        let dets = detector.scan_all(image, min_score, smallest_face, reading)?;
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let scored = score_image(name, &faces, &dets);
+        Ok(PhotoResult { path: path.to_owned(), faces, scored })
+    })?;
     let rows: Vec<PhotoImage> = results.iter().map(|r| r.scored.clone()).collect();
     Ok((summarize(&rows, min_score), results))
 }
 
-/// One photo of a set, detected and scored against its faces file `json`.
-fn evaluate_photo(
-    detector: &mut Detector,
-    path: PathBuf,
-    json: &Path,
-    min_score: f32,
-    smallest_face: f32,
-    reading: Reading,
-) -> Result<PhotoResult, DetectError> {
-    let faces = read_faces_file(json)?.faces;
-    let image = image::open(&path).map_err(|e| DetectError::Io { path: path.clone(), error: std::io::Error::other(e) })?.to_rgb8();
-    let dets = detector.scan_all(&image, min_score, smallest_face, reading)?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let scored = score_image(name, &faces, &dets);
-    Ok(PhotoResult { path, faces, scored })
+/// Runs `work` on every photo of `photos` (an image and its faces file, or `None`: face-free)
+/// with its reference faces and pixels, on the local cores, each with its own copy of
+/// `detector`'s networks; `progress(done, total)` after each photo. Results keep the photos'
+/// order; the first unreadable photo or faces file is the error.
+pub fn on_each_photo<T: Send>(
+    detector: &Detector,
+    photos: Vec<(PathBuf, Option<PathBuf>)>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    work: impl Fn(&mut Detector, &Path, Vec<ReferenceFace>, &image::RgbImage) -> Result<T, DetectError> + Sync + Send,
+) -> Result<Vec<T>, DetectError> {
+    use rayon::prelude::*;
+    let total = photos.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    photos
+        .into_par_iter()
+        .map_init(
+            || detector.clone(),
+            |detector, (path, json)| {
+                let faces = match &json {
+                    Some(json) => read_faces_file(json)?.faces,
+                    None => Vec::new(),
+                };
+                let image =
+                    image::open(&path).map_err(|e| DetectError::Io { path: path.clone(), error: std::io::Error::other(e) })?.to_rgb8();
+                let result = work(detector, &path, faces, &image);
+                progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
+                result
+            },
+        )
+        .collect()
 }
 
 #[cfg(test)]
