@@ -538,7 +538,12 @@ pub fn train_on(
             let (train_f, train_i) = (pass < opts.passes, pass < opts.init_passes);
             for (step, idx) in order.chunks(opts.batch).enumerate() {
                 let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
-                if train_f {
+                // The two networks learn from the same batch independently: their steps run side
+                // by side (each alone leaves a core mostly idle between its matrix products).
+                let finder_step = || -> Result<Option<f32>, TrainError> {
+                    if !train_f {
+                        return Ok(None);
+                    }
                     opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
                     // The mistakes in turn over the whole training, not from the start each pass.
                     let free: Vec<&[i8]> = cycled(&face_free, per_batch, step)
@@ -548,10 +553,12 @@ pub fn train_on(
                     let seen: Vec<&Sample> = batch.iter().copied().chain(cycled(&real, real_per_batch, step)).collect();
                     let lf = finder_loss(&finder, &seen, &free, &geo, &device).map_err(TrainError::Tensor)?;
                     opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
-                    f = lf.to_scalar::<f32>().map_err(TrainError::Tensor)?;
-                    net_done[0] += 1;
-                }
-                if train_i {
+                    Ok(Some(lf.to_scalar::<f32>().map_err(TrainError::Tensor)?))
+                };
+                let initializer_step = || -> Result<Option<f32>, TrainError> {
+                    if !train_i {
+                        return Ok(None);
+                    }
                     opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
                     let with_real: Vec<&Sample> = batch.iter().copied().chain(cycled(&real_crops, real_per_batch, step).copied()).collect();
                     let li = if opts.mirror && pass % 2 == 1 {
@@ -561,7 +568,15 @@ pub fn train_on(
                         initializer_loss(&initializer, &with_real, &geo, &device).map_err(TrainError::Tensor)?
                     };
                     opt_i.backward_step(&li).map_err(TrainError::Tensor)?;
-                    i = li.to_scalar::<f32>().map_err(TrainError::Tensor)?;
+                    Ok(Some(li.to_scalar::<f32>().map_err(TrainError::Tensor)?))
+                };
+                let (lf, li) = rayon::join(finder_step, initializer_step);
+                if let Some(v) = lf? {
+                    f = v;
+                    net_done[0] += 1;
+                }
+                if let Some(v) = li? {
+                    i = v;
                     net_done[1] += 1;
                 }
                 if !(f.is_finite() && i.is_finite()) {
