@@ -512,105 +512,91 @@ pub fn train_on(
         (Some(_), _, _) => return Err(TrainError::MistakesNeedStart),
     };
     let mistakes_per_batch = opts.scan_mistakes.map_or(0, |m| (opts.batch as f64 * m.per_scene).ceil() as usize);
-    let render = |chunk: usize| samples(source, &geo, opts.seed, (chunk * opts.chunk_scenes) as u64, opts.chunk_scenes as u64);
-    let mut rendered: Option<Vec<Sample>> = None;
     for chunk in 0..opts.chunks {
         progress(Progress::Rendering { chunk });
         let start = (chunk * opts.chunk_scenes) as u64;
         let t0 = std::time::Instant::now();
-        let data = match rendered.take() {
-            Some(data) => data,
-            None => render(chunk),
-        };
+        let data = samples(source, &geo, opts.seed, start, opts.chunk_scenes as u64);
         render_seconds += t0.elapsed().as_secs_f64();
-        // The next chunk's scenes render while this one trains (the networks leave room on the cores).
-        std::thread::scope(|scope| -> Result<(), TrainError> {
-            let next = (chunk + 1 < opts.chunks).then(|| scope.spawn(|| render(chunk + 1)));
-            let t0 = std::time::Instant::now();
-            if data.is_empty() {
-                return Err(TrainError::NoScenes);
-            }
-            let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
-            let face_free =
-                mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
-            let per_batch = (opts.batch as f64 * opts.face_free).ceil() as usize;
-            // Empty without photos of people.
-            let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
-            let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
-            let real_per_batch = (opts.batch as f64 * opts.photo_faces).ceil() as usize;
-            // The real faces whose points the reference read teach the initializer those points.
-            let real_crops: Vec<&Sample> = real.iter().filter(|s| opts.photo_points && !s.crop.is_empty()).collect();
-            let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
-            let (mut f, mut i) = (last_f, last_i);
-            for pass in 0..opts.passes.max(opts.init_passes) {
-                let order = pass_order(opts.seed, chunk, pass, data.len());
-                let (train_f, train_i) = (pass < opts.passes, pass < opts.init_passes);
-                for (step, idx) in order.chunks(opts.batch).enumerate() {
-                    let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
-                    // The two networks learn from the same batch independently: their steps run side
-                    // by side (each alone leaves a core mostly idle between its matrix products).
-                    let finder_step = || -> Result<Option<f32>, TrainError> {
-                        if !train_f {
-                            return Ok(None);
-                        }
-                        opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
-                        // The mistakes in turn over the whole training, not from the start each pass.
-                        let free: Vec<&[i8]> = cycled(&face_free, per_batch, step)
-                            .chain(cycled(&mistakes.frames, mistakes_per_batch, net_done[0]))
-                            .map(Vec::as_slice)
-                            .collect();
-                        let seen: Vec<&Sample> = batch.iter().copied().chain(cycled(&real, real_per_batch, step)).collect();
-                        let lf = finder_loss(&finder, &seen, &free, &geo, &device).map_err(TrainError::Tensor)?;
-                        opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
-                        Ok(Some(lf.to_scalar::<f32>().map_err(TrainError::Tensor)?))
+        let t0 = std::time::Instant::now();
+        if data.is_empty() {
+            return Err(TrainError::NoScenes);
+        }
+        let keep = if backgrounds.is_some() { (opts.chunk_scenes as f64 * opts.face_free).round() as usize } else { 0 };
+        let face_free = mine_face_free(&finder, source, &geo, opts.seed ^ 0xFACE_F4EE, start, keep, &device).map_err(TrainError::Tensor)?;
+        let per_batch = (opts.batch as f64 * opts.face_free).ceil() as usize;
+        // Empty without photos of people.
+        let n_real = (opts.chunk_scenes as f64 * opts.photo_faces).round() as u64;
+        let real = photo_face_samples(source, &geo, opts.seed ^ 0x9E0_F1E5, start, n_real);
+        let real_per_batch = (opts.batch as f64 * opts.photo_faces).ceil() as usize;
+        // The real faces whose points the reference read teach the initializer those points.
+        let real_crops: Vec<&Sample> = real.iter().filter(|s| opts.photo_points && !s.crop.is_empty()).collect();
+        let (mut sum, mut n) = ([0.0f32; 2], [0usize; 2]);
+        let (mut f, mut i) = (last_f, last_i);
+        for pass in 0..opts.passes.max(opts.init_passes) {
+            let order = pass_order(opts.seed, chunk, pass, data.len());
+            let (train_f, train_i) = (pass < opts.passes, pass < opts.init_passes);
+            for (step, idx) in order.chunks(opts.batch).enumerate() {
+                let batch: Vec<&Sample> = idx.iter().map(|&i| &data[i]).collect();
+                // The two networks learn from the same batch independently: their steps run side
+                // by side (each alone leaves a core mostly idle between its matrix products).
+                let finder_step = || -> Result<Option<f32>, TrainError> {
+                    if !train_f {
+                        return Ok(None);
+                    }
+                    opt_f.set_learning_rate(lr_at(net_done[0], net_total[0]));
+                    // The mistakes in turn over the whole training, not from the start each pass.
+                    let free: Vec<&[i8]> = cycled(&face_free, per_batch, step)
+                        .chain(cycled(&mistakes.frames, mistakes_per_batch, net_done[0]))
+                        .map(Vec::as_slice)
+                        .collect();
+                    let seen: Vec<&Sample> = batch.iter().copied().chain(cycled(&real, real_per_batch, step)).collect();
+                    let lf = finder_loss(&finder, &seen, &free, &geo, &device).map_err(TrainError::Tensor)?;
+                    opt_f.backward_step(&lf).map_err(TrainError::Tensor)?;
+                    Ok(Some(lf.to_scalar::<f32>().map_err(TrainError::Tensor)?))
+                };
+                let initializer_step = || -> Result<Option<f32>, TrainError> {
+                    if !train_i {
+                        return Ok(None);
+                    }
+                    opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
+                    let with_real: Vec<&Sample> = batch.iter().copied().chain(cycled(&real_crops, real_per_batch, step).copied()).collect();
+                    let li = if opts.mirror && pass % 2 == 1 {
+                        let seen: Vec<Sample> = with_real.iter().filter_map(|s| s.mirrored(&geo)).collect();
+                        initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(TrainError::Tensor)?
+                    } else {
+                        initializer_loss(&initializer, &with_real, &geo, &device).map_err(TrainError::Tensor)?
                     };
-                    let initializer_step = || -> Result<Option<f32>, TrainError> {
-                        if !train_i {
-                            return Ok(None);
-                        }
-                        opt_i.set_learning_rate(lr_at(net_done[1], net_total[1]));
-                        let with_real: Vec<&Sample> =
-                            batch.iter().copied().chain(cycled(&real_crops, real_per_batch, step).copied()).collect();
-                        let li = if opts.mirror && pass % 2 == 1 {
-                            let seen: Vec<Sample> = with_real.iter().filter_map(|s| s.mirrored(&geo)).collect();
-                            initializer_loss(&initializer, &seen.iter().collect::<Vec<_>>(), &geo, &device).map_err(TrainError::Tensor)?
-                        } else {
-                            initializer_loss(&initializer, &with_real, &geo, &device).map_err(TrainError::Tensor)?
-                        };
-                        opt_i.backward_step(&li).map_err(TrainError::Tensor)?;
-                        Ok(Some(li.to_scalar::<f32>().map_err(TrainError::Tensor)?))
-                    };
-                    let (lf, li) = rayon::join(finder_step, initializer_step);
-                    if let Some(v) = lf? {
-                        f = v;
-                        net_done[0] += 1;
-                    }
-                    if let Some(v) = li? {
-                        i = v;
-                        net_done[1] += 1;
-                    }
-                    if !(f.is_finite() && i.is_finite()) {
-                        return Err(TrainError::Diverged { step: done, finder: f, initializer: i });
-                    }
-                    for (k, (last_pass, value)) in [(opts.passes, f), (opts.init_passes, i)].into_iter().enumerate() {
-                        if pass + 1 == last_pass {
-                            sum[k] += value;
-                            n[k] += 1;
-                        }
-                    }
-                    done += 1;
-                    progress(Progress::Step { done, total, finder: f, initializer: i });
+                    opt_i.backward_step(&li).map_err(TrainError::Tensor)?;
+                    Ok(Some(li.to_scalar::<f32>().map_err(TrainError::Tensor)?))
+                };
+                let (lf, li) = rayon::join(finder_step, initializer_step);
+                if let Some(v) = lf? {
+                    f = v;
+                    net_done[0] += 1;
                 }
+                if let Some(v) = li? {
+                    i = v;
+                    net_done[1] += 1;
+                }
+                if !(f.is_finite() && i.is_finite()) {
+                    return Err(TrainError::Diverged { step: done, finder: f, initializer: i });
+                }
+                for (k, (last_pass, value)) in [(opts.passes, f), (opts.init_passes, i)].into_iter().enumerate() {
+                    if pass + 1 == last_pass {
+                        sum[k] += value;
+                        n[k] += 1;
+                    }
+                }
+                done += 1;
+                progress(Progress::Step { done, total, finder: f, initializer: i });
             }
-            train_seconds += t0.elapsed().as_secs_f64();
-            (last_f, last_i) = (sum[0] / n[0].max(1) as f32, sum[1] / n[1].max(1) as f32);
-            if chunk + 1 == opts.chunks {
-                calib = data.into_iter().take(CALIBRATION_SCENES).collect();
-            }
-            // A render that failed is done again, in the open, at the next chunk.
-            rendered = next.and_then(|h| h.join().ok());
-            Ok(())
-        })?;
+        }
+        train_seconds += t0.elapsed().as_secs_f64();
+        (last_f, last_i) = (sum[0] / n[0].max(1) as f32, sum[1] / n[1].max(1) as f32);
+        if chunk + 1 == opts.chunks {
+            calib = data.into_iter().take(CALIBRATION_SCENES).collect();
+        }
     }
     progress(Progress::Validating);
     if calib.is_empty() {
