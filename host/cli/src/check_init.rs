@@ -5,7 +5,7 @@ use clap::Args;
 use gpmm_core::net::face::Reading;
 use gpmm_host::detect::check::{FaceCheck, KEPT_FACE_SHARE};
 use gpmm_host::detect::check_fit::{fit_check, with_metadata, FIT_MIN_SCORE};
-use gpmm_host::detect::Detector;
+use gpmm_host::detect::{Detector, PHOTO_MIN_SCORE};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `gpmm check-init`.
@@ -53,7 +53,10 @@ pub fn check_init(a: CheckInitArgs) -> Result<()> {
     let bytes = with_metadata(detector.bytes(), &metadata).with_context(|| format!("{}: cannot rewrite", a.init.display()))?;
     std::fs::write(&a.output, bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     report(&check);
-    eprintln!("wrote {} (fitted on boxes scoring {FIT_MIN_SCORE} or more; for photos use --min-score 0.9)", a.output.display());
+    eprintln!(
+        "wrote {} (fitted on boxes scoring {FIT_MIN_SCORE} or more; for photos use --min-score {PHOTO_MIN_SCORE})",
+        a.output.display()
+    );
     Ok(())
 }
 

@@ -26,8 +26,8 @@ pub enum CheckFitError {
 /// with a `STEM.faces.json` has those faces, one without is face-free, as `gpmm train-init
 /// --backgrounds` reads folders), scanned down to `smallest_face` px and read as `reading` (with
 /// the mirrored reading), before any check: each box's features and whether it is one of the
-/// photo's known faces (intersection over union ≥ 0.5). Boxes on no known face, faces the reference missed among them, count as false faces.
-/// `progress(done, total)` after each photo.
+/// photo's known faces (intersection over union ≥ 0.5). Boxes on no known face, faces the
+/// reference missed among them, count as false faces. `progress(done, total)` after each photo.
 pub fn check_samples(
     detector: &Detector,
     dirs: &[&Path],

@@ -215,6 +215,11 @@ impl Detector {
 /// smaller sizes added windows whose false positives outscored true faces.
 pub const DEFAULT_SMALLEST_FACE: f32 = 32.0;
 
+/// The least finder score advised for faces of real photos (`--min-score`): on photos no training
+/// saw it kept false positives at 0.05 per face-free photo with the face check, where 0.5 gave
+/// 0.025–0.125 from one training to the next (docs/real-photos.md).
+pub const PHOTO_MIN_SCORE: f32 = 0.9;
+
 /// The least finder score a command takes as a face by default (`gpmm detect`, `fit --init`,
 /// `learn`).
 pub const DEFAULT_MIN_SCORE: f32 = 0.05;
