@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_core::net::face::{Detection, Reading};
-use gpmm_host::detect::Detector;
+use gpmm_host::detect::{CheckedFaces, Detector};
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};
 
@@ -58,9 +58,27 @@ pub fn detect(a: DetectArgs) -> Result<()> {
         detector.set_check(None);
     }
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
-    let faces = detector.scan_all(&image, a.min_score, a.smallest_face, Reading { refine: a.refine, mirror: !a.single_read })?;
+    let reading = Reading { refine: a.refine, mirror: !a.single_read };
+    let CheckedFaces { kept: faces, refused } = detector.scan_split(&image, a.min_score, a.smallest_face, reading)?;
+    if let Some(best) = refused.first().filter(|_| faces.is_empty()) {
+        bail!(
+            "{}: no face passed the face check of {}: {} box(es) scored at least --min-score {} (the best {:.2}, {:.0} px at ({:.0}, {:.0})) \
+             but their readings did not look like a face's; --no-face-check lists them",
+            a.image.display(),
+            a.init.display(),
+            refused.len(),
+            a.min_score,
+            best.face.score,
+            best.face.size,
+            best.face.cx,
+            best.face.cy
+        );
+    }
     if faces.is_empty() {
         bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
+    }
+    if !refused.is_empty() {
+        eprintln!("{} more box(es) failed the face check and are left out (--no-face-check lists them)", refused.len());
     }
     let chosen = pick(&a.image, &faces, a.face)?;
     if let Some(path) = &a.output {

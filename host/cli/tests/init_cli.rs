@@ -101,6 +101,27 @@ fn detect_writes_68_landmarks_and_a_picture() {
 }
 
 #[test]
+fn detect_says_when_the_face_check_refused_every_box() {
+    use gpmm_host::detect::{check::FaceCheck, check_fit::with_metadata, Detector};
+    let Some(f) = fixture() else { return };
+    let image = f.synth.join("0000_yaw00.png");
+    // The quick file with a check no box passes.
+    let bytes = std::fs::read(&f.init).unwrap();
+    let plain = Detector::from_bytes(&bytes).unwrap();
+    let refuse_all = FaceCheck { weights: [0.0; 4], bias: -10.0, threshold: 0.5, faces: 10, others: 10 };
+    let metadata = refuse_all.into_metadata(plain.file().unwrap().metadata).unwrap();
+    let checked = f.dir.path().join("refuse-all.init");
+    std::fs::write(&checked, with_metadata(&bytes, &metadata).unwrap()).unwrap();
+    let err = fails(&gpmm(&["detect", s(&image), "--init", s(&checked)]));
+    assert!(err.contains("no face passed the face check") && err.contains("refuse-all.init") && err.contains("--no-face-check"), "{err}");
+    assert!(!err.contains("finder score below"), "{err}");
+    // Without the check the same boxes are listed.
+    let out = ok(&gpmm(&["detect", s(&image), "--init", s(&checked), "--no-face-check"]));
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(!json["faces"].as_array().unwrap().is_empty());
+}
+
+#[test]
 fn eval_detect_scores_a_real_photo_set() {
     let Some(f) = fixture() else { return };
     // Two faces with reference points (the synthetic set's own) and a face-free gray image.

@@ -58,6 +58,15 @@ pub enum DetectError {
     Run(NetError),
 }
 
+/// A scan's faces split by the face check ([`Detector::scan_split`]).
+#[derive(Debug, Clone, Default)]
+pub struct CheckedFaces {
+    /// The faces that pass the check (every face without one); best first.
+    pub kept: Vec<Detection>,
+    /// The faces whose reading failed the check; best first.
+    pub refused: Vec<Detection>,
+}
+
 /// The finder and the initializer of an init file, loaded into a 4-aligned buffer with scratch
 /// for their runs (a clone has its own scratch, for another thread).
 #[derive(Debug, Clone)]
@@ -148,6 +157,23 @@ impl Detector {
         self.scan_checked(image, (min_score, smallest_face), reading, true)
     }
 
+    /// [`Detector::scan_all`]'s faces and, apart, those the face check refused (so a command can
+    /// say that boxes were found but their readings failed the check); each list best first.
+    pub fn scan_split(
+        &mut self,
+        image: &RgbImage,
+        min_score: f32,
+        smallest_face: f32,
+        reading: Reading,
+    ) -> Result<CheckedFaces, DetectError> {
+        let check = self.check;
+        let found = self.scan_measured(image, min_score, smallest_face, reading)?;
+        let (kept, refused): (Vec<_>, Vec<_>) =
+            found.into_iter().partition(|(det, a)| check.is_none_or(|c| c.passes(det.face.score, a.as_ref())));
+        let faces = |list: Vec<(Detection, Option<ReadingAgreement>)>| list.into_iter().map(|(det, _)| det).collect();
+        Ok(CheckedFaces { kept: faces(kept), refused: faces(refused) })
+    }
+
     /// [`Detector::scan_measured`]'s faces that pass the face check; all of them if there is no
     /// check, or if none passes and `all_if_none`.
     fn scan_checked(
@@ -157,11 +183,8 @@ impl Detector {
         reading: Reading,
         all_if_none: bool,
     ) -> Result<Vec<Detection>, DetectError> {
-        let check = self.check;
-        let found = self.scan_measured(image, min_score, smallest_face, reading)?;
-        let passes = |(det, a): &(Detection, Option<ReadingAgreement>)| check.is_none_or(|c| c.passes(det.face.score, a.as_ref()));
-        let keep_all = all_if_none && !found.iter().any(passes);
-        Ok(found.into_iter().filter(|f| keep_all || passes(f)).map(|(det, _)| det).collect())
+        let CheckedFaces { kept, refused } = self.scan_split(image, min_score, smallest_face, reading)?;
+        Ok(if all_if_none && kept.is_empty() { refused } else { kept })
     }
 
     /// [`Detector::scan_all`]'s faces before the face check, each with how well its reading
