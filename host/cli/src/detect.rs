@@ -60,7 +60,10 @@ pub fn detect(a: DetectArgs) -> Result<()> {
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
     let reading = Reading { refine: a.refine, mirror: !a.single_read };
     let CheckedFaces { kept: faces, refused } = detector.scan_split(&image, a.min_score, a.smallest_face, reading)?;
-    if let Some(best) = refused.first().filter(|_| faces.is_empty()) {
+    if faces.is_empty() {
+        let Some(best) = refused.first() else {
+            bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
+        };
         bail!(
             "{}: no face passed the face check of {}: {} box(es) scored at least --min-score {} (the best {:.2}, {:.0} px at ({:.0}, {:.0})) \
              but their readings did not look like a face's; --no-face-check lists them",
@@ -73,9 +76,6 @@ pub fn detect(a: DetectArgs) -> Result<()> {
             best.face.cx,
             best.face.cy
         );
-    }
-    if faces.is_empty() {
-        bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
     }
     if !refused.is_empty() {
         eprintln!("{} more box(es) failed the face check and are left out (--no-face-check lists them)", refused.len());
