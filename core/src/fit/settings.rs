@@ -237,6 +237,18 @@ impl FitSettings {
         s
     }
 
+    /// These settings with an image chain of `image_steps` steps that fits the shape as well
+    /// (with [`MixtureShares::IMAGE`]'s shape share unless it already does): the shape then
+    /// answers to the pixels, not to the landmarks alone, as the learning loop's fits need.
+    pub const fn with_image_shape(self, image_steps: u32) -> Self {
+        let mut s = self;
+        s.image.steps = image_steps;
+        if s.proposals.image.shape <= 0.0 {
+            s.proposals.image.shape = MixtureShares::IMAGE.shape;
+        }
+        s
+    }
+
     /// These settings with other ranks (shape and colour components fitted).
     pub const fn with_ranks(self, shape: usize, color: usize) -> Self {
         let mut s = self;
@@ -557,6 +569,19 @@ mod tests {
         own.proposals.image.shape = 0.1;
         let kept = own.without_shape_solve();
         assert_eq!((kept.landmarks.pose_share, kept.proposals.image.shape), (0.7, 0.1));
+    }
+
+    #[test]
+    fn the_image_chain_can_fit_the_shape_too() {
+        let d = FitSettings::DEFAULT;
+        let s = d.with_image_shape(10_000);
+        assert_eq!((s.image.steps, s.proposals.image.shape), (10_000, MixtureShares::IMAGE.shape));
+        // The start's solve and the landmark chain are as they were.
+        assert_eq!((s.start, s.landmarks), (d.start, d.landmarks));
+        assert_eq!(s.validate(), Ok(()));
+        let mut own = d;
+        own.proposals.image.shape = 0.1;
+        assert_eq!(own.with_image_shape(50).proposals.image.shape, 0.1);
     }
 
     #[test]

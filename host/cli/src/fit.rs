@@ -59,9 +59,10 @@ pub struct FitSettingsArgs {
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps, value_name = "N",
         help = landmark_steps_help(&FitSettings::DEFAULT))]
     pub landmark_steps: u32,
-    /// Image-chain steps (one render each).
-    #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.fit.image.steps, value_name = "N")]
-    pub image_steps: u32,
+    #[arg(long, value_name = "N", help = format!(
+        "Image-chain steps, one render each (default: {}; in `gpmm learn` {}, its chain fitting the shape as well)",
+        gpmm_host::fit::FitOptions::DEFAULT.fit.image.steps, gpmm_host::learn::WAKE_IMAGE_STEPS))]
+    pub image_steps: Option<u32>,
     /// Seed of the chains.
     #[arg(long, default_value_t = gpmm_host::fit::FitOptions::DEFAULT.seed)]
     pub seed: u64,
@@ -92,7 +93,7 @@ impl FitSettingsArgs {
             size: Some(self.size),
             seed: Some(self.seed),
             landmark_steps: Some(self.landmark_steps),
-            image_steps: Some(self.image_steps),
+            image_steps: self.image_steps,
             shape_rank: Some(self.shape_rank),
             color_rank: Some(self.color_rank),
             landmark_sigma: Some(self.landmark_sigma),

@@ -92,7 +92,8 @@ pub struct LearnArgs {
     /// A smoke run: one iteration of short fits (1500 landmark, 40 image steps unless given).
     #[arg(long)]
     pub quick: bool,
-    /// Fit settings (as `gpmm fit`'s).
+    /// Fit settings: `gpmm fit`'s, but for an image chain of 10000 steps that fits the shape as
+    /// well (`--set proposals.image.shape=0 --image-steps 600` fits as `gpmm fit` does).
     #[command(flatten)]
     pub settings: FitSettingsArgs,
 }
@@ -117,11 +118,9 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         if a.settings.landmark_steps == gpmm_host::fit::FitOptions::DEFAULT.fit.landmarks.steps {
             flags.landmark_steps = Some(1500);
         }
-        if a.settings.image_steps == gpmm_host::fit::FitOptions::DEFAULT.fit.image.steps {
-            flags.image_steps = Some(40);
-        }
+        flags.image_steps = flags.image_steps.or(Some(40));
     }
-    let fit = flags.resolve()?;
+    let fit = flags.resolve_from(gpmm_host::learn::wake_fit_options())?;
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let plan = RunPlan {
         model: a.model.clone(),

@@ -40,7 +40,11 @@ fn fit_defaults() -> Vec<String> {
         format!("--size <SIZE> Working image side (pixels): the crop is resampled to SIZE x SIZE [default: {}]", d.size),
         format!("--landmark-steps <N> Landmark-chain steps, {}", pose_share(&f)),
         format!("[default: {}] --image-steps", f.landmarks.steps),
-        format!("--image-steps <N> Image-chain steps (one render each) [default: {}]", f.image.steps),
+        format!(
+            "--image-steps <N> Image-chain steps, one render each (default: {}; in `gpmm learn` {}, its chain fitting the shape as well)",
+            f.image.steps,
+            gpmm_host::learn::WAKE_IMAGE_STEPS
+        ),
         format!("--seed <SEED> Seed of the chains [default: {}]", d.seed),
         format!("at most the model's rank and {KS}) [default: {}]", f.ranks.shape),
         format!("at most the model's rank and {KC}) [default: {}]", f.ranks.color),
@@ -63,6 +67,13 @@ fn fit_help_states_the_defaults() {
 #[test]
 fn bench_fit_help_states_the_defaults() {
     states("bench-fit", &help("bench-fit"), &fit_defaults());
+}
+
+#[test]
+fn learn_help_states_its_own_image_chain() {
+    let image_steps: Vec<String> = fit_defaults().into_iter().filter(|n| n.starts_with("--image-steps")).collect();
+    assert_eq!(image_steps.len(), 1);
+    states("learn", &help("learn"), &image_steps);
 }
 
 #[test]

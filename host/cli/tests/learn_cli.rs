@@ -102,6 +102,10 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     let rec = m.metadata.learning.as_ref().expect("a learning record");
     assert_eq!((rec.iteration, rec.images, rec.accepted as u64), (1, 10, accepted));
     assert!(rec.max_albedo_change.is_some_and(|m| (f64::from(m) - limit).abs() < 1e-6), "{rec:?}");
+    // The loop's fits: --quick's 40 image steps, the image chain fitting the shape too.
+    let shape_share = gpmm_host::learn::wake_fit_options().fit.proposals.image.shape;
+    assert!(shape_share > 0.0);
+    assert_eq!((rec.image_steps, rec.image_shape_share), (Some(40), Some(shape_share)), "{rec:?}");
     assert_eq!(m.metadata.template.attribution, base.metadata.template.attribution);
     // Another command reads it: a fit with landmarks.
     let fit_dir = dir.path().join("fit");

@@ -152,7 +152,8 @@ pub fn learn_run<'py>(
         initializer_sigma: landmarks_dir.is_none().then_some(init_landmark_sigma.unwrap_or(gpmm_host::detect::INIT_LANDMARK_SIGMA)),
         overrides: overrides(set)?,
     };
-    let fit = flags.resolve().map_err(|e| value_error(e.to_string().replace("--set ", "set: ")))?;
+    let fit =
+        flags.resolve_from(gpmm_host::learn::wake_fit_options()).map_err(|e| value_error(e.to_string().replace("--set ", "set: ")))?;
     let images = image_files(&images).map_err(|e| run_error(e, &model))?;
     let jobs = match opt::<usize>(&jobs, "jobs")? {
         Some(j) => j.max(1),

@@ -86,7 +86,12 @@ impl FitFlags {
     /// The options: the defaults, the flags given, the initializer's landmark σ, then the
     /// overrides (each applied once).
     pub fn resolve(&self) -> Result<FitOptions, FitRunError> {
-        let d = FitOptions::DEFAULT;
+        self.resolve_from(FitOptions::DEFAULT)
+    }
+
+    /// [`Self::resolve`] from other defaults than [`FitOptions::DEFAULT`] (a command whose fits
+    /// differ, e.g. `gpmm learn`'s): a flag not given keeps `d`'s value.
+    pub fn resolve_from(&self, d: FitOptions) -> Result<FitOptions, FitRunError> {
         let mut fit = d.fit.with_steps(self.landmark_steps.unwrap_or(d.fit.landmarks.steps), self.image_steps.unwrap_or(d.fit.image.steps));
         fit = fit.with_ranks(self.shape_rank.unwrap_or(d.fit.ranks.shape), self.color_rank.unwrap_or(d.fit.ranks.color));
         fit.landmarks.sigma = self.landmark_sigma.unwrap_or(fit.landmarks.sigma);
@@ -125,5 +130,15 @@ mod tests {
         assert_eq!(o.fit.landmarks, FitSettings::DEFAULT.landmarks.for_initializer(0.05));
         let set = FitFlags { overrides: vec!["landmarks.sigma=0.03".into()], ..flags }.resolve().unwrap();
         assert_eq!(set.fit.landmarks.sigma, 0.03);
+    }
+
+    #[test]
+    fn other_defaults_hold_where_no_flag_is_given() {
+        let base = FitOptions { fit: FitSettings::DEFAULT.with_image_shape(900), ..FitOptions::DEFAULT };
+        assert_eq!(FitFlags::default().resolve_from(base).unwrap(), base);
+        let o = FitFlags { image_steps: Some(30), ..FitFlags::default() }.resolve_from(base).unwrap();
+        assert_eq!((o.fit.image.steps, o.fit.proposals.image.shape), (30, base.fit.proposals.image.shape));
+        let off = FitFlags { overrides: vec!["proposals.image.shape=0".into()], ..FitFlags::default() }.resolve_from(base).unwrap();
+        assert_eq!((off.fit.image.steps, off.fit.proposals.image.shape), (900, 0.0));
     }
 }

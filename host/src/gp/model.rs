@@ -133,6 +133,13 @@ pub struct LearningRecord {
     pub max_albedo_change: Option<f32>,
     /// Seed of the fits.
     pub seed: u64,
+    /// Image-chain steps of each fit (absent in files written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image_steps: Option<u32>,
+    /// The image chain's share of shape moves (0: the shape came from the landmarks and the
+    /// start's solve alone; absent in files written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image_shape_share: Option<f32>,
 }
 
 /// The current model file format version.

@@ -39,7 +39,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::detect::{choose_face, Detector, DEFAULT_MIN_SCORE};
 use crate::eval::models::pca::{pca_beside, KeptCovariance};
-use crate::fit::{fit_prepared, prepare, FitOptions};
+use crate::fit::{fit_prepared, prepare, FitOptions, FitSettings};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::mesh::Mesh;
 use gpmm_core::fit::TargetImage;
@@ -56,6 +56,17 @@ pub const ALBEDO_CHANGE_PAPER: (f32, f32) = (8.0, 0.5);
 pub fn albedo_change_limit(done: u32) -> f32 {
     let (r2, r3) = ALBEDO_CHANGE_PAPER;
     ((r2 - done as f32 * r3) / 255.0).max(0.0)
+}
+
+/// Image-chain steps of the loop's fits: the paper's n₂ (10,000 steps on every parameter).
+pub const WAKE_IMAGE_STEPS: u32 = 10_000;
+
+/// The fit settings the loop starts from (flags and `--set` change them): `gpmm fit`'s, with an
+/// image chain of [`WAKE_IMAGE_STEPS`] steps that fits the shape as well. With `gpmm fit`'s chain
+/// (shape from the landmarks and the start's solve alone) the mean of 180 fits stayed where the
+/// model's mean was, exact points or not (docs/learning.md, "What moves the mean").
+pub fn wake_fit_options() -> FitOptions {
+    FitOptions { fit: FitSettings::DEFAULT.with_image_shape(WAKE_IMAGE_STEPS), ..FitOptions::DEFAULT }
 }
 
 /// The share of the previous model's covariance a learned model keeps by default: on the
@@ -400,6 +411,18 @@ mod tests {
             record(false, Some(0.8), Some(0.2)),
         ];
         assert_eq!(counts(&r), Counts { accepted: 2, rejected_overlap: 1, rejected_albedo: 1, failed: 1 });
+    }
+
+    #[test]
+    fn the_loops_fits_move_the_shape_by_the_image() {
+        let (o, d) = (wake_fit_options(), FitOptions::DEFAULT);
+        assert_eq!(o.fit.image.steps, WAKE_IMAGE_STEPS);
+        assert!(o.fit.proposals.image.shape > 0.0 && d.fit.proposals.image.shape == 0.0);
+        // Everything else is `gpmm fit`'s.
+        assert_eq!(
+            (o.size, o.seed, o.fit.landmarks, o.fit.start, o.fit.ranks),
+            (d.size, d.seed, d.fit.landmarks, d.fit.start, d.fit.ranks)
+        );
     }
 
     #[test]

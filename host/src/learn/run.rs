@@ -374,6 +374,8 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
                 min_iou: plan.settings.min_iou,
                 max_albedo_change,
                 seed: plan.settings.fit.seed,
+                image_steps: Some(plan.settings.fit.fit.image.steps),
+                image_shape_share: Some(plan.settings.fit.fit.proposals.image.shape),
             };
             std::fs::create_dir_all(&dir).map_err(io(&dir))?;
             let next = learned_model(&model, &wakes, plan.settings.keep_variance, record)?;
