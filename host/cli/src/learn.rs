@@ -92,8 +92,9 @@ pub struct LearnArgs {
     /// A smoke run: one iteration of short fits (1500 landmark, 40 image steps unless given).
     #[arg(long)]
     pub quick: bool,
-    /// Fit settings: `gpmm fit`'s, but for an image chain of 10000 steps that fits the shape as
-    /// well (`--set proposals.image.shape=0 --image-steps 600` fits as `gpmm fit` does).
+    /// Fit settings: `gpmm fit`'s, but for an image chain of
+    /// [`gpmm_host::learn::WAKE_IMAGE_STEPS`] steps that fits the shape as well
+    /// (`--set proposals.image.shape=0 --image-steps 600` fits as `gpmm fit` does).
     #[command(flatten)]
     pub settings: FitSettingsArgs,
 }
