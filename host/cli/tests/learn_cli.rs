@@ -191,6 +191,12 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     let (start, m1, m2) = (median(&c1, "previous"), median(&c1, "learned"), median(&c2, "learned"));
     assert!([start, m1, m2].iter().all(|m| *m > 0.0 && *m < 50.0), "{c1} {c2}");
     assert!(c1["learned"]["fits"].as_u64().unwrap() >= 3, "{c1}");
+    // The check fits as `gpmm fit` does (no shape moves in the image chain), not as the loop does.
+    let cache = read_json(&checked.join("development/fits/model_1.json"));
+    let used: serde_json::Value = serde_json::from_str(cache["key"]["settings"].as_str().unwrap()).unwrap();
+    assert_eq!(used["proposals"]["image"]["shape"].as_f64(), Some(0.0), "{used}");
+    let loop_record = gpmm_host::gp::model_io::load(&checked.join("model_1.gpmm")).unwrap().metadata.learning.unwrap();
+    assert!(loop_record.image_shape_share.is_some_and(|s| s > 0.0), "{loop_record:?}");
     // The second iteration starts from model_1 and reuses its measured figure.
     assert_eq!(c2["previous"], c1["learned"], "{c2}");
     assert_eq!(c1["better"].as_bool().unwrap(), m1 < start, "{c1}");

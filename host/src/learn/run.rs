@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::dev::{DevComparison, DevFigure, DevSet, DevTrack};
 use super::{albedo_change_limit, counts, learned_model, wake, ImageRecord, LearnError, LearnSettings, Wake};
+use crate::fit::FitOptions;
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::gp::model_io;
 use crate::render::figure::{sample_grid, save_png, shape_light};
@@ -67,6 +68,9 @@ pub struct RunPlan {
     pub iterations: u32,
     /// Fit settings and quality control.
     pub settings: LearnSettings,
+    /// The fit the development check measures every model with: `gpmm fit`'s with the loop's
+    /// points and their σ, as users fit the learned model (not the loop's own image-led fits).
+    pub dev_fit: FitOptions,
     /// Parallel fits.
     pub jobs: usize,
 }
@@ -326,7 +330,7 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
         } else {
             path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned())
         };
-        dev.figure(path, &label, &plan.settings.fit, plan.jobs, &progress).map_err(|error| RunError::Development { error })
+        dev.figure(path, &label, &plan.dev_fit, plan.jobs, &progress).map_err(|error| RunError::Development { error })
     };
     for iteration in 1..=plan.iterations {
         let dir = iteration_dir(&plan.out, iteration);
