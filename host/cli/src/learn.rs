@@ -57,8 +57,8 @@ pub struct LearnArgs {
     /// A development set with known truth (a `gpmm synth` set, or one made from it, with its
     /// truth.json): after each iteration the new model and its predecessor fit its images as
     /// `gpmm fit` fits them, from the loop's kind of points (the init file's, or
-    /// --dev-landmarks-dir), and are measured against the true faces; every iteration runs, each says whether it beat its predecessor and the best
-    /// so far, and DIR/model.gpmm is the best.
+    /// --dev-landmarks-dir), and are measured against the true faces; every iteration runs, each
+    /// says whether it beat its predecessor and the best so far, and DIR/model.gpmm is the best.
     #[arg(long, value_name = "SET")]
     pub dev: Option<PathBuf>,
     /// Landmark files of the --dev images, when the loop reads landmark files (--landmarks-dir).
@@ -121,8 +121,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         }
         flags.image_steps = flags.image_steps.or(Some(40));
     }
-    let fit = flags.resolve_from(gpmm_host::learn::wake_fit_options())?;
-    let dev_fit = flags.resolve()?;
+    let (fit, dev_fit) = gpmm_host::learn::loop_and_check_options(&flags)?;
     let jobs = a.jobs.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)).max(1);
     let plan = RunPlan {
         model: a.model.clone(),

@@ -7,7 +7,7 @@ use crate::arrays::vec3_to_numpy;
 use crate::errors::{io_error, read_error, value_error};
 use crate::json_to_py;
 use crate::model::Model;
-use gpmm_host::fit::{FitFlags, FitOptions};
+use gpmm_host::fit::FitFlags;
 use gpmm_host::learn::dev::{DevPoints, DevSet};
 use gpmm_host::learn::run::{image_files, local_wake, run_with, Hooks, RunError, RunEvent, RunPlan, WakeJob};
 use gpmm_host::learn::shading::{ShadingBases, ShadingModel, ShadingSettings};
@@ -152,9 +152,8 @@ pub fn learn_run<'py>(
         initializer_sigma: landmarks_dir.is_none().then_some(init_landmark_sigma.unwrap_or(gpmm_host::detect::INIT_LANDMARK_SIGMA)),
         overrides: overrides(set)?,
     };
-    let resolve = |base| flags.resolve_from(base).map_err(|e| value_error(e.to_string().replace("--set ", "set: ")));
-    // The loop fits with its own settings; the development check as `gpmm fit` fits.
-    let (fit, dev_fit) = (resolve(gpmm_host::learn::wake_fit_options())?, resolve(FitOptions::DEFAULT)?);
+    let (fit, dev_fit) =
+        gpmm_host::learn::loop_and_check_options(&flags).map_err(|e| value_error(e.to_string().replace("--set ", "set: ")))?;
     let images = image_files(&images).map_err(|e| run_error(e, &model))?;
     let jobs = match opt::<usize>(&jobs, "jobs")? {
         Some(j) => j.max(1),

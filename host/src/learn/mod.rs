@@ -39,7 +39,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::detect::{choose_face, Detector, DEFAULT_MIN_SCORE};
 use crate::eval::models::pca::{pca_beside, KeptCovariance};
-use crate::fit::{fit_prepared, prepare, FitOptions, FitSettings};
+use crate::fit::{fit_prepared, prepare, FitFlags, FitOptions, FitRunError, FitSettings};
 use crate::gp::model::{GpModel, LearningRecord};
 use crate::mesh::Mesh;
 use gpmm_core::fit::TargetImage;
@@ -67,6 +67,13 @@ pub const WAKE_IMAGE_STEPS: u32 = 10_000;
 /// model's mean was, exact points or not (docs/learning.md, "What moves the mean").
 pub fn wake_fit_options() -> FitOptions {
     FitOptions { fit: FitSettings::DEFAULT.with_image_shape(WAKE_IMAGE_STEPS), ..FitOptions::DEFAULT }
+}
+
+/// The fit options of the loop and of its development check, from the same flags: the loop's
+/// over [`wake_fit_options`], the check's over `gpmm fit`'s defaults (the learned model is
+/// measured as users fit it).
+pub fn loop_and_check_options(flags: &FitFlags) -> Result<(FitOptions, FitOptions), FitRunError> {
+    Ok((flags.resolve_from(wake_fit_options())?, flags.resolve()?))
 }
 
 /// The share of the previous model's covariance a learned model keeps by default: on the
@@ -423,6 +430,15 @@ mod tests {
             (o.size, o.seed, o.fit.landmarks, o.fit.start, o.fit.ranks),
             (d.size, d.seed, d.fit.landmarks, d.fit.start, d.fit.ranks)
         );
+    }
+
+    #[test]
+    fn the_check_fits_as_gpmm_fit_does_under_the_same_flags() {
+        assert_eq!(loop_and_check_options(&FitFlags::default()).unwrap(), (wake_fit_options(), FitOptions::DEFAULT));
+        let flags = FitFlags { seed: Some(3), ..FitFlags::default() };
+        let (wake, check) = loop_and_check_options(&flags).unwrap();
+        assert_eq!((wake.seed, check.seed), (3, 3));
+        assert_eq!((wake.fit.image.steps, check.fit.image.steps), (WAKE_IMAGE_STEPS, FitOptions::DEFAULT.fit.image.steps));
     }
 
     #[test]

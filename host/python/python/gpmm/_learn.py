@@ -100,9 +100,10 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
     ``images``: image files or folders of them. ``init``: the init file (``gpmm train-init``)
     whose finder and initializer start every fit, or ``landmarks_dir`` with ``STEM.pts`` files.
     ``keep_variance``: the share of the previous model's covariance kept beside the fits' (the
-    program's default when ``None``). ``settings``: the fit settings ``Model.fit`` takes (``seed``, ``landmark_steps``,
-    ``image_steps``, ``set`` ...), from ``gpmm learn``'s defaults (an image chain of 10000 steps that
-    fits the shape as well, where ``Model.fit``'s has 600 and leaves the shape to the landmarks). ``client``: a ``distributed.Client`` whose workers fit the
+    program's default when ``None``). ``settings``: the fit settings ``Model.fit`` takes
+    (``seed``, ``landmark_steps``, ``image_steps``, ``set`` ...), from ``gpmm learn``'s defaults (an
+    image chain of 10000 steps that fits the shape as well, where ``Model.fit``'s has 600 and
+    leaves the shape to the landmarks). ``client``: a ``distributed.Client`` whose workers fit the
     views (the same models as without it); ``None`` fits on ``jobs`` threads here (default all
     cores). ``progress``: called with a dict per event (``event`` is "fitting", "checking",
     "finished" or "reused").
