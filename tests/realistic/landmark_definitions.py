@@ -41,7 +41,7 @@ def model_tensor(path, name):
         t = header[name]
         start, end = t["data_offsets"]
         f.seek(8 + n + start)
-        return np.frombuffer(f.read(end - start), dtype={"U32": "<u4", "F32": "<f4"}[t["dtype"]]).reshape(t["shape"])
+        return np.frombuffer(f.read(end - start), dtype={"U32": "<u4", "F32": "<f4", "F64": "<f8"}[t["dtype"]]).reshape(t["shape"])
 
 
 def ply_positions(path):
@@ -79,9 +79,9 @@ def closest_barycentric(p, a, b, c):
     return best[1]
 
 
-def transfer(a):
-    ict = Ict(a.ict)
-    ids = model_tensor(a.model, "landmarks").astype(np.int64)
+def registered_ict(model, ict, gpmm, landmark_weight=None):
+    """ICT's neutral face registered into `model`'s topology (`gpmm register`, ICT's landmarks; in
+    ICT's frame): (vertex positions, register.json). `landmark_weight` None keeps register's default."""
     with tempfile.TemporaryDirectory() as tmp:
         mesh, lm, out = (os.path.join(tmp, n) for n in ("ict.ply", "ict.json", "reg"))
         with open(mesh, "w") as f:
@@ -90,12 +90,19 @@ def transfer(a):
             f.writelines("%.5f %.5f %.5f\n" % tuple(p) for p in ict.neutral)
             f.writelines("3 %d %d %d\n" % tuple(t) for t in ict.tris)
         json.dump({"scheme": "ibug68", "vertex_ids": ict.landmarks.tolist()}, open(lm, "w"))
-        cmd = [a.gpmm, "register", a.model, mesh, "--landmarks", lm, "--landmark-weight", str(a.landmark_weight), "-o", out]
+        weight = [] if landmark_weight is None else ["--landmark-weight", str(landmark_weight)]
+        cmd = [gpmm, "register", model, mesh, "--landmarks", lm, *weight, "-o", out]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
             sys.exit(f"{' '.join(cmd)} failed:\n{r.stderr}")
         print(r.stderr.strip().splitlines()[0], file=sys.stderr)
-        registered = ply_positions(os.path.join(out, "registered.ply"))
+        return ply_positions(os.path.join(out, "registered.ply")), json.load(open(os.path.join(out, "register.json")))
+
+
+def transfer(a):
+    ict = Ict(a.ict)
+    ids = model_tensor(a.model, "landmarks").astype(np.int64)
+    registered, _ = registered_ict(a.model, ict, a.gpmm, a.landmark_weight)
     points = registered[ids]
     if a.albedo:
         # Each ICT vertex takes the model's mean colour at the nearest registered vertex; where the model does

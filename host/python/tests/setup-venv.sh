@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Creates (or reuses) a virtual environment of the Python package's tools, idempotently:
 #   bash host/python/tests/setup-venv.sh build DIR   maturin, to build the wheel (kept between runs)
-#   bash host/python/tests/setup-venv.sh test DIR    the test tools (pytest, h5py, Dask, mypy for
+#   bash host/python/tests/setup-venv.sh test DIR    the test tools (pytest, h5py, Dask, Pillow, mypy for
 #                                                    stubtest) for a venv the wheel is installed into
 # Needs CPython >= 3.9 with venv and pip; on Debian, installs python3-venv when missing (as root).
 # Then pip installs the tools from PyPI.
@@ -26,6 +26,6 @@ if [ ! -x "$venv/bin/python" ]; then
 fi
 case "$kind" in
     build) "$venv/bin/python" -m pip install --quiet --upgrade pip "maturin>=1.9,<2" ;;
-    test) "$venv/bin/python" -m pip install --quiet pytest h5py "dask[distributed]" mypy ;;
+    test) "$venv/bin/python" -m pip install --quiet pytest h5py "dask[distributed]" mypy pillow ;;
     *) log "unknown kind '$kind' (build or test)"; exit 1 ;;
 esac
