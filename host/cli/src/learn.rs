@@ -67,6 +67,11 @@ pub struct LearnArgs {
     /// Use the first N identities of --dev (default: all).
     #[arg(long, value_name = "N", requires = "dev")]
     pub dev_identities: Option<usize>,
+    /// The development check also identifies its probes from the same fits (rank-1, gallery at
+    /// yaw 0): a model whose fits come closer but whose rank-1 falls more than this many
+    /// percentage points below the model it is compared with does not count as better.
+    #[arg(long, value_name = "POINTS", default_value_t = 100.0 * gpmm_host::learn::dev::DEFAULT_MAX_RANK1_DROP, requires = "dev")]
+    pub dev_max_identity_drop: f64,
     /// Data directory: the true faces' source for --dev, the template head for --retrain-init
     /// (default: $GPMM_DATA or ../shared/data).
     #[arg(long, value_name = "DIR")]
@@ -152,7 +157,10 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             };
             let points = DevPoints::like_the_loop(a.landmarks_dir.as_deref(), a.dev_landmarks_dir.as_deref(), bytes.as_deref())
                 .map_err(|e| anyhow::anyhow!("--dev: {e} (--dev-landmarks-dir)"))?;
-            let d = DevSet::prepare(dir, a.dev_identities, &data, points, &work)?;
+            if !(0.0..=100.0).contains(&a.dev_max_identity_drop) {
+                anyhow::bail!("--dev-max-identity-drop {}: percentage points from 0 to 100", a.dev_max_identity_drop);
+            }
+            let d = DevSet::prepare(dir, a.dev_identities, &data, points, &work)?.with_max_rank1_drop(a.dev_max_identity_drop / 100.0);
             pb.finish_and_clear();
             if d.unfound > 0 {
                 eprintln!("{}: no face found in {} development images; they are left out", dir.display(), d.unfound);
@@ -252,14 +260,22 @@ pub fn learn(a: LearnArgs) -> Result<()> {
 
 /// One line on an iteration's development check: both figures and the best model so far.
 fn development_line(iteration: u32, c: &gpmm_host::learn::dev::DevComparison) -> String {
-    let verdict = match (c.better, c.best) {
-        (_, true) => "better, the best so far".to_string(),
-        (true, false) => format!("better than its predecessor; the best stays {} ({:.3} mm)", c.best_model, c.best_median_mm),
-        (false, _) => format!("worse; the best stays {} ({:.3} mm)", c.best_model, c.best_median_mm),
+    let rank1 = |r: Option<f64>| r.map_or_else(String::new, |r| format!(", rank-1 {:.1} %", 100.0 * r));
+    let best = format!("the best stays {} ({:.3} mm{})", c.best_model, c.best_median_mm, rank1(c.best_rank1));
+    let verdict = match (c.better, c.best, c.closer) {
+        (_, true, _) => "better, the best so far".to_string(),
+        (true, false, _) => format!("better than its predecessor; {best}"),
+        (false, _, true) => format!("closer, but it tells the identities apart less well: not better; {best}"),
+        (false, _, false) => format!("worse; {best}"),
     };
     format!(
-        "iteration {iteration}: development median {:.3} mm (mean {:.3}) against {:.3} mm (mean {:.3}) before: {verdict}",
-        c.learned.median_mm, c.learned.mean_mm, c.previous.median_mm, c.previous.mean_mm
+        "iteration {iteration}: development median {:.3} mm (mean {:.3}{}) against {:.3} mm (mean {:.3}{}) before: {verdict}",
+        c.learned.median_mm,
+        c.learned.mean_mm,
+        rank1(c.learned.rank1),
+        c.previous.median_mm,
+        c.previous.mean_mm,
+        rank1(c.previous.rank1)
     )
 }
 

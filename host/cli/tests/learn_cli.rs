@@ -199,11 +199,18 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert!(loop_record.image_shape_share.is_some_and(|s| s > 0.0), "{loop_record:?}");
     // The second iteration starts from model_1 and reuses its measured figure.
     assert_eq!(c2["previous"], c1["learned"], "{c2}");
-    assert_eq!(c1["better"].as_bool().unwrap(), m1 < start, "{c1}");
-    assert_eq!(c2["better"].as_bool().unwrap(), m2 < m1, "{c2}");
-    let (best, best_file) = [(start, model.clone()), (m1, checked.join("model_1.gpmm")), (m2, checked.join("model_2.gpmm"))]
+    // Closer (a lower median) and identifying at most five points worse (the default drop): better.
+    let rank1 = |c: &serde_json::Value, k: &str| c[k]["rank1"].as_f64().unwrap();
+    let (r_start, r1, r2) = (rank1(&c1, "previous"), rank1(&c1, "learned"), rank1(&c2, "learned"));
+    assert!([r_start, r1, r2].iter().all(|r| (0.0..=1.0).contains(r)) && c1["learned"]["probes"].as_u64().unwrap() > 0, "{c1} {c2}");
+    assert!(stderr.contains("rank-1"), "{stderr}");
+    let better = |m: f64, r: f64, than: (f64, f64)| m < than.0 && r >= than.1 - 0.05;
+    assert_eq!(c1["better"].as_bool().unwrap(), better(m1, r1, (start, r_start)), "{c1}");
+    assert_eq!(c1["closer"].as_bool().unwrap(), m1 < start, "{c1}");
+    assert_eq!(c2["better"].as_bool().unwrap(), better(m2, r2, (m1, r1)), "{c2}");
+    let (best, _, best_file) = [(m1, r1, checked.join("model_1.gpmm")), (m2, r2, checked.join("model_2.gpmm"))]
         .into_iter()
-        .fold((f64::INFINITY, model.clone()), |acc, (m, f)| if m < acc.0 { (m, f) } else { acc });
+        .fold((start, r_start, model.clone()), |acc, (m, r, f)| if better(m, r, (acc.0, acc.1)) { (m, r, f) } else { acc });
     assert_eq!(c2["best_median_mm"].as_f64().unwrap(), best, "{c2}");
     assert_eq!(std::fs::read(&kept_path).unwrap(), std::fs::read(&best_file).unwrap(), "DIR/model.gpmm is not the best");
     assert!(stderr.contains(&format!("kept {}", s(&best_file))), "{stderr}");
@@ -277,4 +284,6 @@ fn learn_refuses_bad_arguments_clearly() {
     assert!(e.contains("empty") && e.contains("no .png"), "{e}");
     let e = fails(&gpmm(&["learn", "m.gpmm", s(&empty), "--init", "x.init", "--min-iou", "1.5", "-o", s(dir.path())]));
     assert!(e.contains("--min-iou 1.5"), "{e}");
+    let e = fails(&gpmm(&["learn", "m.gpmm", s(&empty), "--init", "x.init", "--dev-max-identity-drop", "5", "-o", s(dir.path())]));
+    assert!(e.contains("--dev-max-identity-drop") && e.contains("--dev"), "{e}");
 }

@@ -85,13 +85,13 @@ pub fn learn_wake<'py>(
 #[pyfunction]
 #[pyo3(signature = (model, images, output, *, init = None, landmarks_dir = None, iterations = Int::of(5), mirror = false,
     min_iou = None, init_landmark_sigma = None, shape_from_shading = false, keep_variance = None, dev = None,
-    dev_landmarks_dir = None, dev_identities = None, data = None, jobs = None, wake_all = None, progress = None,
+    dev_landmarks_dir = None, dev_identities = None, dev_max_identity_drop = None, data = None, jobs = None, wake_all = None, progress = None,
     seed = None, size = None, landmark_steps = None, image_steps = None, shape_rank = None, color_rank = None,
     landmark_sigma = None, contour_sigma = None, set = None),
     text_signature = "(model, images, output, *, init=None, landmarks_dir=None, iterations=5, mirror=False, min_iou=None, \
     init_landmark_sigma=None, shape_from_shading=False, keep_variance=None, dev=None, dev_landmarks_dir=None, \
-    dev_identities=None, data=None, jobs=None, wake_all=None, progress=None, seed=None, size=None, landmark_steps=None, \
-    image_steps=None, shape_rank=None, color_rank=None, landmark_sigma=None, contour_sigma=None, set=None)")]
+    dev_identities=None, dev_max_identity_drop=None, data=None, jobs=None, wake_all=None, progress=None, seed=None, size=None, \
+    landmark_steps=None, image_steps=None, shape_rank=None, color_rank=None, landmark_sigma=None, contour_sigma=None, set=None)")]
 #[allow(clippy::too_many_arguments)]
 pub fn learn_run<'py>(
     py: Python<'py>,
@@ -109,6 +109,7 @@ pub fn learn_run<'py>(
     dev: Option<PathBuf>,
     dev_landmarks_dir: Option<PathBuf>,
     dev_identities: Option<Int>,
+    dev_max_identity_drop: Option<f64>,
     data: Option<PathBuf>,
     jobs: Option<Int>,
     wake_all: Option<Py<PyAny>>,
@@ -178,6 +179,11 @@ pub fn learn_run<'py>(
         jobs,
     };
     let dev_identities = opt::<usize>(&dev_identities, "dev_identities")?;
+    let max_rank1_drop = match dev_max_identity_drop {
+        Some(d) if (0.0..=100.0).contains(&d) => d / 100.0,
+        Some(d) => return Err(value_error(format!("dev_max_identity_drop = {d}: percentage points from 0 to 100"))),
+        None => gpmm_host::learn::dev::DEFAULT_MAX_RANK1_DROP,
+    };
     // Python errors of the callbacks, raised again as they were once the loop has stopped.
     let raised: Mutex<Option<PyErr>> = Mutex::new(None);
     let keep = |e: PyErr| {
@@ -198,7 +204,8 @@ pub fn learn_run<'py>(
                 let points = DevPoints::like_the_loop(landmarks_dir.as_deref(), dev_landmarks_dir.as_deref(), bytes.as_deref())
                     .map_err(|e| value_error(format!("dev: {e} (dev_landmarks_dir)")))?;
                 let prepared = DevSet::prepare(dir, dev_identities, &data, points, &work);
-                Some(prepared.map_err(|e| read_error(format!("development set: {e}"), &[dir.as_path(), data.as_path()]))?)
+                let prepared = prepared.map_err(|e| read_error(format!("development set: {e}"), &[dir.as_path(), data.as_path()]))?;
+                Some(prepared.with_max_rank1_drop(max_rank1_drop))
             }
             None => None,
         };

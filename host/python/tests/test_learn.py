@@ -131,6 +131,7 @@ def test_a_development_set_keeps_the_programs_best(tmp_path, inputs, client, run
         c["learned"].pop("model")
     assert without(development, ("best_model",)) == without(cli, ("best_model",)), (development, cli)
     assert development["learned"]["fits"] >= 3, development
+    assert 0.0 <= development["learned"]["rank1"] <= 1.0 and development["learned"]["probes"] >= 1, development
     assert out["best"] == str(tmp_path / "py" / "model.gpmm")
     assert (tmp_path / "py" / "model.gpmm").read_bytes() == (tmp_path / "cli" / "model.gpmm").read_bytes()
     assert (tmp_path / "py" / "model.gpmm").read_bytes() == open(out["kept"], "rb").read()
@@ -189,6 +190,8 @@ def test_bad_inputs_are_errors_naming_them(tmp_path, inputs):
         gpmm.learn(model, images, tmp_path / "d", **LEARN)
     with pytest.raises(gpmm.GpmmValueError, match="min_iou"):
         gpmm.learn(model, images, tmp_path / "e", init=init, min_iou=2.0, **LEARN)
+    with pytest.raises(gpmm.GpmmValueError, match="dev_max_identity_drop"):
+        gpmm.learn(model, images, tmp_path / "g", init=init, dev_max_identity_drop=-1.0, **LEARN)
     with pytest.raises(TypeError, match="no_such_setting"):
         gpmm.learn(model, images, tmp_path / "f", init=init, no_such_setting=1, **LEARN)
 

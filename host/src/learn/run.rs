@@ -387,7 +387,7 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
             write_samples(&next, &dir.join("samples.png"))?;
             write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;
             let development = match dev.as_deref() {
-                Some(d) => Some(track.compare(d.dir(), &previous_path, &next_path, &|p: &Path| figure(d, iteration, p))?),
+                Some(d) => Some(track.compare(d.dir(), &previous_path, &next_path, d.max_rank1_drop, &|p: &Path| figure(d, iteration, p))?),
                 None => None,
             };
             let file = IterationFile {

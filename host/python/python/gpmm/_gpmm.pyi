@@ -230,6 +230,7 @@ def learn_run(
     dev: Optional[_Path] = None,
     dev_landmarks_dir: Optional[_Path] = None,
     dev_identities: Optional[int] = None,
+    dev_max_identity_drop: Optional[float] = None,
     data: Optional[_Path] = None,
     jobs: Optional[int] = None,
     wake_all: Optional[Callable[[int, str, Optional[bytes], str, list[Tuple[str, bool]]], Sequence[Any]]] = None,

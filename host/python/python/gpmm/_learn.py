@@ -90,7 +90,7 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
           mirror: bool = False, keep_variance: Optional[float] = None, min_iou: Optional[float] = None,
           init_landmark_sigma: Optional[float] = None, shape_from_shading: bool = False,
           dev: Optional[PathLike] = None, dev_identities: Optional[int] = None,
-          dev_landmarks_dir: Optional[PathLike] = None, data: Optional[PathLike] = None,
+          dev_max_identity_drop: Optional[float] = None, dev_landmarks_dir: Optional[PathLike] = None, data: Optional[PathLike] = None,
           jobs: Optional[int] = None, client: Optional[Any] = None,
           progress: Optional[Callable[[dict[str, Any]], None]] = None, **settings: Any) -> dict[str, Any]:
     """Learns a model from unlabelled images as ``gpmm learn`` does, with the same outputs in
@@ -100,7 +100,9 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
     ``images``: image files or folders of them. ``init``: the init file (``gpmm train-init``)
     whose finder and initializer start every fit, or ``landmarks_dir`` with ``STEM.pts`` files.
     ``keep_variance``: the share of the previous model's covariance kept beside the fits' (the
-    program's default when ``None``). ``settings``: the fit settings ``Model.fit`` takes
+    program's default when ``None``). ``dev_max_identity_drop``: the development check's allowed
+    fall of rank-1 identification, in percentage points, for a model whose fits come closer (the
+    program's default, 5, when ``None``). ``settings``: the fit settings ``Model.fit`` takes
     (``seed``, ``landmark_steps``, ``image_steps``, ``set`` ...), from ``gpmm learn``'s defaults (an
     image chain of 10000 steps that fits the shape as well, where ``Model.fit``'s has 600 and
     leaves the shape to the landmarks). ``client``: a ``distributed.Client`` whose workers fit the
@@ -121,5 +123,5 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
         landmarks_dir=fspath(landmarks_dir), iterations=iterations, mirror=mirror, min_iou=min_iou,
         init_landmark_sigma=init_landmark_sigma, shape_from_shading=shape_from_shading,
         keep_variance=keep_variance, dev=fspath(dev), dev_landmarks_dir=fspath(dev_landmarks_dir),
-        dev_identities=dev_identities, data=fspath(data), jobs=jobs, wake_all=wake_all, progress=progress,
+        dev_identities=dev_identities, dev_max_identity_drop=dev_max_identity_drop, data=fspath(data), jobs=jobs, wake_all=wake_all, progress=progress,
         **settings)
