@@ -165,18 +165,8 @@ impl<'a> DenseBasis<'a> {
         if self.vertices == 0 {
             return Ok(());
         }
-        for (c, comp) in coeffs.iter().zip(self.values.chunks_exact(self.vertices * 3)) {
-            if *c == 0.0 {
-                continue;
-            }
-            for (o, b) in out.iter_mut().zip(comp.chunks_exact(3)) {
-                if let [x, y, z] = b {
-                    o[0] += c * x;
-                    o[1] += c * y;
-                    o[2] += c * z;
-                }
-            }
-        }
+        let comps = coeffs.iter().zip(self.values.chunks_exact(self.vertices * 3)).filter(|(c, _)| **c != 0.0);
+        fold_dense_all(comps.map(|(c, comp)| (*c, comp)), out);
         Ok(())
     }
 }
@@ -222,14 +212,15 @@ impl QuantValues<'_> {
 }
 
 /// Hands the components `(d, values)` to `four` in blocks of four and the rest to `one`, in
-/// their order (the blocked passes of [`fold_factored_all`] and [`gather_factored_all`]).
-fn in_blocks_of_four<'v, Q: 'v>(
-    comps: impl Iterator<Item = (Vec3, &'v [Q])>,
+/// their order (the blocked passes of [`fold_factored_all`], [`gather_factored_all`] and
+/// [`dense::fold_dense_all`]).
+fn in_blocks_of_four<'v, M: Copy + Default, Q: 'v>(
+    comps: impl Iterator<Item = (M, &'v [Q])>,
     out: &mut [Vec3],
-    four: impl Fn(&[(Vec3, &'v [Q]); 4], &mut [Vec3]),
-    one: impl Fn(Vec3, &'v [Q], &mut [Vec3]),
+    four: impl Fn(&[(M, &'v [Q]); 4], &mut [Vec3]),
+    one: impl Fn(M, &'v [Q], &mut [Vec3]),
 ) {
-    let mut block: [(Vec3, &[Q]); 4] = [([0.0; 3], &[]); 4];
+    let mut block: [(M, &[Q]); 4] = [(M::default(), &[]); 4];
     let mut filled = 0;
     for comp in comps {
         if let Some(slot) = block.get_mut(filled) {
@@ -278,17 +269,6 @@ fn fold_factored<Q: Copy + Into<f32>>(d: Vec3, values: &[Q], out: &mut [Vec3]) {
         o[0] += d[0] * q;
         o[1] += d[1] * q;
         o[2] += d[2] * q;
-    }
-}
-
-/// Multiply-adds `out[v][a] += m · q[v][a]` (dense) over one component's values.
-fn fold_dense<Q: Copy + Into<f32>>(m: f32, values: &[Q], out: &mut [Vec3]) {
-    for (o, q) in out.iter_mut().zip(values.chunks_exact(3)) {
-        if let [x, y, z] = *q {
-            o[0] += m * x.into();
-            o[1] += m * y.into();
-            o[2] += m * z.into();
-        }
     }
 }
 
@@ -378,16 +358,10 @@ impl<'a> QuantizedBasis<'a> {
                 }
             }
             None => {
-                for (k, (c, s)) in coeffs.iter().zip(self.scales).enumerate() {
-                    let m = c * s;
-                    if m == 0.0 {
-                        continue;
-                    }
-                    let range = 3 * k * n..3 * (k + 1) * n;
-                    match self.values {
-                        QuantValues::I8(v) => fold_dense(m, v.get(range).unwrap_or(&[]), out),
-                        QuantValues::I16(v) => fold_dense(m, v.get(range).unwrap_or(&[]), out),
-                    }
+                let comps = coeffs.iter().zip(self.scales).map(|(c, s)| c * s).enumerate().filter(|(_, m)| *m != 0.0);
+                match self.values {
+                    QuantValues::I8(v) => fold_dense_all(comps.map(|(k, m)| (m, v.get(3 * k * n..3 * (k + 1) * n).unwrap_or(&[]))), out),
+                    QuantValues::I16(v) => fold_dense_all(comps.map(|(k, m)| (m, v.get(3 * k * n..3 * (k + 1) * n).unwrap_or(&[]))), out),
                 }
             }
         }
@@ -584,9 +558,11 @@ impl Basis<'_> {
 }
 
 mod axis;
+mod dense;
 mod rows;
 
 use axis::fold_axis_all;
+use dense::fold_dense_all;
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
