@@ -30,6 +30,12 @@ pub struct LearnArgs {
     /// points mirrored.
     #[arg(long, value_name = "DIR")]
     pub landmarks_dir: Option<PathBuf>,
+    /// Learn where the --landmarks-dir points lie on the model: in each accepted fit, the vertex
+    /// each point lands on (within 20 mm of its landmark); each new model takes the vertices the
+    /// fits agree on, so that the detector that made the points fits it without bending its shape
+    /// to another convention.
+    #[arg(long, requires = "landmarks_dir")]
+    pub learn_landmarks: bool,
     /// Output directory: model_N.gpmm and iteration_N/ (records.json, samples.png,
     /// reconstructions.png) per iteration; a rerun continues after the last complete iteration.
     #[arg(short, long, value_name = "DIR")]
@@ -142,6 +148,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
             max_albedo_change: albedo_change_limit(0),
             landmarks_dir: a.landmarks_dir.clone(),
             keep_variance: a.keep_variance,
+            learn_landmarks: a.learn_landmarks,
         },
         dev_fit,
         jobs,

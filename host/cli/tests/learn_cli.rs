@@ -157,6 +157,36 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert!(broken.iter().all(|r| r["accepted"] == false), "{broken:?}");
     let m = gpmm_host::gp::model_io::load(&from_files.join("model_1.gpmm")).unwrap();
     assert!(m.metadata.learning.as_ref().unwrap().init.contains("landmark files"), "{:?}", m.metadata.learning);
+    let start = gpmm_host::gp::model_io::load(&model).unwrap();
+    assert_eq!(m.landmarks, start.landmarks, "landmarks moved without --learn-landmarks");
+
+    // Learning the points' convention: a "detector" that marks the nose tip (point 30) 6 px lower
+    // than the renders' truth in every image; the learned model's nose-tip vertex moves down.
+    let shifted = dir.path().join("shifted");
+    std::fs::create_dir(&shifted).unwrap();
+    for entry in std::fs::read_dir(&images).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "pts") {
+            let mut pts = gpmm_host::photo::pts::read_pts(&path, false).unwrap().points;
+            pts[30][1] += 6.0;
+            std::fs::write(shifted.join(path.file_name().unwrap()), gpmm_host::photo::pts::pts_string(&pts)).unwrap();
+        }
+    }
+    let learned_lm = dir.path().join("learned-landmarks");
+    let args =
+        ["learn", s(&model), s(&images), "--landmarks-dir", s(&shifted), "--learn-landmarks", "--quick", "--mirror", "-o", s(&learned_lm)];
+    ok(&gpmm(&args));
+    let m = gpmm_host::gp::model_io::load(&learned_lm.join("model_1.gpmm")).unwrap();
+    let (old, new) = (start.landmarks[30] as usize, m.landmarks[30] as usize);
+    // Model y points up; 6 px is about 10 mm on these renders.
+    assert!(start.shape.mean[new][1] < start.shape.mean[old][1] - 2.0, "nose tip {old} -> {new}");
+    assert!(m.metadata.learning.as_ref().unwrap().landmarks_moved.is_some_and(|n| n >= 1), "{:?}", m.metadata.learning);
+    let records = read_json(&learned_lm.join("iteration_1/records.json"));
+    let hits: Vec<&serde_json::Value> =
+        records["records"].as_array().unwrap().iter().filter(|r| r["accepted"] == true).map(|r| &r["landmark_hits"]).collect();
+    assert!(!hits.is_empty() && hits.iter().all(|h| h.as_array().is_some_and(|a| a.len() == 68)), "{records}");
+    let e = fails(&gpmm(&["learn", s(&model), s(&images), "--init", s(&init), "--learn-landmarks", "-o", s(&learned_lm)]));
+    assert!(e.contains("--learn-landmarks") && e.contains("--landmarks-dir"), "{e}");
 
     // With a development set: each model is measured against its predecessor and the best so
     // far there, every iteration runs, and DIR/model.gpmm is the best.

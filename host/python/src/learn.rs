@@ -83,13 +83,13 @@ pub fn learn_wake<'py>(
 /// model to use), `best` (with `dev`: `output/model.gpmm`, its copy), `model` (the last one
 /// written, `None` if no iteration ran) and `iterations` (each iteration's records.json as a dict).
 #[pyfunction]
-#[pyo3(signature = (model, images, output, *, init = None, landmarks_dir = None, iterations = Int::of(5), mirror = false,
+#[pyo3(signature = (model, images, output, *, init = None, landmarks_dir = None, learn_landmarks = false, iterations = Int::of(5), mirror = false,
     min_iou = None, init_landmark_sigma = None, shape_from_shading = false, keep_variance = None, dev = None,
     dev_landmarks_dir = None, dev_identities = None, dev_max_identity_drop = None, data = None, jobs = None, wake_all = None, progress = None,
     seed = None, size = None, landmark_steps = None, image_steps = None, shape_rank = None, color_rank = None,
     landmark_sigma = None, contour_sigma = None, set = None),
-    text_signature = "(model, images, output, *, init=None, landmarks_dir=None, iterations=5, mirror=False, min_iou=None, \
-    init_landmark_sigma=None, shape_from_shading=False, keep_variance=None, dev=None, dev_landmarks_dir=None, \
+    text_signature = "(model, images, output, *, init=None, landmarks_dir=None, learn_landmarks=False, iterations=5, mirror=False, \
+    min_iou=None, init_landmark_sigma=None, shape_from_shading=False, keep_variance=None, dev=None, dev_landmarks_dir=None, \
     dev_identities=None, dev_max_identity_drop=None, data=None, jobs=None, wake_all=None, progress=None, seed=None, size=None, \
     landmark_steps=None, image_steps=None, shape_rank=None, color_rank=None, landmark_sigma=None, contour_sigma=None, set=None)")]
 #[allow(clippy::too_many_arguments)]
@@ -100,6 +100,7 @@ pub fn learn_run<'py>(
     output: PathBuf,
     init: Option<PathBuf>,
     landmarks_dir: Option<PathBuf>,
+    learn_landmarks: bool,
     iterations: Int,
     mirror: bool,
     min_iou: Option<f64>,
@@ -139,6 +140,9 @@ pub fn learn_run<'py>(
     if init.is_none() && landmarks_dir.is_none() {
         return Err(value_error("init (an init file) or landmarks_dir is needed: the fits start from one of them"));
     }
+    if learn_landmarks && landmarks_dir.is_none() {
+        return Err(value_error("learn_landmarks needs landmarks_dir: the landmarks are learned from its points"));
+    }
     // The initializer's points are fitted as `gpmm fit --init` fits them; landmark files as
     // `gpmm fit --landmarks` does.
     let flags = FitFlags {
@@ -174,6 +178,7 @@ pub fn learn_run<'py>(
             max_albedo_change: albedo_change_limit(0),
             landmarks_dir: landmarks_dir.clone(),
             keep_variance,
+            learn_landmarks,
         },
         dev_fit,
         jobs,

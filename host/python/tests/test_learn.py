@@ -192,6 +192,8 @@ def test_bad_inputs_are_errors_naming_them(tmp_path, inputs):
         gpmm.learn(model, images, tmp_path / "e", init=init, min_iou=2.0, **LEARN)
     with pytest.raises(gpmm.GpmmValueError, match="dev_max_identity_drop"):
         gpmm.learn(model, images, tmp_path / "g", init=init, dev_max_identity_drop=-1.0, **LEARN)
+    with pytest.raises(gpmm.GpmmValueError, match="learn_landmarks needs landmarks_dir"):
+        gpmm.learn(model, images, tmp_path / "h", init=init, learn_landmarks=True, **LEARN)
     with pytest.raises(TypeError, match="no_such_setting"):
         gpmm.learn(model, images, tmp_path / "f", init=init, no_such_setting=1, **LEARN)
 

@@ -140,6 +140,10 @@ pub struct LearningRecord {
     /// start's solve alone; absent in files written before it was recorded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub image_shape_share: Option<f32>,
+    /// Landmark vertices the iteration moved to where its landmark files' points lie (absent when
+    /// it kept its predecessor's landmarks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landmarks_moved: Option<usize>,
 }
 
 /// The current model file format version.

@@ -27,6 +27,7 @@
 //!    model so far; the next iteration starts from them.
 
 pub mod dev;
+pub mod landmarks;
 pub mod run;
 pub mod shading;
 pub mod silhouette;
@@ -101,6 +102,10 @@ pub struct LearnSettings {
     /// The share of the previous model's covariance the learned model keeps beside its fits' (0:
     /// the fits' PCA alone; see [`crate::eval::models::pca::pca_beside`]).
     pub keep_variance: f64,
+    /// Learn where the landmark files' points lie on the model: each iteration's model takes the
+    /// landmark vertices its accepted fits agree on ([`landmarks`]; needs `landmarks_dir`).
+    #[serde(default)]
+    pub learn_landmarks: bool,
 }
 
 /// What became of one image in one iteration.
@@ -129,6 +134,9 @@ pub struct ImageRecord {
     /// Shape from shading's mean absolute height over the vertices it saw (mm).
     #[serde(default)]
     pub detail_mm: Option<f32>,
+    /// The vertex each of the image's points lands on in the fit (with `learn_landmarks`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landmark_hits: Option<Vec<Option<u32>>>,
     /// Vertices shape from shading saw.
     #[serde(default)]
     pub detail_vertices: Option<usize>,
@@ -151,6 +159,7 @@ impl ImageRecord {
             angles_deg: None,
             albedo_change: None,
             detail_mm: None,
+            landmark_hits: None,
             detail_vertices: None,
             seconds: 0.0,
         }
@@ -230,6 +239,19 @@ fn fit_and_check(
     }
     let mean = outcome.posterior.mean_params(&outcome.params);
     let mesh = model.instance(mean.shape_coeffs(), mean.color_coeffs()).map_err(|e| e.to_string())?;
+    if settings.learn_landmarks && settings.landmarks_dir.is_some() {
+        let camera = mean.camera(prepared.image.width(), prepared.image.height());
+        let hits = landmarks::landmark_hits(
+            &mesh,
+            &mean.pose,
+            &camera,
+            &model.shape.mean,
+            &model.landmarks,
+            &prepared.landmarks,
+            landmarks::LANDMARK_SEARCH_MM,
+        );
+        record.landmark_hits = Some(hits);
+    }
     let (Some(sm), Some(sfs)) = (shading, settings.shading.as_ref()) else { return Ok(Some(mesh)) };
     let pixels: Vec<[u8; 3]> = prepared.image.pixels().map(|p| p.0).collect();
     let target = TargetImage::new(&pixels, settings.fit.size, settings.fit.size)
@@ -347,8 +369,15 @@ pub enum LearnError {
 }
 
 /// The next model: the PCA of the accepted reconstructions of `wakes`, in `previous`'s topology
-/// with its landmarks, its template's provenance and attribution, and a record of the iteration.
-pub fn learned_model(previous: &GpModel, wakes: &[Wake], keep_variance: f64, record: LearningRecord) -> Result<GpModel, LearnError> {
+/// with its landmarks (or `landmarks`, learned ones), its template's provenance and attribution,
+/// and a record of the iteration.
+pub fn learned_model(
+    previous: &GpModel,
+    wakes: &[Wake],
+    keep_variance: f64,
+    landmarks: Option<&[u32]>,
+    record: LearningRecord,
+) -> Result<GpModel, LearnError> {
     let examples: Vec<Mesh> = wakes.iter().filter_map(|w| w.reconstruction.clone()).collect();
     if examples.len() < 2 {
         return Err(LearnError::TooFewAccepted { iteration: record.iteration, accepted: examples.len(), images: wakes.len() });
@@ -358,7 +387,8 @@ pub fn learned_model(previous: &GpModel, wakes: &[Wake], keep_variance: f64, rec
     // At most as many components as the predecessor has (or the examples give, without it).
     let kept =
         (keep_variance > 0.0).then_some(KeptCovariance { model: previous, share: keep_variance, max_rank: previous.shape.rank().max(2) });
-    let mut model = pca_beside(&examples, kept, &previous.triangles, &previous.landmarks, "learned", &source, &attribution)?;
+    let landmarks = landmarks.unwrap_or(&previous.landmarks);
+    let mut model = pca_beside(&examples, kept, &previous.triangles, landmarks, "learned", &source, &attribution)?;
     model.metadata.template = previous.metadata.template.clone();
     model.metadata.landmark_scheme = previous.metadata.landmark_scheme.clone();
     model.metadata.units = previous.metadata.units.clone();
@@ -403,6 +433,7 @@ mod tests {
             angles_deg: None,
             albedo_change,
             detail_mm: None,
+            landmark_hits: None,
             detail_vertices: None,
             seconds: 0.0,
         }

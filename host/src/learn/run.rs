@@ -380,9 +380,19 @@ pub fn run_with(plan: &RunPlan, mut dev: Option<&mut DevSet>, hooks: &Hooks<'_>)
                 seed: plan.settings.fit.seed,
                 image_steps: Some(plan.settings.fit.fit.image.steps),
                 image_shape_share: Some(plan.settings.fit.fit.proposals.image.shape),
+                landmarks_moved: None,
             };
             std::fs::create_dir_all(&dir).map_err(io(&dir))?;
-            let next = learned_model(&model, &wakes, plan.settings.keep_variance, record)?;
+            let learned_landmarks = plan.settings.learn_landmarks.then(|| {
+                let hits: Vec<&[Option<u32>]> =
+                    wakes.iter().filter(|w| w.reconstruction.is_some()).filter_map(|w| w.record.landmark_hits.as_deref()).collect();
+                super::landmarks::agreed_landmarks(&model.shape.mean, &model.landmarks, &hits)
+            });
+            let record = LearningRecord {
+                landmarks_moved: learned_landmarks.as_ref().map(|l| l.iter().zip(&model.landmarks).filter(|(a, b)| a != b).count()),
+                ..record
+            };
+            let next = learned_model(&model, &wakes, plan.settings.keep_variance, learned_landmarks.as_deref(), record)?;
             model_io::save(&next, &next_path)?;
             write_samples(&next, &dir.join("samples.png"))?;
             write_reconstructions(&next, &wakes, &dir.join("reconstructions.png"))?;

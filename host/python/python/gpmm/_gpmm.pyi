@@ -221,6 +221,7 @@ def learn_run(
     *,
     init: Optional[_Path] = None,
     landmarks_dir: Optional[_Path] = None,
+    learn_landmarks: bool = False,
     iterations: int = 5,
     mirror: bool = False,
     min_iou: Optional[float] = None,

@@ -86,7 +86,8 @@ class _ClusterWake:
 
 
 def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: PathLike, *,
-          init: Optional[PathLike] = None, landmarks_dir: Optional[PathLike] = None, iterations: int = 5,
+          init: Optional[PathLike] = None, landmarks_dir: Optional[PathLike] = None,
+          learn_landmarks: bool = False, iterations: int = 5,
           mirror: bool = False, keep_variance: Optional[float] = None, min_iou: Optional[float] = None,
           init_landmark_sigma: Optional[float] = None, shape_from_shading: bool = False,
           dev: Optional[PathLike] = None, dev_identities: Optional[int] = None,
@@ -98,7 +99,8 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
     after the last complete iteration).
 
     ``images``: image files or folders of them. ``init``: the init file (``gpmm train-init``)
-    whose finder and initializer start every fit, or ``landmarks_dir`` with ``STEM.pts`` files.
+    whose finder and initializer start every fit, or ``landmarks_dir`` with ``STEM.pts`` files;
+    ``learn_landmarks``: each model takes the landmark vertices where those points lie.
     ``keep_variance``: the share of the previous model's covariance kept beside the fits' (the
     program's default when ``None``). ``dev_max_identity_drop``: the development check's allowed
     fall of rank-1 identification, in percentage points, for a model whose fits come closer (the
@@ -120,8 +122,8 @@ def learn(model: PathLike, images: Union[PathLike, Sequence[PathLike]], output: 
     fspath = (lambda p: None if p is None else os.fspath(p))
     return _gpmm.learn_run(
         os.fspath(model), [os.fspath(p) for p in paths], os.fspath(output), init=fspath(init),
-        landmarks_dir=fspath(landmarks_dir), iterations=iterations, mirror=mirror, min_iou=min_iou,
-        init_landmark_sigma=init_landmark_sigma, shape_from_shading=shape_from_shading,
+        landmarks_dir=fspath(landmarks_dir), learn_landmarks=learn_landmarks, iterations=iterations, mirror=mirror,
+        min_iou=min_iou, init_landmark_sigma=init_landmark_sigma, shape_from_shading=shape_from_shading,
         keep_variance=keep_variance, dev=fspath(dev), dev_landmarks_dir=fspath(dev_landmarks_dir),
-        dev_identities=dev_identities, dev_max_identity_drop=dev_max_identity_drop, data=fspath(data), jobs=jobs, wake_all=wake_all, progress=progress,
-        **settings)
+        dev_identities=dev_identities, dev_max_identity_drop=dev_max_identity_drop, data=fspath(data), jobs=jobs,
+        wake_all=wake_all, progress=progress, **settings)
