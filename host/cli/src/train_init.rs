@@ -82,6 +82,16 @@ pub struct TrainInitArgs {
     /// without them the finder's box on photos of people came out about twice the face).
     #[arg(long, help_heading = COMPARISONS)]
     pub undressed: bool,
+    /// Show every frame with its camera's look alone (by default half of all frames, renders, real
+    /// faces and face-free views alike, get a random photographic look: a tenth of all frames in
+    /// black and white, the rest with contrast, brightness, saturation and a colour cast drawn
+    /// anew).
+    #[arg(long, help_heading = COMPARISONS)]
+    pub plain_looks: bool,
+    /// Draw nothing over the faces (by default a tenth of the faces, rendered and real, wear dark
+    /// glasses and one in twenty a face mask, drawn from their 68 points).
+    #[arg(long, help_heading = COMPARISONS)]
+    pub no_occluders: bool,
     /// Folder of photos (.jpg/.png) to draw some scenes over, and to cut face-free frames from
     /// that the finder learns as "no face" (the hardest of several candidates, by the finder's own
     /// score, each chunk); repeat for several folders. A photo with a STEM.faces.json beside it
@@ -160,6 +170,10 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     }
     opts.ranges.open_eyes = !a.shut_eyes;
     opts.ranges.dressed = !a.undressed;
+    if a.plain_looks {
+        opts.ranges.look_share = 0.0;
+    }
+    opts.ranges.occluders = !a.no_occluders;
     let head = if a.no_head {
         None
     } else {

@@ -253,6 +253,15 @@ fn training_over_background_photos_records_them_and_names_a_bad_photo() {
     let text = String::from_utf8_lossy(&bytes);
     assert!(text.contains("\"background_photos\":2") && text.contains("\"face_free_frames\":0.125"), "metadata lacks the photos");
     assert_ne!(bytes, std::fs::read(&f.init).unwrap(), "the photos changed nothing");
+    assert!(text.contains("\"look_share\":0.5") && text.contains("\"occluders\":true"), "metadata lacks the looks and occluders");
+    // Without looks and occluders: recorded, and other frames make another file.
+    let plain = f.dir.path().join("plain.init");
+    let args = ["train-init", s(&f.model), "-o", s(&plain), "--quick", "--seed", "7", "--backgrounds", s(&photos)];
+    ok(&gpmm(&[&args[..], &["--plain-looks", "--no-occluders"]].concat()));
+    let plain_bytes = std::fs::read(&plain).unwrap();
+    let plain_text = String::from_utf8_lossy(&plain_bytes);
+    assert!(plain_text.contains("\"look_share\":0.0") && plain_text.contains("\"occluders\":false"), "{plain_text}");
+    assert_ne!(plain_bytes, bytes, "looks and occluders changed nothing");
     std::fs::write(photos.join("broken.jpg"), b"not a jpeg").unwrap();
     let err = fails(&gpmm(&["train-init", s(&f.model), "-o", s(&init), "--quick", "--backgrounds", s(&photos)]));
     assert!(err.contains("broken.jpg"), "{err}");

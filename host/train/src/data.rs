@@ -224,7 +224,8 @@ mod tests {
         (points[36], points[45]) = ([410.0, 320.0], [470.0, 320.0]);
         let face = ReferenceFace { bbox: [405.0, 310.0, 475.0, 380.0], landmarks: Some(points) };
         let b = Backgrounds::from_labelled(vec![(img, vec![face])], 0.5);
-        let ranges = SceneRanges::default();
+        // Colours are checked below: no black and white looks, no masks over the red face.
+        let ranges = SceneRanges { look_share: 0.0, occluders: false, ..SceneRanges::default() };
         let source = SceneSource { faces: &[], head: None, ranges: &ranges, backgrounds: Some(&b) };
         let geo = crate::train::geometry(68);
         let got = photo_face_samples(source, &geo, 4, 0, 40);

@@ -624,6 +624,8 @@ pub fn train_on(
         "open_eyes": opts.ranges.open_eyes,
         "aspects": opts.ranges.aspects,
         "dressed": opts.ranges.dressed,
+        "look_share": opts.ranges.look_share,
+        "occluders": opts.ranges.occluders,
         // What every scene is, recorded as files have always recorded it: no open mouths, no
         // plainer skin, the prior's spread of shapes and colours, crops jittered as the finder
         // misses, no cast shadows.

@@ -144,7 +144,8 @@ fn green_share(frame: &RgbImage, rows: std::ops::Range<u32>) -> f64 {
 #[test]
 fn a_background_photo_changes_the_background_and_nothing_else() {
     let Some(model) = common::template_model(800, 8, 200) else { return };
-    let ranges = SceneRanges { dressed: false, ..SceneRanges::default() };
+    // Photographic looks would turn some green frames grey: they are tested on their own below.
+    let ranges = SceneRanges { dressed: false, look_share: 0.0, ..SceneRanges::default() };
     let openings = Openings::of_model(&model, &ranges);
     let green = Backgrounds::from_photos(vec![RgbImage::from_pixel(640, 480, Rgb([20, 200, 30]))], 1.0);
     let faces = [FaceModel { model: &model, openings: &openings }];
@@ -166,4 +167,30 @@ fn a_background_photo_changes_the_background_and_nothing_else() {
     assert!(green_share(&f, 0..f.height()) > 0.9, "{}", green_share(&f, 0..f.height()));
     assert_eq!(f, face_free_frame(photo, 9, 2));
     assert_ne!(face_free_frame(plain, 9, 2), f);
+}
+
+#[test]
+fn looks_and_occluders_change_pixels_never_labels() {
+    let Some(model) = common::template_model(800, 8, 200) else { return };
+    let plain = SceneRanges { dressed: false, look_share: 0.0, occluders: false, ..SceneRanges::default() };
+    let looks = SceneRanges { look_share: 1.0, ..plain.clone() };
+    let worn = SceneRanges { occluders: true, ..plain.clone() };
+    let openings = Openings::of_model(&model, &plain);
+    let faces = [FaceModel { model: &model, openings: &openings }];
+    let source = |ranges| SceneSource { faces: &faces, head: None, ranges, backgrounds: None };
+    let mut renderer = Renderer::new();
+    let (mut compared, mut looked, mut occluded) = (0, 0, 0);
+    for i in 0..40 {
+        let Some(a) = render_scene(source(&plain), 4, i, &mut renderer) else { continue };
+        for (ranges, changed) in [(&looks, &mut looked), (&worn, &mut occluded)] {
+            let b = render_scene(source(ranges), 4, i, &mut renderer).expect("the same scene renders");
+            assert_eq!((&a.landmarks, a.angles, &a.light), (&b.landmarks, b.angles, &b.light), "scene {i}: a label changed");
+            *changed += usize::from(a.frame != b.frame);
+        }
+        compared += 1;
+    }
+    assert!(compared >= 30, "only {compared} of 40 scenes rendered");
+    assert_eq!(looked, compared, "every scene gets a look at share 1");
+    // A tenth wear dark glasses, one in twenty a mask: a few of 40, not most.
+    assert!((1..=15).contains(&occluded), "{occluded} of {compared} scenes occluded");
 }

@@ -13,6 +13,8 @@ pub mod backgrounds;
 pub mod dress;
 pub mod eyes;
 pub mod head;
+pub mod look;
+pub mod occluders;
 
 use backgrounds::{Backgrounds, FaceView};
 use eyes::OpenEyes;
@@ -51,6 +53,11 @@ pub struct SceneRanges {
     pub open_eyes: bool,
     /// Dress the heads (`crate::scene::dress`: fuller and long hair, clothes, a torso).
     pub dressed: bool,
+    /// The share of frames given a random photographic look (`crate::scene::look`: black and
+    /// white, contrast, brightness, saturation, colour cast), from a stream of its own.
+    pub look_share: f64,
+    /// Draw dark glasses and masks over some faces (`crate::scene::occluders`).
+    pub occluders: bool,
 }
 
 impl Default for SceneRanges {
@@ -69,6 +76,8 @@ impl Default for SceneRanges {
             components: 60,
             open_eyes: true,
             dressed: true,
+            look_share: 0.5,
+            occluders: true,
         }
     }
 }
@@ -186,6 +195,18 @@ fn camera_effects(render: &RgbaImage, back: &RgbImage, rng: &mut impl Rng) -> Rg
     out
 }
 
+/// `frame` finished from a stream of its own for `(seed, key)`, so that the rest of a scene is the
+/// same with or without: occluders over the face at `points` (when `ranges.occluders`), then a
+/// random look ([`look::apply_look`]).
+fn finished(mut frame: RgbImage, points: &[[f32; 2]], ranges: &SceneRanges, seed: u64, key: u64) -> RgbImage {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ key.wrapping_mul(0xD6E8_FEB8_6659_FD93) ^ 0x100C);
+    if ranges.occluders {
+        occluders::draw_occluders(&mut frame, points, &mut rng);
+    }
+    look::apply_look(&mut frame, ranges.look_share, &mut rng);
+    frame
+}
+
 /// The eyes a model's scenes may open, found once on its mean shape.
 #[derive(Debug, Clone, Default)]
 pub struct Openings {
@@ -257,7 +278,7 @@ pub fn face_free_frame(source: SceneSource<'_>, seed: u64, index: u64) -> RgbIma
         Some(photo) => photo,
         None => background(w, h, &mut rng),
     };
-    camera_effects(&RgbaImage::new(w, h), &back, &mut rng)
+    finished(camera_effects(&RgbaImage::new(w, h), &back, &mut rng), &[], ranges, seed, index ^ 0xF4EE)
 }
 
 /// Real face `index` of the stream `seed`: a view of a known face of a photo of people
@@ -271,7 +292,7 @@ pub fn photo_face_frame(source: SceneSource<'_>, seed: u64, index: u64) -> Optio
     let aspect = ranges.aspects.get(rng.random_range(0..ranges.aspects.len().max(1))).copied().unwrap_or(1.0);
     let (w, h) = frame_size(long, aspect);
     let view = source.backgrounds?.face_view(w, h, ranges.face_fraction, &mut rng)?;
-    let image = camera_effects(&RgbaImage::new(w, h), &view.image, &mut rng);
+    let image = finished(camera_effects(&RgbaImage::new(w, h), &view.image, &mut rng), &view.points, ranges, seed, index ^ 0xFACE);
     Some(FaceView { image, ..view })
 }
 
@@ -368,7 +389,7 @@ pub fn render_scene(source: SceneSource<'_>, seed: u64, index: u64, renderer: &m
     if let (Some(backdrop), Some(&chin)) = (&backdrop, landmarks.get(8)) {
         backdrop.draw(&mut back, projected, (landmark_box(&landmarks).2, chin), &mut dress_rng);
     }
-    let frame = camera_effects(&render, &back, &mut rng);
+    let frame = finished(camera_effects(&render, &back, &mut rng), &landmarks, ranges, seed, index);
     let light = settings.light.coeffs.iter().take(4).flat_map(|c| c.iter().copied()).collect();
     Some(Scene { frame, landmarks, angles: [view.yaw.to_radians(), view.pitch.to_radians(), view.roll.to_radians()], light })
 }
