@@ -75,18 +75,17 @@ pub fn agreed_landmarks(mean_shape: &[Vec3], current: &[u32], hits: &[&[Option<u
         .iter()
         .enumerate()
         .map(|(k, &now)| {
-            let named: Vec<u32> =
-                hits.iter().filter_map(|h| h.get(k).copied().flatten()).filter(|&v| (v as usize) < mean_shape.len()).collect();
-            let positions: Vec<Vec3> = named.iter().filter_map(|&v| mean_shape.get(v as usize).copied()).collect();
-            if positions.is_empty() {
-                return now;
-            }
+            let named: Vec<(u32, Vec3)> = hits
+                .iter()
+                .filter_map(|h| h.get(k).copied().flatten())
+                .filter_map(|v| mean_shape.get(v as usize).map(|&p| (v, p)))
+                .collect();
             let median = [0, 1, 2].map(|a| {
-                let mut c: Vec<f32> = positions.iter().map(|p| p[a]).collect();
+                let mut c: Vec<f32> = named.iter().map(|(_, p)| p[a]).collect();
                 c.sort_by(f32::total_cmp);
                 c.get(c.len() / 2).copied().unwrap_or(0.0)
             });
-            named.iter().zip(&positions).min_by(|a, b| dist2(a.1, &median).total_cmp(&dist2(b.1, &median))).map_or(now, |(&v, _)| v)
+            named.iter().min_by(|a, b| dist2(&a.1, &median).total_cmp(&dist2(&b.1, &median))).map_or(now, |&(v, _)| v)
         })
         .collect()
 }

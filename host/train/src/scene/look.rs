@@ -32,14 +32,13 @@ pub fn apply_look(frame: &mut RgbImage, share: f64, rng: &mut impl Rng) {
     let brightness = rng.random_range(BRIGHTNESS.0..BRIGHTNESS.1);
     let saturation = if grey { 0.0 } else { rng.random_range(SATURATION.0..SATURATION.1) };
     let cast = if grey { [1.0; 3] } else { [rng.random_range(CAST.0..CAST.1), 1.0, rng.random_range(CAST.0..CAST.1)] };
-    let pixels = frame.pixels().count().max(1) as f32;
+    let pixels = (frame.width() as f32 * frame.height() as f32).max(1.0);
     let mean = frame.pixels().map(|p| luma(p.0)).sum::<f32>() / pixels;
     for p in frame.pixels_mut() {
         let y = luma(p.0);
-        let mut k = 0;
-        p.0 = p.0.map(|c| {
-            let v = (y + (c as f32 / 255.0 - y) * saturation) * cast[k];
-            k += 1;
+        let c = p.0;
+        p.0 = std::array::from_fn(|k| {
+            let v = (y + (c[k] as f32 / 255.0 - y) * saturation) * cast[k];
             ((mean + (v - mean) * contrast + brightness).clamp(0.0, 1.0) * 255.0).round() as u8
         });
     }

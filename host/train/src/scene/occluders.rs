@@ -3,6 +3,7 @@
 //! that never saw one reads a face in dark glasses or a mask as no face. The points keep their
 //! places under the occluder: the initializer learns where the hidden ones are.
 
+use gpmm_host::mesh::geometry::point_in_polygon;
 use image::{Rgb, RgbImage};
 use rand::{Rng, RngExt};
 
@@ -32,7 +33,7 @@ pub fn draw_occluders(frame: &mut RgbImage, points: &[[f32; 2]], rng: &mut impl 
 fn glasses(frame: &mut RgbImage, points: &[[f32; 2]], rng: &mut impl Rng) {
     let tone = rng.random_range(5u8..60);
     let tint = [rng.random_range(0u8..15), rng.random_range(0u8..15), rng.random_range(0u8..25)];
-    let colour = Rgb([tone.saturating_add(tint[0]), tone.saturating_add(tint[1]), tone.saturating_add(tint[2])]);
+    let colour = Rgb(tint.map(|t| tone.saturating_add(t)));
     let scale = rng.random_range(1.3f32..1.8);
     let eye_distance = distance(centre(&points[36..42]), centre(&points[42..48])).max(1.0);
     for eye in [&points[36..42], &points[42..48]] {
@@ -54,13 +55,13 @@ fn mask(frame: &mut RgbImage, points: &[[f32; 2]], rng: &mut impl Rng) {
     let base = colours[rng.random_range(0..colours.len())];
     let shade = rng.random_range(0.75f32..1.05);
     let colour = Rgb(base.map(|v: i32| (v as f32 * shade).clamp(0.0, 255.0) as u8));
-    let mut outline: Vec<[f32; 2]> = points[1..16].to_vec();
-    outline.push(points[29]);
-    let (lo, hi) = outline
+    let corners: Vec<[f32; 2]> = points[1..16].iter().chain([&points[29]]).copied().collect();
+    let outline: Vec<[f64; 2]> = corners.iter().map(|p| p.map(f64::from)).collect();
+    let (lo, hi) = corners
         .iter()
         .fold(([f32::MAX; 2], [f32::MIN; 2]), |(lo, hi), p| ([lo[0].min(p[0]), lo[1].min(p[1])], [hi[0].max(p[0]), hi[1].max(p[1])]));
-    let c = [(lo[0] + hi[0]) * 0.5, (lo[1] + hi[1]) * 0.5];
-    fill(frame, colour, |x, y| inside(&outline, [x, y]), bounds(c, (hi[0] - lo[0]) * 0.5, (hi[1] - lo[1]) * 0.5));
+    let covered = |x: f32, y: f32| point_in_polygon(&outline, [f64::from(x), f64::from(y)]);
+    fill(frame, colour, covered, [lo[0], lo[1], hi[0], hi[1]]);
 }
 
 /// The pixel box around `c` reaching `rx`, `ry`.
@@ -101,18 +102,6 @@ fn segment_distance(p: [f32; 2], a: [f32; 2], b: [f32; 2]) -> f32 {
     let len2 = d[0] * d[0] + d[1] * d[1];
     let t = if len2 > 0.0 { (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0) } else { 0.0 };
     distance(p, [a[0] + t * d[0], a[1] + t * d[1]])
-}
-
-/// Whether `p` lies inside the closed polygon `outline` (even-odd rule).
-fn inside(outline: &[[f32; 2]], p: [f32; 2]) -> bool {
-    let mut crossing = false;
-    for (i, a) in outline.iter().enumerate() {
-        let b = outline[(i + 1) % outline.len()];
-        if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
-            crossing = !crossing;
-        }
-    }
-    crossing
 }
 
 #[cfg(test)]
