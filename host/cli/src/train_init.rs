@@ -61,7 +61,8 @@ pub struct TrainInitArgs {
     /// landmarks whose pairs say what a mirror swaps).
     #[arg(long, help_heading = COMPARISONS)]
     pub no_mirror: bool,
-    /// Write a picture grid of training scenes (what the networks see) to this PNG.
+    /// Write a picture grid of training scenes (what the networks see: rendered scenes, real faces
+    /// when some backgrounds are photos of people, face-free frames) to this PNG.
     #[arg(long, value_name = "PNG")]
     pub preview: Option<PathBuf>,
     /// Template directory (one .ply and landmarks_ibug68.json) whose whole head, neck and ears are
@@ -221,13 +222,15 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         let openings: Vec<Openings> = models.iter().map(|m| Openings::of_model(m, &opts.ranges)).collect();
         let faces: Vec<FaceModel<'_>> = models.iter().zip(&openings).map(|(model, openings)| FaceModel { model, openings }).collect();
         let source = SceneSource { faces: &faces, head: head.as_ref(), ranges: &opts.ranges, backgrounds: backgrounds.as_ref() };
-        let mut grid = gpmm_train::preview::scene_grid(source, opts.seed, 4, 6);
-        if let Some(faces) = gpmm_train::preview::photo_face_grid(source, opts.seed, 2, 6) {
-            // The real faces below the rendered scenes.
-            let mut both = image::RgbImage::new(grid.width(), grid.height() + faces.height());
-            image::imageops::overlay(&mut both, &grid, 0, 0);
-            image::imageops::overlay(&mut both, &faces, 0, i64::from(grid.height()));
-            grid = both;
+        // Rendered scenes, then real faces (with photos of people), then face-free frames.
+        let mut parts = vec![gpmm_train::preview::scene_grid(source, opts.seed, 4, 6)];
+        parts.extend(gpmm_train::preview::photo_face_grid(source, opts.seed, 2, 6));
+        parts.push(gpmm_train::preview::face_free_grid(source, opts.seed, 2, 6));
+        let mut grid = image::RgbImage::new(parts[0].width(), parts.iter().map(|p| p.height()).sum());
+        let mut top = 0i64;
+        for part in &parts {
+            image::imageops::overlay(&mut grid, part, 0, top);
+            top += i64::from(part.height());
         }
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
             .with_context(|| format!("cannot write {}", path.display()))?;

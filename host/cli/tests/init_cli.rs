@@ -296,9 +296,10 @@ fn photos_of_people_give_the_finder_real_faces_and_their_surroundings() {
     assert!(text.contains("\"people_photos\":1") && text.contains("\"photo_faces\":1"), "metadata lacks the photos of people");
     assert!(text.contains("\"photo_face_share\":0.25"), "metadata lacks the share of real faces");
     assert!(text.contains("\"photo_points\":true"), "metadata lacks the initializer's real points");
-    // The preview shows two rows of real faces below the four of rendered scenes.
+    // The preview shows two rows of real faces below the four of rendered scenes, then two of
+    // face-free frames.
     let (w, h) = image::image_dimensions(&preview).unwrap();
-    assert_eq!((w, h), (6 * 160, 6 * 160));
+    assert_eq!((w, h), (6 * 160, 8 * 160));
     // Without real faces in the batches the networks differ.
     let other = f.dir.path().join("people-none.init");
     ok(&gpmm(&["train-init", s(&f.model), "-o", s(&other), "--quick", "--seed", "7", "--backgrounds", s(&people), "--photo-faces", "0"]));

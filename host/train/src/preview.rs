@@ -1,6 +1,6 @@
 //! A picture grid of training scenes with their landmarks: what the networks learn from.
 
-use crate::scene::{photo_face_frame, render_scene, SceneSource};
+use crate::scene::{face_free_frame, photo_face_frame, render_scene, SceneSource};
 use gpmm_host::render::Renderer;
 use image::{imageops, Rgb, RgbImage};
 
@@ -43,6 +43,17 @@ pub fn photo_face_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32)
         place(&mut grid, &frame, i % cols, i / cols, CELL);
     }
     Some(grid)
+}
+
+/// `rows × cols` face-free frames of the stream `seed` (views of the backgrounds, hands and all), as
+/// the finder learns "no face" from them.
+pub fn face_free_grid(source: SceneSource<'_>, seed: u64, rows: u32, cols: u32) -> RgbImage {
+    const CELL: u32 = 160;
+    let mut grid = RgbImage::from_pixel(cols * CELL, rows * CELL, Rgb([24, 24, 24]));
+    for i in 0..rows * cols {
+        place(&mut grid, &face_free_frame(source, seed, u64::from(i)), i % cols, i / cols, CELL);
+    }
+    grid
 }
 
 /// Colours pixel (x, y) of `frame` if it lies inside.
