@@ -222,16 +222,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         let openings: Vec<Openings> = models.iter().map(|m| Openings::of_model(m, &opts.ranges)).collect();
         let faces: Vec<FaceModel<'_>> = models.iter().zip(&openings).map(|(model, openings)| FaceModel { model, openings }).collect();
         let source = SceneSource { faces: &faces, head: head.as_ref(), ranges: &opts.ranges, backgrounds: backgrounds.as_ref() };
-        // Rendered scenes, then real faces (with photos of people), then face-free frames.
-        let mut parts = vec![gpmm_train::preview::scene_grid(source, opts.seed, 4, 6)];
-        parts.extend(gpmm_train::preview::photo_face_grid(source, opts.seed, 2, 6));
-        parts.push(gpmm_train::preview::face_free_grid(source, opts.seed, 2, 6));
-        let mut grid = image::RgbImage::new(parts[0].width(), parts.iter().map(|p| p.height()).sum());
-        let mut top = 0i64;
-        for part in &parts {
-            image::imageops::overlay(&mut grid, part, 0, top);
-            top += i64::from(part.height());
-        }
+        let grid = gpmm_train::preview::preview(source, opts.seed);
         gpmm_host::render::figure::save_png(&image::DynamicImage::ImageRgb8(grid).to_rgba8(), path)
             .with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
