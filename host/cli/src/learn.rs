@@ -2,6 +2,7 @@
 
 use crate::fit::FitSettingsArgs;
 use crate::progress::{bar_style, note};
+use crate::training_photos::TrainingPhotos;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_host::gp::model::GpModel;
@@ -85,7 +86,9 @@ pub struct LearnArgs {
     /// Retrain the init file's finder and initializer after each iteration: fine-tune the networks
     /// it started from for CHUNKS chunks of renders of every model so far (the start model and each
     /// iteration's, drawn alike), as `gpmm train-init MODELS --from INIT --chunks CHUNKS` does; the
-    /// next iteration starts from it (DIR/iteration_N/init.init, its validation in init.json).
+    /// next iteration starts from it (DIR/iteration_N/init.init, its validation in init.json). An
+    /// init file trained on real photos needs them again (--backgrounds and the options beside it,
+    /// as it was trained): renders alone make its finder forget them.
     #[arg(long, value_name = "CHUNKS", requires = "init", conflicts_with = "landmarks_dir")]
     pub retrain_init: Option<usize>,
     /// Template directory whose head, neck and ears are put around the faces the initializer is
@@ -108,6 +111,10 @@ pub struct LearnArgs {
     /// (`--set proposals.image.shape=0 --image-steps 600` fits as `gpmm fit` does).
     #[command(flatten)]
     pub settings: FitSettingsArgs,
+    /// Real photos the retraining shows beside the renders, as `gpmm train-init` takes them; with
+    /// photos of people its face check is fitted again on them after each retraining.
+    #[command(flatten, next_help_heading = "Real photos in the retraining (with --retrain-init)")]
+    pub photos: TrainingPhotos,
 }
 
 /// Runs `gpmm learn`.
@@ -121,6 +128,11 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     if a.retrain_init == Some(0) {
         bail!("--retrain-init 0 trains nothing; leave it out to keep the init file");
     }
+    if !a.photos.backgrounds.is_empty() && a.retrain_init.is_none() {
+        bail!("--backgrounds are shown to the retraining of the init file: give --retrain-init CHUNKS");
+    }
+    // Checked before any fit, applied to every retraining.
+    a.photos.set_options(&mut gpmm_train::TrainOptions::fine_tuning(0))?;
     let images = image_files(&a.images)?;
     let mut flags = a.settings.flags();
     // The initializer's points are fitted as `gpmm fit --init` fits them; landmark files as
@@ -220,6 +232,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         Some(_) => Some(retraining_head(&plan.model, a.head.as_deref(), a.data.as_deref())?),
         None => None,
     };
+    let backgrounds = a.photos.load()?;
     let retrain = |job: RetrainJob<'_>| -> Result<Vec<u8>, RunError> {
         let chunks = a.retrain_init.unwrap_or(0);
         let mut opts = if a.quick {
@@ -229,6 +242,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         };
         opts.chunks = chunks;
         let failed = |error: String| RunError::Hook { iteration: job.iteration, error };
+        a.photos.set_options(&mut opts).map_err(|e| failed(e.to_string()))?;
         let models = job.models.iter().map(|p| model_io::load(p)).collect::<Result<Vec<_>, _>>()?;
         let refs: Vec<&GpModel> = models.iter().collect();
         let progress = |p: gpmm_train::train::Progress| {
@@ -238,8 +252,12 @@ pub fn learn(a: LearnArgs) -> Result<()> {
                 bar.set_position(done as u64);
             }
         };
-        let (bytes, report) = gpmm_train::fine_tune(&refs, head.as_ref(), None, job.init, &opts, progress)
+        let (bytes, report) = gpmm_train::fine_tune(&refs, head.as_ref(), backgrounds.as_ref(), job.init, &opts, progress)
             .map_err(|e| failed(format!("retraining the initializer: {e}")))?;
+        let bytes = match &backgrounds {
+            Some(b) => a.photos.with_face_check(bytes, b, &bar).map_err(|e| failed(format!("the retrained file's face check: {e}")))?,
+            None => bytes,
+        };
         let path = iteration_dir(&plan.out, job.iteration).join("init.json");
         let text = serde_json::to_string_pretty(&report).map_err(|e| failed(e.to_string()))?;
         std::fs::write(&path, text + "\n").map_err(|error| RunError::Io { path: path.clone(), error })?;

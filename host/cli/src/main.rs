@@ -19,6 +19,7 @@ mod register;
 mod render;
 mod synth;
 mod train_init;
+mod training_photos;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

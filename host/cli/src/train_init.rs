@@ -2,11 +2,11 @@
 //! of models, from random weights or from an init file's networks (fine-tuning).
 
 use crate::progress::{bar_style, note};
+use crate::training_photos::TrainingPhotos;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_core::model::ibug::IBUG68_POINTS;
 use gpmm_host::gp::model_io;
-use gpmm_train::scene::backgrounds::Backgrounds;
 use gpmm_train::scene::head::HeadContext;
 use gpmm_train::scene::{FaceModel, Openings, SceneSource};
 use gpmm_train::train::{check_mixture, FINE_TUNE_LR_SHARE};
@@ -93,39 +93,9 @@ pub struct TrainInitArgs {
     /// glasses and one in twenty a face mask, drawn from their 68 points).
     #[arg(long, help_heading = COMPARISONS)]
     pub no_occluders: bool,
-    /// Folder of photos (.jpg/.png) to draw some scenes over, and to cut face-free frames from
-    /// that the finder learns as "no face" (the hardest of several candidates, by the finder's own
-    /// score, each chunk); repeat for several folders. A photo with a STEM.faces.json beside it
-    /// (the real-photo set format) is a photo of people: no cut touches its faces, so its hands,
-    /// clothes and rooms are learned as background, and its faces are shown to the finder as
-    /// faces (--photo-faces). `tests/realphotos/backgrounds.py` makes a folder from Debian's
-    /// wallpaper packages, `tests/realphotos/make_pool.py` one of people from face projects'
-    /// example photos. Default: procedural backgrounds only.
-    #[arg(long, value_name = "DIR")]
-    pub backgrounds: Vec<PathBuf>,
-    /// Fraction of scenes drawn over a photo of --backgrounds (the rest over procedural ones).
-    #[arg(long, value_name = "F", default_value_t = 0.5, requires = "backgrounds")]
-    pub background_share: f64,
-    /// Face-free frames per scene with --backgrounds.
-    #[arg(long, value_name = "F", requires = "backgrounds")]
-    pub face_free: Option<f64>,
-    /// Real faces (from photos of people among --backgrounds) per scene in both networks'
-    /// batches (default 0.25): the finder learns them as faces, the initializer their reference
-    /// points (their pose and light are unknown, so those it learns from renders only).
-    #[arg(long, value_name = "F", requires = "backgrounds")]
-    pub photo_faces: Option<f64>,
-    /// The initializer learns from rendered faces only, not the real faces' reference points
-    /// (those points carry the reference detector's habits: a model learned from fits that start
-    /// from them identified fewer faces, docs/learning.md).
-    #[arg(long, requires = "backgrounds")]
-    pub no_photo_points: bool,
-    /// Fine-tuning: the finder of --from first scans every --backgrounds photo as `gpmm detect`
-    /// scans a photo (score 0.5 and up, faces down to 32 px), and each box it keeps on a face-free
-    /// part (on a photo of people, touching none of its known faces) is shown as "no face" at
-    /// three zooms and mirrored (2 in a batch of 64 scenes): the scan's own mistakes on small
-    /// windows, which random views of the photos rarely show it (docs/real-photos.md)
-    #[arg(long, requires_all = ["backgrounds", "from"])]
-    pub scan_mistakes: bool,
+    /// Real photos in the scenes.
+    #[command(flatten, next_help_heading = "Real photos")]
+    pub photos: TrainingPhotos,
     /// Do not fit the face check: by default, when --backgrounds holds photos of people, the
     /// trained file's finder scans every --backgrounds photo and a check of its readings is fitted
     /// and written into the file's metadata, as `gpmm check-init` does (about a minute).
@@ -186,34 +156,11 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         eprintln!("head: {} vertices from {}", head.vertices(), mesh.display());
         Some(head)
     };
-    if !(0.0..=1.0).contains(&a.background_share) {
-        bail!("--background-share {} is not a fraction from 0 to 1", a.background_share);
+    if a.photos.scan_mistakes && a.from.is_none() {
+        bail!("--scan-mistakes looks for the mistakes of the finder being fine-tuned: give --from INIT");
     }
-    opts.face_free = a.face_free.unwrap_or(opts.face_free);
-    if !(0.0..=1.0).contains(&opts.face_free) {
-        bail!("--face-free {} is not a fraction from 0 to 1", opts.face_free);
-    }
-    opts.photo_faces = a.photo_faces.unwrap_or(opts.photo_faces);
-    if !(0.0..=1.0).contains(&opts.photo_faces) {
-        bail!("--photo-faces {} is not a fraction from 0 to 1", opts.photo_faces);
-    }
-    opts.photo_points = !a.no_photo_points;
-    opts.scan_mistakes = a.scan_mistakes.then(gpmm_train::mistakes::MistakeScan::default);
-    let backgrounds = if a.backgrounds.is_empty() {
-        None
-    } else {
-        let dirs: Vec<&Path> = a.backgrounds.iter().map(PathBuf::as_path).collect();
-        let b = Backgrounds::load_all(&dirs, a.background_share)?;
-        let names: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
-        eprintln!(
-            "backgrounds: {} photos from {}, {} of them of people with {} known faces",
-            b.len(),
-            names.join(", "),
-            b.people_photos(),
-            b.faces()
-        );
-        Some(b)
-    };
+    a.photos.set_options(&mut opts)?;
+    let backgrounds = a.photos.load()?;
     let from = match &a.from {
         Some(path) => Some(std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?),
         None => None,
@@ -246,10 +193,7 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
             }
         })?;
     let bytes = match &backgrounds {
-        Some(b) if b.people_photos() > 0 && !a.no_face_check => {
-            bar.set_message("fitting the face check on the backgrounds".to_string());
-            with_face_check(bytes, &a.backgrounds, &bar)?
-        }
+        Some(b) if !a.no_face_check => a.photos.with_face_check(bytes, b, &bar)?,
         _ => bytes,
     };
     bar.finish_and_clear();
@@ -257,31 +201,6 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
     note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
-}
-
-/// `bytes` (a trained init file) with a face check fitted on the photos of `dirs`
-/// ([`gpmm_host::detect::check_fit::fit_check`]); unchanged, with a note, when too few boxes
-/// were found to fit one.
-fn with_face_check(bytes: Vec<u8>, dirs: &[PathBuf], bar: &ProgressBar) -> Result<Vec<u8>> {
-    use gpmm_host::detect::check::{CheckError, KEPT_FACE_SHARE};
-    use gpmm_host::detect::check_fit::{fit_check, with_metadata, CheckFitError};
-    let detector = gpmm_host::detect::Detector::from_bytes(&bytes).map_err(|e| anyhow::anyhow!("the trained file: {e}"))?;
-    let dirs: Vec<&Path> = dirs.iter().map(PathBuf::as_path).collect();
-    let smallest = gpmm_host::detect::DEFAULT_SMALLEST_FACE;
-    let reading = gpmm_core::net::face::Reading::DEFAULT;
-    match fit_check(&detector, &dirs, smallest, reading, KEPT_FACE_SHARE, &|_, _| {}) {
-        Ok(check) => {
-            let file = detector.file().map_err(|e| anyhow::anyhow!("the trained file: {e}"))?;
-            let metadata = check.into_metadata(file.metadata)?;
-            note(bar, format!("face check: fitted on {} known faces and {} other boxes", check.faces, check.others));
-            with_metadata(&bytes, &metadata).map_err(|e| anyhow::anyhow!("the trained file with its face check: {e}"))
-        }
-        Err(CheckFitError::Check(e @ (CheckError::TooFew { .. } | CheckError::NoMirror(_)))) => {
-            note(bar, format!("no face check: {e}"));
-            Ok(bytes)
-        }
-        Err(e) => Err(e.into()),
-    }
 }
 
 /// The mesh (the directory's only .ply) and `landmarks_ibug68.json` of a template directory.

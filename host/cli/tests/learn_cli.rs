@@ -245,8 +245,28 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     assert_eq!(std::fs::read(&kept_path).unwrap(), std::fs::read(&best_file).unwrap(), "DIR/model.gpmm is not the best");
     assert!(stderr.contains(&format!("kept {}", s(&best_file))), "{stderr}");
     // Retraining the initializer after each iteration: the next iteration starts from the new
-    // init file, the development images are re-read with it, and a rerun reuses it.
+    // init file, the development images are re-read with it, and a rerun reuses it. The
+    // retraining is shown real photos as `train-init --backgrounds` is (one of people here).
+    let people = dir.path().join("people");
+    std::fs::create_dir_all(&people).unwrap();
+    image::RgbImage::from_fn(320, 240, |x, y| {
+        if (150..190).contains(&x) && (80..120).contains(&y) {
+            image::Rgb([210, 160, 130])
+        } else {
+            image::Rgb([((x * 3 + y) % 90) as u8 + 40, 90, ((y * 5) % 120) as u8 + 60])
+        }
+    })
+    .save(people.join("group.jpg"))
+    .unwrap();
+    let points: Vec<[f32; 2]> = (0..68).map(|i| [150.0 + (i % 9) as f32 * 5.0, 80.0 + (i / 9) as f32 * 40.0 / 7.0]).collect();
+    std::fs::write(
+        people.join("group.faces.json"),
+        serde_json::json!({"faces": [{"box": [152, 85, 188, 120], "landmarks": points}]}).to_string(),
+    )
+    .unwrap();
     let retrained = dir.path().join("retrained");
+    let refused = fails(&gpmm(&["learn", s(&model), s(&images), "--init", s(&init), "--backgrounds", s(&people), "-o", s(&retrained)]));
+    assert!(refused.contains("--retrain-init"), "{refused}");
     let args_r = [
         "learn",
         s(&model),
@@ -258,6 +278,10 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
         "2",
         "--retrain-init",
         "1",
+        "--backgrounds",
+        s(&people),
+        "--photo-faces",
+        "0.5",
         "--dev",
         s(&dev),
         "--data",
@@ -270,6 +294,8 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     let first_init = retrained.join("iteration_1/init.init");
     let bytes = std::fs::read(&first_init).expect("iteration_1/init.init");
     assert_ne!(bytes, std::fs::read(&init).unwrap(), "the retrained init file is the start's");
+    let text = String::from_utf8_lossy(&bytes).into_owned();
+    assert!(text.contains("\"people_photos\":1") && text.contains("\"photo_face_share\":0.5"), "the retraining saw no photos");
     let report = read_json(&retrained.join("iteration_1/init.json"));
     assert!(report["found"].as_f64().is_some() && report["median_landmark_error"].as_f64().is_some(), "{report}");
     let m2 = gpmm_host::gp::model_io::load(&retrained.join("model_2.gpmm")).unwrap();
