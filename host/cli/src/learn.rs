@@ -131,8 +131,6 @@ pub fn learn(a: LearnArgs) -> Result<()> {
     if !a.photos.backgrounds.is_empty() && a.retrain_init.is_none() {
         bail!("--backgrounds are shown to the retraining of the init file: give --retrain-init CHUNKS");
     }
-    // Checked before any fit, applied to every retraining.
-    a.photos.set_options(&mut gpmm_train::TrainOptions::fine_tuning(0))?;
     let images = image_files(&a.images)?;
     let mut flags = a.settings.flags();
     // The initializer's points are fitted as `gpmm fit --init` fits them; landmark files as
@@ -165,6 +163,15 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         dev_fit,
         jobs,
     };
+    let backgrounds = a.photos.load()?;
+    // The same options for every retraining, checked before the development set is read.
+    let mut opts = if a.quick {
+        gpmm_train::TrainOptions::quick(plan.settings.fit.seed)
+    } else {
+        gpmm_train::TrainOptions::fine_tuning(plan.settings.fit.seed)
+    };
+    opts.chunks = a.retrain_init.unwrap_or(0);
+    a.photos.set_options(&mut opts)?;
     let mut dev = match &a.dev {
         Some(dir) => {
             let pb = crate::progress::spinner(&format!("{}: finding the development faces", dir.display()));
@@ -232,17 +239,8 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         Some(_) => Some(retraining_head(&plan.model, a.head.as_deref(), a.data.as_deref())?),
         None => None,
     };
-    let backgrounds = a.photos.load()?;
     let retrain = |job: RetrainJob<'_>| -> Result<Vec<u8>, RunError> {
-        let chunks = a.retrain_init.unwrap_or(0);
-        let mut opts = if a.quick {
-            gpmm_train::TrainOptions::quick(plan.settings.fit.seed)
-        } else {
-            gpmm_train::TrainOptions::fine_tuning(plan.settings.fit.seed)
-        };
-        opts.chunks = chunks;
         let failed = |error: String| RunError::Hook { iteration: job.iteration, error };
-        a.photos.set_options(&mut opts).map_err(|e| failed(e.to_string()))?;
         let models = job.models.iter().map(|p| model_io::load(p)).collect::<Result<Vec<_>, _>>()?;
         let refs: Vec<&GpModel> = models.iter().collect();
         let progress = |p: gpmm_train::train::Progress| {
@@ -261,7 +259,7 @@ pub fn learn(a: LearnArgs) -> Result<()> {
         let path = iteration_dir(&plan.out, job.iteration).join("init.json");
         let text = serde_json::to_string_pretty(&report).map_err(|e| failed(e.to_string()))?;
         std::fs::write(&path, text + "\n").map_err(|error| RunError::Io { path: path.clone(), error })?;
-        note(&bar, format!("iteration {}: initializer retrained ({chunks} chunks): found {:.1} %, landmark error {:.3} of the eye distance on its validation renders", job.iteration, 100.0 * report.found, report.median_landmark_error));
+        note(&bar, format!("iteration {}: initializer retrained ({} chunks): found {:.1} %, landmark error {:.3} of the eye distance on its validation renders", job.iteration, opts.chunks, 100.0 * report.found, report.median_landmark_error));
         Ok(bytes)
     };
     let local = local_wake(&plan, &events);

@@ -3,7 +3,7 @@
 //! missing init files are refused with the file's name.
 
 mod common;
-use common::{fails, gpmm, ok};
+use common::{fails, gpmm, ok, people_folder};
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -271,19 +271,7 @@ fn training_over_background_photos_records_them_and_names_a_bad_photo() {
 fn photos_of_people_give_the_finder_real_faces_and_their_surroundings() {
     let Some(f) = fixture() else { return };
     let people = f.dir.path().join("people");
-    std::fs::create_dir_all(&people).unwrap();
-    // A textured photo with one "face" whose box and 68 points are known.
-    let img = image::RgbImage::from_fn(640, 480, |x, y| {
-        if (300..380).contains(&x) && (150..230).contains(&y) {
-            image::Rgb([210, 160, 130])
-        } else {
-            image::Rgb([((x * 3 + y) % 90) as u8 + 40, 90, ((y * 5) % 120) as u8 + 60])
-        }
-    });
-    img.save(people.join("group.jpg")).unwrap();
-    let points: Vec<[f32; 2]> = (0..68).map(|i| [300.0 + (i % 9) as f32 * 10.0, 150.0 + (i / 9) as f32 * 80.0 / 7.0]).collect();
-    let faces = serde_json::json!({"faces": [{"box": [305, 160, 375, 230], "landmarks": points}]});
-    std::fs::write(people.join("group.faces.json"), faces.to_string()).unwrap();
+    people_folder(&people);
     let (init, preview) = (f.dir.path().join("people.init"), f.dir.path().join("people.png"));
     let args = ["train-init", s(&f.model), "-o", s(&init), "--quick", "--seed", "7", "--backgrounds", s(&people)];
     let run = gpmm(&[&args[..], &["--preview", s(&preview)]].concat());

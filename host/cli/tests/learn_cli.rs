@@ -4,7 +4,7 @@
 //! errors.
 
 mod common;
-use common::{fails, gpmm, ok, read_json};
+use common::{fails, gpmm, ok, people_folder, read_json};
 
 use std::path::Path;
 
@@ -248,22 +248,7 @@ fn learn_quick_makes_a_model_records_every_image_and_resumes() {
     // init file, the development images are re-read with it, and a rerun reuses it. The
     // retraining is shown real photos as `train-init --backgrounds` is (one of people here).
     let people = dir.path().join("people");
-    std::fs::create_dir_all(&people).unwrap();
-    image::RgbImage::from_fn(320, 240, |x, y| {
-        if (150..190).contains(&x) && (80..120).contains(&y) {
-            image::Rgb([210, 160, 130])
-        } else {
-            image::Rgb([((x * 3 + y) % 90) as u8 + 40, 90, ((y * 5) % 120) as u8 + 60])
-        }
-    })
-    .save(people.join("group.jpg"))
-    .unwrap();
-    let points: Vec<[f32; 2]> = (0..68).map(|i| [150.0 + (i % 9) as f32 * 5.0, 80.0 + (i / 9) as f32 * 40.0 / 7.0]).collect();
-    std::fs::write(
-        people.join("group.faces.json"),
-        serde_json::json!({"faces": [{"box": [152, 85, 188, 120], "landmarks": points}]}).to_string(),
-    )
-    .unwrap();
+    people_folder(&people);
     let retrained = dir.path().join("retrained");
     let refused = fails(&gpmm(&["learn", s(&model), s(&images), "--init", s(&init), "--backgrounds", s(&people), "-o", s(&retrained)]));
     assert!(refused.contains("--retrain-init"), "{refused}");
