@@ -217,6 +217,8 @@ pub struct PhotoSetRun<'a> {
     pub smallest_face: f32,
     /// How the initializer reads each face.
     pub reading: Reading,
+    /// Score each photo's mirror image too.
+    pub mirror: bool,
     /// Where to draw each photo's boxes, if anywhere.
     pub draw_dir: Option<&'a Path>,
     /// Write DIR/detect.json.
@@ -230,12 +232,15 @@ pub fn eval_photo_set(detector: &Detector, a: &PhotoSetRun<'_>) -> Result<()> {
     let pb = crate::progress::counter(total, "photos");
     let progress = |done: usize, _: usize| pb.set_position(done as u64);
     let (summary, results) =
-        gpmm_host::detect::photos::evaluate_photos(detector, a.dir, a.min_score, a.smallest_face, a.reading, &progress)?;
+        gpmm_host::detect::photos::evaluate_photos(detector, a.dir, (a.min_score, a.smallest_face), a.reading, a.mirror, &progress)?;
     pb.finish_and_clear();
     if let Some(dir) = a.draw_dir {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         for r in &results {
-            let image = image::open(&r.path).with_context(|| format!("cannot read image {}", r.path.display()))?.to_rgb8();
+            let mut image = image::open(&r.path).with_context(|| format!("cannot read image {}", r.path.display()))?.to_rgb8();
+            if r.mirrored {
+                image = image::imageops::flip_horizontal(&image);
+            }
             let path = dir.join(Path::new(&r.scored.image).with_extension("png"));
             draw_photo_result(&image, r).save(&path).with_context(|| format!("cannot write {}", path.display()))?;
         }

@@ -157,6 +157,22 @@ fn eval_detect_scores_a_real_photo_set() {
     }
     let written: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(set.join("detect.json")).unwrap()).unwrap();
     assert_eq!(written["images"].as_array().unwrap().len(), 3);
+    // With --mirror every photo is scored twice, the mirror image after it, drawn mirrored.
+    let mirror_draw = f.dir.path().join("photo-draw-mirror");
+    let args =
+        ["eval", "detect", s(&set), "--init", s(&f.init), "--min-score", "0.5", "--no-write", "--mirror", "--draw-dir", s(&mirror_draw)];
+    let mirrored: serde_json::Value = serde_json::from_str(&ok(&gpmm(&args))).unwrap();
+    assert_eq!(
+        (mirrored["images"].as_u64(), mirrored["face_free_images"].as_u64(), mirrored["faces"].as_u64()),
+        (Some(6), Some(2), Some(4))
+    );
+    assert_eq!(mirrored["mirror_images"].as_bool(), Some(true));
+    assert_eq!(json["mirror_images"].as_bool(), Some(false));
+    let drawn = image::open(draw.join("0000_yaw30.png")).unwrap().to_rgb8();
+    let drawn_mirror = image::open(mirror_draw.join("0000_yaw30.mirrored.png")).unwrap().to_rgb8();
+    assert_eq!(drawn.dimensions(), drawn_mirror.dimensions());
+    assert_ne!(drawn, drawn_mirror, "the mirror image is drawn mirrored");
+    assert!(mirror_draw.join("gray.mirrored.png").exists());
     // A broken reference file is refused with its name.
     std::fs::write(set.join("gray.faces.json"), r#"{"faces": [{"box": [1, 2, 3], "landmarks": null}]}"#).unwrap();
     let err = fails(&gpmm(&["eval", "detect", s(&set), "--init", s(&f.init), "--no-write"]));

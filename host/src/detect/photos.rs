@@ -5,6 +5,7 @@
 
 use super::eval::{quantile, score_detection};
 use super::{DetectError, Detector};
+use gpmm_core::model::ibug::ibug68_partner;
 use gpmm_core::net::face::{iou, landmark_box, Detection, FaceBox, Reading};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -45,6 +46,21 @@ impl ReferenceFace {
         };
         FaceBox { cx, cy, size, score: 1.0, looks: 1 }
     }
+}
+
+/// The reference faces of a photo `width` px wide as its mirror image shows them: each box
+/// mirrored, and each point moved to where its mirror partner lies (the iBUG-68 pairs swapped, so
+/// point 36 stays the image-left eye corner).
+pub fn mirrored_faces(faces: &[ReferenceFace], width: f32) -> Vec<ReferenceFace> {
+    faces
+        .iter()
+        .map(|f| {
+            let [x0, y0, x1, y1] = f.bbox;
+            let landmarks =
+                f.landmarks.as_ref().map(|p| (0..p.len()).filter_map(|k| p.get(ibug68_partner(k)).map(|q| [width - q[0], q[1]])).collect());
+            ReferenceFace { bbox: [width - x1, y0, width - x0, y1], landmarks }
+        })
+        .collect()
 }
 
 /// A `.faces.json` file.
@@ -164,6 +180,8 @@ pub struct PhotoSummary {
     pub faces: usize,
     /// Smallest finder score counted as a face.
     pub min_score: f32,
+    /// Whether each photo's mirror image was scored too (counted in `images` and `faces`).
+    pub mirror_images: bool,
     /// IoU a match needs.
     pub match_iou: f32,
     /// Over all sizes.
@@ -210,8 +228,9 @@ pub fn score_image(image: String, faces: &[ReferenceFace], dets: &[Detection]) -
     PhotoImage { image, face_sizes: faces.iter().map(ReferenceFace::size).collect(), found, detections }
 }
 
-/// Sums scored images into the set's figures.
-pub fn summarize(rows: &[PhotoImage], min_score: f32) -> PhotoSummary {
+/// Sums scored images into the set's figures (`mirror_images`: whether they include the photos'
+/// mirror images).
+pub fn summarize(rows: &[PhotoImage], min_score: f32, mirror_images: bool) -> PhotoSummary {
     let row = |size: &'static str, lo: f32, hi: f32| {
         let within = |s: f32| s >= lo && s < hi;
         let (mut faces, mut found, mut detections, mut matched) = (0, 0, 0, 0);
@@ -236,6 +255,7 @@ pub fn summarize(rows: &[PhotoImage], min_score: f32) -> PhotoSummary {
         face_free_images: free.len(),
         faces: rows.iter().map(|r| r.face_sizes.len()).sum(),
         min_score,
+        mirror_images,
         match_iou: MATCH_IOU,
         all: row("all", 0.0, f32::INFINITY),
         by_size: SIZE_CLASSES.iter().map(|&(n, lo, hi)| row(n, lo, hi)).collect(),
@@ -255,33 +275,51 @@ pub fn summarize(rows: &[PhotoImage], min_score: f32) -> PhotoSummary {
 pub struct PhotoResult {
     /// The image file.
     pub path: PathBuf,
-    /// Its reference faces.
+    /// Its reference faces (mirrored with the image).
     pub faces: Vec<ReferenceFace>,
+    /// Whether this is the image's mirror image.
+    pub mirrored: bool,
     /// The scored detections.
     pub scored: PhotoImage,
 }
 
 /// Detects every face of every image of the set in `dir` ([`list_photo_set`]) at `min_score`,
 /// scanning for faces down to `smallest_face` px ([`Detector::scan_all`]), and scores them, on
-/// all local cores ([`on_each_photo`]); `progress(done, total)` after each photo. Results keep the
-/// set's order.
+/// all local cores ([`on_each_photo`]); `progress(done, total)` after each photo. With `mirror`,
+/// each photo's mirror image is scored too ([`mirrored_faces`]), listed after it as
+/// `STEM.mirrored.EXT`: a face turned one way and the same face turned the other count alike, so
+/// figures depend less on which way a set's faces happen to turn. Results keep the set's order.
 pub fn evaluate_photos(
     detector: &Detector,
     dir: &Path,
-    min_score: f32,
-    smallest_face: f32,
+    (min_score, smallest_face): (f32, f32),
     reading: Reading,
+    mirror: bool,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(PhotoSummary, Vec<PhotoResult>), DetectError> {
     let photos = list_photo_set(dir)?.into_iter().map(|(photo, json)| (photo, Some(json))).collect();
-    let results = on_each_photo(detector, photos, progress, |detector, path, faces, image| {
-        let dets = detector.scan_all(image, min_score, smallest_face, reading)?;
+    let views = on_each_photo(detector, photos, progress, |detector, path, faces, image| {
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let scored = score_image(name, &faces, &dets);
-        Ok(PhotoResult { path: path.to_owned(), faces, scored })
+        let mut score = |image: &image::RgbImage, faces: Vec<ReferenceFace>, name: String, mirrored: bool| {
+            let dets = detector.scan_all(image, min_score, smallest_face, reading)?;
+            let scored = score_image(name, &faces, &dets);
+            Ok::<_, DetectError>(PhotoResult { path: path.to_owned(), faces, mirrored, scored })
+        };
+        let mut views = Vec::new();
+        if mirror {
+            let flipped = image::imageops::flip_horizontal(image);
+            let faces = mirrored_faces(&faces, image.width() as f32);
+            let p = Path::new(&name);
+            let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            let ext = p.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            views.push(score(&flipped, faces, format!("{stem}.mirrored.{ext}"), true)?);
+        }
+        views.insert(0, score(image, faces, name, false)?);
+        Ok(views)
     })?;
+    let results: Vec<PhotoResult> = views.into_iter().flatten().collect();
     let rows: Vec<PhotoImage> = results.iter().map(|r| r.scored.clone()).collect();
-    Ok((summarize(&rows, min_score), results))
+    Ok((summarize(&rows, min_score, mirror), results))
 }
 
 /// Runs `work` on every photo of `photos` (an image and its faces file, or `None`: face-free)
@@ -349,7 +387,7 @@ mod tests {
         let b = score_image("b".into(), &[reference(0.0, 0.0, 70.0)], &[detection(500.0, 500.0, 30.0)]);
         let c = score_image("c".into(), &[], &[detection(10.0, 10.0, 80.0)]);
         let d = score_image("d".into(), &[], &[]);
-        let s = summarize(&[a, b, c, d], 0.5);
+        let s = summarize(&[a, b, c, d], 0.5, false);
         assert_eq!((s.images, s.face_free_images, s.faces), (4, 2, 4));
         assert_eq!((s.all.faces, s.all.found, s.all.detections), (4, 2, 5));
         assert_eq!(s.all.recall, 0.5);
@@ -379,6 +417,21 @@ mod tests {
         let scored = score_image("x".into(), &[face], &[det]);
         // Every point 2 px off over an IOD of 20 px.
         assert!((scored.detections[0].landmark_error.unwrap() - 0.1).abs() < 1e-9);
+    }
+
+    #[test]
+    fn mirrored_faces_swap_sides_and_partners_and_mirror_back() {
+        let points: Vec<[f32; 2]> = (0..68).map(|i| [10.0 + i as f32, 5.0 + (i % 7) as f32]).collect();
+        let face = ReferenceFace { bbox: [10.0, 20.0, 40.0, 60.0], landmarks: Some(points.clone()) };
+        let m = mirrored_faces(&[face.clone(), reference(0.0, 0.0, 8.0)], 100.0);
+        assert_eq!(m[0].bbox, [60.0, 20.0, 90.0, 60.0]);
+        assert_eq!(m[1].bbox, [92.0, 0.0, 100.0, 8.0]);
+        assert!(m[1].landmarks.is_none());
+        let mp = m[0].landmarks.as_ref().unwrap();
+        // Point 36 (image-left outer eye corner) is where 45 was, mirrored; the nose tip stays 30.
+        assert_eq!(mp[36], [100.0 - points[45][0], points[45][1]]);
+        assert_eq!(mp[30], [100.0 - points[30][0], points[30][1]]);
+        assert_eq!(mirrored_faces(&m, 100.0), vec![face, reference(0.0, 0.0, 8.0)]);
     }
 
     #[test]
