@@ -53,6 +53,13 @@ pub fn ibug68_partner(k: usize) -> usize {
         .unwrap_or(k)
 }
 
+/// iBUG-68 points of an image `width` px wide as its mirror image shows them: x becomes
+/// `width − x` and each point takes its mirror partner's place, so point 36 stays the image-left
+/// outer eye corner. A point whose partner is missing from `points` is left out.
+pub fn mirrored_ibug68(points: &[[f32; 2]], width: f32) -> impl Iterator<Item = [f32; 2]> + '_ {
+    (0..points.len()).filter_map(move |k| points.get(ibug68_partner(k))).map(move |&[x, y]| [width - x, y])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,5 +77,20 @@ mod tests {
         assert_eq!(midline, 68 - 2 * IBUG68_MIRROR_PAIRS.len());
         assert_eq!(ibug68_partner(36), 45);
         assert_eq!(ibug68_partner(30), 30);
+    }
+
+    #[test]
+    fn mirrored_points_swap_partners_and_mirror_back() {
+        let points: [[f32; 2]; IBUG68_POINTS] = core::array::from_fn(|k| [k as f32, 100.0 + k as f32]);
+        let mut once = [[0.0f32; 2]; IBUG68_POINTS];
+        for (slot, p) in once.iter_mut().zip(mirrored_ibug68(&points, 200.0)) {
+            *slot = p;
+        }
+        assert_eq!(once[36], [200.0 - 45.0, 145.0]);
+        assert_eq!(once[30], [170.0, 130.0]);
+        assert!(mirrored_ibug68(&once, 200.0).eq(points.iter().copied()));
+        // A partner past the points given is left out, not read: of jaw points 0-9 only 7, 8
+        // and 9 have theirs (9, 8, 7) among them.
+        assert!(mirrored_ibug68(&points[..10], 200.0).eq([[191.0, 109.0], [192.0, 108.0], [193.0, 107.0]]));
     }
 }

@@ -5,7 +5,7 @@
 
 use super::eval::{quantile, score_detection};
 use super::{DetectError, Detector};
-use gpmm_core::model::ibug::ibug68_partner;
+use gpmm_core::model::ibug::mirrored_ibug68;
 use gpmm_core::net::face::{iou, landmark_box, Detection, FaceBox, Reading};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -56,8 +56,7 @@ pub fn mirrored_faces(faces: &[ReferenceFace], width: f32) -> Vec<ReferenceFace>
         .iter()
         .map(|f| {
             let [x0, y0, x1, y1] = f.bbox;
-            let landmarks =
-                f.landmarks.as_ref().map(|p| (0..p.len()).filter_map(|k| p.get(ibug68_partner(k)).map(|q| [width - q[0], q[1]])).collect());
+            let landmarks = f.landmarks.as_ref().map(|p| mirrored_ibug68(p, width).collect());
             ReferenceFace { bbox: [width - x1, y0, width - x0, y1], landmarks }
         })
         .collect()
@@ -300,21 +299,21 @@ pub fn evaluate_photos(
     let photos = list_photo_set(dir)?.into_iter().map(|(photo, json)| (photo, Some(json))).collect();
     let views = on_each_photo(detector, photos, progress, |detector, path, faces, image| {
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        // The mirror image's view, made before the photo's own takes its faces.
+        let mirror_view = mirror.then(|| {
+            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            let ext = path.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            (image::imageops::flip_horizontal(image), mirrored_faces(&faces, image.width() as f32), format!("{stem}.mirrored.{ext}"))
+        });
         let mut score = |image: &image::RgbImage, faces: Vec<ReferenceFace>, name: String, mirrored: bool| {
             let dets = detector.scan_all(image, min_score, smallest_face, reading)?;
             let scored = score_image(name, &faces, &dets);
             Ok::<_, DetectError>(PhotoResult { path: path.to_owned(), faces, mirrored, scored })
         };
-        let mut views = Vec::new();
-        if mirror {
-            let flipped = image::imageops::flip_horizontal(image);
-            let faces = mirrored_faces(&faces, image.width() as f32);
-            let p = Path::new(&name);
-            let stem = p.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-            let ext = p.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-            views.push(score(&flipped, faces, format!("{stem}.mirrored.{ext}"), true)?);
+        let mut views = vec![score(image, faces, name, false)?];
+        if let Some((flipped, faces, name)) = mirror_view {
+            views.push(score(&flipped, faces, name, true)?);
         }
-        views.insert(0, score(image, faces, name, false)?);
         Ok(views)
     })?;
     let results: Vec<PhotoResult> = views.into_iter().flatten().collect();

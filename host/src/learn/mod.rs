@@ -292,7 +292,7 @@ pub fn start_points(detector: &mut Detector, photo: &image::RgbImage) -> Result<
 /// The points of `image` in `dir/STEM.pts` (iBUG-68, 0-based, checked against `photo`), mirrored
 /// with the image when `mirrored` (x → width − x, each point swapped with its iBUG partner).
 fn file_points(dir: &Path, image: &Path, photo: &image::RgbImage, mirrored: bool) -> Result<Vec<[f32; 2]>, String> {
-    use gpmm_core::model::ibug::{ibug68_partner, IBUG68_POINTS};
+    use gpmm_core::model::ibug::{mirrored_ibug68, IBUG68_POINTS};
     let stem = image.file_stem().ok_or_else(|| format!("{}: no file name", image.display()))?;
     let path = dir.join(stem).with_extension("pts");
     let pts = crate::photo::pts::read_pts(&path, false).map_err(|e| e.to_string())?;
@@ -300,8 +300,7 @@ fn file_points(dir: &Path, image: &Path, photo: &image::RgbImage, mirrored: bool
     if !mirrored {
         return Ok(pts.points);
     }
-    let w = photo.width() as f32;
-    Ok((0..IBUG68_POINTS).map(|k| pts.points[ibug68_partner(k)]).map(|[x, y]| [w - x, y]).collect())
+    Ok(mirrored_ibug68(&pts.points, photo.width() as f32).collect())
 }
 
 /// Every image (and mirror image) of one iteration, in parallel on `jobs` threads, in input order;
