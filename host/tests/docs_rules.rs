@@ -1,7 +1,7 @@
 //! Documentation rules checked on the repository: the project speaks of itself to its users, so no
-//! text file names work-period numbers, issue numbers or branch names; the evaluation reference and
-//! the README stay short; and every relative link of the README and of `docs/*.md` leads to a file
-//! (and to a heading of it, where it names one).
+//! text file names work-period numbers, issue numbers or branch names; the evaluation, learning and
+//! real-photo references and the README stay short; and every relative link of the README and of
+//! `docs/*.md` leads to a file (and to a heading of it, where it names one).
 
 use std::path::{Path, PathBuf};
 
@@ -9,6 +9,10 @@ use std::path::{Path, PathBuf};
 const EVALUATION_MAX_LINES: usize = 600;
 /// Longest `README.md` may grow (lines).
 const README_MAX_LINES: usize = 200;
+/// Longest `docs/learning.md` may grow (lines): under 350.
+const LEARNING_MAX_LINES: usize = 349;
+/// Longest `docs/real-photos.md` may grow (lines): under 350.
+const REAL_PHOTOS_MAX_LINES: usize = 349;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -135,6 +139,14 @@ fn the_evaluation_reference_and_the_readme_stay_short() {
     assert!(evaluation <= EVALUATION_MAX_LINES, "docs/evaluation.md has {evaluation} lines, at most {EVALUATION_MAX_LINES}");
     let readme = line_count("README.md");
     assert!(readme <= README_MAX_LINES, "README.md has {readme} lines, at most {README_MAX_LINES}");
+}
+
+#[test]
+fn the_learning_and_real_photo_references_stay_short() {
+    let learning = line_count("docs/learning.md");
+    assert!(learning <= LEARNING_MAX_LINES, "docs/learning.md has {learning} lines, at most {LEARNING_MAX_LINES}");
+    let real_photos = line_count("docs/real-photos.md");
+    assert!(real_photos <= REAL_PHOTOS_MAX_LINES, "docs/real-photos.md has {real_photos} lines, at most {REAL_PHOTOS_MAX_LINES}");
 }
 
 /// The targets of the Markdown links and images of `text` (`[..](target)`), outside code.
