@@ -11,7 +11,9 @@
 use crate::clock::{self, instructions_now};
 use crate::{fail, hexlog, stack, PROFILE};
 use gpmm_core::format::detection::{self, DetectCounts, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
-use gpmm_core::net::face::{bounded_reading, find_face, is_face, read_landmarks, record_parts, Detection, FaceBox, InitFile};
+use gpmm_core::net::face::{bounded_reading, find_face, read_landmarks, record_parts, Detection};
+use gpmm_core::format::init_file::InitFile;
+use gpmm_core::net::face_box::{is_face, FaceBox};
 use gpmm_core::net::{NetError, NetScratch};
 
 /// Bytes of each activation buffer.

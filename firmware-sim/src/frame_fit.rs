@@ -22,7 +22,8 @@ use gpmm_core::format::detection::{DetectCounts, Frame};
 use gpmm_core::format::frame_fit::{self, FrameFitJob};
 use gpmm_core::model::MorphableModel;
 use gpmm_core::net::crop::crop_for_fit;
-use gpmm_core::net::face::{Detection, InitFile, MAX_INIT_LANDMARKS};
+use gpmm_core::net::face::Detection;
+use gpmm_core::format::init_file::{InitFile, MAX_INIT_LANDMARKS};
 
 /// Largest working side of this firmware's landmark-free fit.
 const SIDE: usize = PROFILE.frame_fit_side as usize;

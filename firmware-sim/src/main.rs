@@ -38,7 +38,7 @@ use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
 use gpmm_core::format::frame_fit as sections;
 use gpmm_core::geometry::Vec3;
-use gpmm_core::net::face::INIT_MAGIC;
+use gpmm_core::format::init_file::INIT_MAGIC;
 use gpmm_core::profile::{DeviceProfile, MemoryMap, M4F, M7, MPS2, NETDUINOPLUS2, NRF52840, STM32F405};
 use gpmm_core::render::frame_cache::CompactBuffers;
 use gpmm_core::render::{vertex_stage, Cull, ProjectedVertex, TileRasterizer};

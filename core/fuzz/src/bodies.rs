@@ -10,8 +10,9 @@
 use gpmm_core::checksum::crc32;
 use gpmm_core::fit::{FitSettings, TargetImage};
 use gpmm_core::format::blob::{blob_crc, ModelBlob, CRC_OFFSET};
+use gpmm_core::format::init_file::InitFile;
 use gpmm_core::format::{detection, fit_input, fit_record, frame_fit};
-use gpmm_core::net::face::{detect, InitFile, Reading};
+use gpmm_core::net::face::{detect, Reading};
 use gpmm_core::net::NetScratch;
 use gpmm_core::profile::M4F;
 

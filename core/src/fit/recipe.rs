@@ -472,6 +472,19 @@ pub fn project_landmarks<I: TriIndex, const KS: usize, const KC: usize>(
 }
 
 impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
+    /// Accepted over proposed in the whole landmark chain, its pose and shape phases together
+    /// (either may have no steps: by default the pose phase has them all).
+    pub fn landmark_acceptance(&self) -> f32 {
+        let phases = [&self.pose_acceptance, &self.landmark.acceptance];
+        let proposed: u32 = phases.iter().flat_map(|a| a.proposed.iter()).fold(0, |s, &n| s.saturating_add(n));
+        let accepted: u32 = phases.iter().flat_map(|a| a.accepted.iter()).fold(0, |s, &n| s.saturating_add(n));
+        if proposed == 0 {
+            0.0
+        } else {
+            accepted as f32 / proposed as f32
+        }
+    }
+
     /// The fit record's figures of this fit (`GPFR`): the firmware logs them and the host's parity
     /// run writes the same, so two records are equal exactly when the fits are.
     pub fn record_figures(&self) -> FitFigures {
@@ -488,7 +501,7 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
             landmark_log_likelihood: self.image.best_landmarks.log_likelihood,
             landmark_rmse_px: self.image.best_landmarks.rmse(),
             pixel_rmse: img.rmse(),
-            acceptance_landmark_chain: self.landmark.acceptance.overall(),
+            acceptance_landmark_chain: self.landmark_acceptance(),
             acceptance_image_chain: self.image.acceptance.overall(),
             covered_pixels: img.covered,
         }

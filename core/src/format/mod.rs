@@ -6,6 +6,8 @@
 //!   settings (`GPFI`);
 //! - [`fit_record`]: the fit's result as the firmware reports it (`GPFR`);
 //! - [`detection`]: a camera frame to detect the face in (`GPDF`) and the detection (`GPDR`);
+//! - [`init_file`]: the landmark-free start's two networks and what they read (`GPMI`,
+//!   `docs/init-format.md`);
 //! - `frame_fit` (feature `serde`): the landmark-free fit's job (`GPFF`: working side, seed,
 //!   settings) and the partition layout blob + job + init file + frame.
 //!
@@ -23,6 +25,7 @@ pub mod fit_input;
 pub mod fit_record;
 #[cfg(feature = "serde")]
 pub mod frame_fit;
+pub mod init_file;
 
 use core::fmt;
 

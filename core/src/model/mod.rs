@@ -13,5 +13,8 @@ pub mod params;
 
 pub use basis::{Basis, DenseBasis, FactoredBasis, ModelError, QuantValues, QuantizedBasis};
 pub use instance::{Instance, InstanceBuffers, SpareBuffers};
-pub use morphable::{MorphableModel, MAX_LANDMARKS};
+pub use morphable::MorphableModel;
 pub use params::FitParams;
+
+/// Most landmarks a model or a fit target has.
+pub const MAX_LANDMARKS: usize = 128;

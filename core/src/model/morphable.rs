@@ -3,9 +3,7 @@
 use crate::error::FitError;
 use crate::geometry::{TriIndex, Vec3};
 use crate::model::basis::{Basis, FactoredBasis};
-
-/// Most landmarks a model or a fit target has.
-pub const MAX_LANDMARKS: usize = 128;
+use crate::model::MAX_LANDMARKS;
 
 /// A morphable model, borrowed: means, bases, triangles and landmark vertex ids (iBUG-68 order).
 ///

@@ -5,7 +5,7 @@
 //! mostly does not (docs/real-photos.md, "The reading's check"). These are the measures; the host
 //! combines them with the finder's score into one check learned from photos with known faces.
 
-use super::face::{landmark_box, FaceBox};
+use super::face_box::{landmark_box, FaceBox};
 
 /// The measures of one reading, each over the finder's box size.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -18,7 +18,7 @@ pub const CROP_LIFT: f32 = 0.1;
 /// The crop of a `w × h` frame around `landmarks` (frame px), sampled into `side × side` pixels;
 /// `None` if the landmarks span no area or are not finite.
 pub fn fit_window(landmarks: &[[f32; 2]], w: usize, h: usize, side: usize) -> Option<Window> {
-    let (cx, cy, e) = super::face::landmark_box(landmarks);
+    let (cx, cy, e) = super::face_box::landmark_box(landmarks);
     if !(cx.is_finite() && cy.is_finite() && e.is_finite() && e >= 1.0) || side == 0 {
         return None;
     }

@@ -16,6 +16,7 @@
 pub mod agreement;
 pub mod crop;
 pub mod face;
+pub mod face_box;
 pub mod resample;
 pub mod scan;
 
@@ -124,9 +125,11 @@ impl Shape {
     }
 }
 
-/// One layer read from the file: its description and its parameters in place.
-#[derive(Debug, Clone, Copy)]
-pub struct Layer<'a> {
+/// What a layer computes, over how many channels: the six fields of a layer's header that the
+/// trainer writes and this reader reads (with the output scale, `docs/init-format.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LayerShape {
     /// Convolution or dense.
     pub kind: LayerKind,
     /// Kernel side (1 for dense).
@@ -135,10 +138,107 @@ pub struct Layer<'a> {
     pub stride: usize,
     /// Whether `max(y, 0)` is applied.
     pub relu: bool,
-    /// Input channels (dense: the flattened input length).
+    /// Input channels (dense: the flattened input length, in `(y·W + x)·C + c` order).
     pub cin: usize,
     /// Output channels.
     pub cout: usize,
+}
+
+/// Bytes of a layer's header: kind, kernel, stride, flags (one byte each), input and output
+/// channels (`u16` each) and the output scale (`f32`).
+pub const LAYER_HEADER_BYTES: usize = 12;
+
+impl LayerShape {
+    /// Weights per output channel (`kernel × kernel × cin`).
+    pub fn weights_per_output(&self) -> usize {
+        self.kernel.saturating_mul(self.kernel).saturating_mul(self.cin)
+    }
+
+    /// Whether the format can hold it: a convolution's kernel 1, 3 or 5 and stride 1 or 2, a dense
+    /// layer's both 1, and at least one channel in and out (at most `u16::MAX`).
+    pub fn is_valid(&self) -> bool {
+        let sides = match self.kind {
+            LayerKind::Conv => matches!(self.kernel, 1 | 3 | 5) && matches!(self.stride, 1 | 2),
+            LayerKind::Dense => self.kernel == 1 && self.stride == 1,
+        };
+        let channels = |n: usize| (1..=usize::from(u16::MAX)).contains(&n);
+        sides && channels(self.cin) && channels(self.cout)
+    }
+
+    /// The header of a layer of this shape whose output is stored at `out_scale` (`0` for the last
+    /// layer's `f32` output).
+    pub fn header(&self, out_scale: f32) -> Result<[u8; LAYER_HEADER_BYTES], NetError> {
+        if !self.is_valid() {
+            return Err(NetError::Layer("kernel, stride, channels or flags out of range"));
+        }
+        let byte = |n: usize| u8::try_from(n).map_err(|_| NetError::Layer("kernel or stride out of range"));
+        let wide = |n: usize| u16::try_from(n).map_err(|_| NetError::Layer("channels out of range"));
+        let mut h = [0u8; LAYER_HEADER_BYTES];
+        let mut w = crate::format::bytes::Writer::new(&mut h);
+        w.bytes(&[self.kind.code(), byte(self.kernel)?, byte(self.stride)?, u8::from(self.relu)])?;
+        w.u16(wide(self.cin)?)?;
+        w.u16(wide(self.cout)?)?;
+        w.f32(out_scale)?;
+        Ok(h)
+    }
+
+    /// Reads a layer's header: its shape and output scale, checked.
+    fn read_header(r: &mut Reader<'_>) -> Result<(Self, f32), NetError> {
+        let kind = LayerKind::from_code(r.array::<1>()?[0]).ok_or(NetError::Layer("unknown layer kind"))?;
+        let [kernel, stride, flags] = r.array::<3>()?;
+        let cin = usize::from(r.u16()?);
+        let cout = usize::from(r.u16()?);
+        let out_scale = r.f32()?;
+        let shape = LayerShape { kind, kernel: usize::from(kernel), stride: usize::from(stride), relu: flags == 1, cin, cout };
+        if !shape.is_valid() || flags > 1 {
+            return Err(NetError::Layer("kernel, stride, channels or flags out of range"));
+        }
+        if !(out_scale.is_finite() && out_scale >= 0.0) {
+            return Err(NetError::NonFinite);
+        }
+        Ok((shape, out_scale))
+    }
+
+    /// The shape of this layer's output for an `input` tensor.
+    pub fn output_shape(&self, input: Shape) -> Result<Shape, NetError> {
+        match self.kind {
+            LayerKind::Dense => {
+                if input.len() != self.cin {
+                    return Err(NetError::Layer("a dense layer's input length differs from the tensor before it"));
+                }
+                Ok(Shape { h: 1, w: 1, c: self.cout })
+            }
+            LayerKind::Conv => {
+                if input.c != self.cin {
+                    return Err(NetError::Layer("a convolution's input channels differ from the tensor before it"));
+                }
+                let pad = self.kernel / 2;
+                let side = |n: usize| (n + 2 * pad).checked_sub(self.kernel).map(|m| m / self.stride + 1);
+                match (side(input.h), side(input.w)) {
+                    (Some(h), Some(w)) => Ok(Shape { h, w, c: self.cout }),
+                    _ => Err(NetError::Layer("a convolution's input is smaller than its kernel")),
+                }
+            }
+        }
+    }
+}
+
+impl fmt::Display for LayerShape {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let kind = match self.kind {
+            LayerKind::Conv => "convolution",
+            LayerKind::Dense => "dense",
+        };
+        let relu = if self.relu { " + ReLU" } else { "" };
+        write!(f, "{kind} {}x{} stride {}, {} -> {} channels{relu}", self.kernel, self.kernel, self.stride, self.cin, self.cout)
+    }
+}
+
+/// One layer read from the file: its description and its parameters in place.
+#[derive(Debug, Clone, Copy)]
+pub struct Layer<'a> {
+    /// What it computes, over how many channels.
+    pub shape: LayerShape,
     /// Scale of the stored output (`0` in the last layer: `f32` output).
     pub out_scale: f32,
     /// Weights `[cout][kernel][kernel][cin]`.
@@ -168,57 +268,37 @@ impl Layer<'_> {
         f32_at(self.biases, o)
     }
 
-    /// The output shape for an input of shape `input`.
-    pub fn output_shape(&self, input: Shape) -> Result<Shape, NetError> {
-        match self.kind {
-            LayerKind::Dense => {
-                if input.len() != self.cin {
-                    return Err(NetError::Layer("a dense layer's input length differs from the tensor before it"));
-                }
-                Ok(Shape { h: 1, w: 1, c: self.cout })
-            }
-            LayerKind::Conv => {
-                if input.c != self.cin {
-                    return Err(NetError::Layer("a convolution's input channels differ from the tensor before it"));
-                }
-                let pad = self.kernel / 2;
-                let side = |n: usize| (n + 2 * pad).checked_sub(self.kernel).map(|m| m / self.stride + 1);
-                match (side(input.h), side(input.w)) {
-                    (Some(h), Some(w)) => Ok(Shape { h, w, c: self.cout }),
-                    _ => Err(NetError::Layer("a convolution's input is smaller than its kernel")),
-                }
-            }
-        }
-    }
-
     fn read<'a>(r: &mut Reader<'a>) -> Result<Layer<'a>, NetError> {
-        let kind = LayerKind::from_code(r.array::<1>()?[0]).ok_or(NetError::Layer("unknown layer kind"))?;
-        let [kernel, stride, flags] = r.array::<3>()?;
-        let cin = usize::from(r.u16()?);
-        let cout = usize::from(r.u16()?);
-        let out_scale = r.f32()?;
-        let (kernel, stride) = (usize::from(kernel), usize::from(stride));
-        let shape_ok = match kind {
-            LayerKind::Conv => matches!(kernel, 1 | 3 | 5) && matches!(stride, 1 | 2),
-            LayerKind::Dense => kernel == 1 && stride == 1,
-        };
-        if !shape_ok || cin == 0 || cout == 0 || flags > 1 {
-            return Err(NetError::Layer("kernel, stride, channels or flags out of range"));
-        }
-        if !(out_scale.is_finite() && out_scale >= 0.0) {
-            return Err(NetError::NonFinite);
-        }
-        let count = cout * kernel * kernel * cin;
-        let weights: &[i8] = bytemuck::cast_slice(r.take(count)?);
+        let (shape, out_scale) = LayerShape::read_header(r)?;
+        let weights: &[i8] = bytemuck::cast_slice(r.take(shape.cout * shape.weights_per_output())?);
         r.align4()?;
-        let multipliers = r.take(cout * 4)?;
-        let biases = r.take(cout * 4)?;
-        let layer = Layer { kind, kernel, stride, relu: flags == 1, cin, cout, out_scale, weights, multipliers, biases };
-        if (0..cout).any(|o| !layer.multiplier(o).is_finite() || !layer.bias(o).is_finite()) {
+        let multipliers = r.take(shape.cout * 4)?;
+        let biases = r.take(shape.cout * 4)?;
+        let layer = Layer { shape, out_scale, weights, multipliers, biases };
+        if (0..shape.cout).any(|o| !layer.multiplier(o).is_finite() || !layer.bias(o).is_finite()) {
             return Err(NetError::NonFinite);
         }
         Ok(layer)
     }
+}
+
+/// Bytes of a network's header: layer count, a reserved `u16`, input height, width and channels,
+/// a reserved `u16`.
+pub const NETWORK_HEADER_BYTES: usize = 12;
+
+/// The header of a network of `layers` layers over an `input` tensor (what [`Network::parse`]
+/// reads first).
+pub fn network_header(layers: usize, input: Shape) -> Result<[u8; NETWORK_HEADER_BYTES], NetError> {
+    if layers == 0 || layers > MAX_LAYERS || input.is_empty() {
+        return Err(NetError::Layer("layer count or input shape out of range"));
+    }
+    let wide = |n: usize| u16::try_from(n).map_err(|_| NetError::Layer("input shape out of range"));
+    let mut h = [0u8; NETWORK_HEADER_BYTES];
+    let mut w = crate::format::bytes::Writer::new(&mut h);
+    for v in [wide(layers)?, 0, wide(input.h)?, wide(input.w)?, wide(input.c)?, 0] {
+        w.u16(v)?;
+    }
+    Ok(h)
 }
 
 /// A validated network inside a byte slice (`docs/init-format.md`, "Network").
@@ -250,7 +330,7 @@ impl<'a> Network<'a> {
             if last != (layer.out_scale == 0.0) {
                 return Err(NetError::Layer("only the last layer has an f32 output (out_scale 0)"));
             }
-            shape = layer.output_shape(shape)?;
+            shape = layer.shape.output_shape(shape)?;
             largest = largest.max(shape.len());
         }
         let len = r.position();
@@ -288,8 +368,8 @@ impl<'a> Network<'a> {
         let mut shape = self.input;
         let mut total = 0usize;
         for layer in self.layers_iter() {
-            let Ok(next) = layer.output_shape(shape) else { break };
-            total = total.saturating_add(next.len().saturating_mul(layer.kernel * layer.kernel * layer.cin));
+            let Ok(next) = layer.shape.output_shape(shape) else { break };
+            total = total.saturating_add(next.len().saturating_mul(layer.shape.weights_per_output()));
             shape = next;
         }
         total
@@ -298,7 +378,7 @@ impl<'a> Network<'a> {
     /// The layers in order.
     pub fn layers_iter(&self) -> impl Iterator<Item = Layer<'a>> + 'a {
         let mut r = Reader::new(self.bytes);
-        let skip = r.take(12).is_ok();
+        let skip = r.take(NETWORK_HEADER_BYTES).is_ok();
         let mut left = if skip { self.layers } else { 0 };
         core::iter::from_fn(move || {
             if left == 0 {
@@ -320,7 +400,7 @@ impl<'a> Network<'a> {
         let mut shape = self.input;
         let mut in_a = true;
         for layer in self.layers_iter() {
-            let next = layer.output_shape(shape)?;
+            let next = layer.shape.output_shape(shape)?;
             let (src, dst) = if in_a { (&scratch.a, &mut scratch.b) } else { (&scratch.b, &mut scratch.a) };
             let src = src.get(..shape.len()).ok_or(NetError::LengthMismatch)?;
             if layer.out_scale == 0.0 {
@@ -354,20 +434,20 @@ pub fn quantize(y: f32, scale: f32) -> i8 {
 
 /// The value of one layer output before quantization, for every output index in order.
 fn layer_forward(layer: &Layer<'_>, src: &[i8], input: Shape, output: Shape, mut emit: impl FnMut(usize, f32)) {
-    let k = layer.kernel;
+    let k = layer.shape.kernel;
     let finish = |acc: i32, o: usize| {
         let y = acc as f32 * layer.multiplier(o) + layer.bias(o);
-        if layer.relu {
+        if layer.shape.relu {
             y.max(0.0)
         } else {
             y
         }
     };
-    match layer.kind {
-        LayerKind::Dense => dot_channels(src, layer.weights, layer.cout, |o, acc| emit(o, finish(acc, o))),
+    match layer.shape.kind {
+        LayerKind::Dense => dot_channels(src, layer.weights, layer.shape.cout, |o, acc| emit(o, finish(acc, o))),
         LayerKind::Conv => {
             let pad = k / 2;
-            let taps = k * k * layer.cin;
+            let taps = k * k * layer.shape.cin;
             let mut patch = [0i8; MAX_PATCH];
             let mut i = 0;
             for oy in 0..output.h {
@@ -376,24 +456,24 @@ fn layer_forward(layer: &Layer<'_>, src: &[i8], input: Shape, output: Shape, mut
                         // The receptive field as one contiguous `[ky][kx][cin]` run, zeros outside
                         // the image: one dot product per output channel, in the weights' order.
                         gather(src, input, layer, (oy, ox), patch);
-                        dot_channels(patch, layer.weights, layer.cout, |o, acc| emit(i + o, finish(acc, o)));
-                        i += layer.cout;
+                        dot_channels(patch, layer.weights, layer.shape.cout, |o, acc| emit(i + o, finish(acc, o)));
+                        i += layer.shape.cout;
                         continue;
                     }
                     // The kernel window clipped to the image (zero padding contributes nothing).
-                    let y0 = (oy * layer.stride).saturating_sub(pad);
-                    let y1 = (oy * layer.stride + k - pad).min(input.h);
-                    let x0 = (ox * layer.stride).saturating_sub(pad);
-                    let x1 = (ox * layer.stride + k - pad).min(input.w);
-                    let ky0 = y0 + pad - oy * layer.stride;
-                    let kx0 = x0 + pad - ox * layer.stride;
-                    let run = (x1.saturating_sub(x0)) * layer.cin;
-                    let row = k * layer.cin;
+                    let y0 = (oy * layer.shape.stride).saturating_sub(pad);
+                    let y1 = (oy * layer.shape.stride + k - pad).min(input.h);
+                    let x0 = (ox * layer.shape.stride).saturating_sub(pad);
+                    let x1 = (ox * layer.shape.stride + k - pad).min(input.w);
+                    let ky0 = y0 + pad - oy * layer.shape.stride;
+                    let kx0 = x0 + pad - ox * layer.shape.stride;
+                    let run = (x1.saturating_sub(x0)) * layer.shape.cin;
+                    let row = k * layer.shape.cin;
                     for (o, w) in layer.weights.chunks_exact(taps).enumerate() {
                         let mut acc = 0i32;
                         for (dy, iy) in (y0..y1).enumerate() {
-                            let a = src.get((iy * input.w + x0) * layer.cin..).unwrap_or(&[]);
-                            let wr = w.get((ky0 + dy) * row + kx0 * layer.cin..).unwrap_or(&[]);
+                            let a = src.get((iy * input.w + x0) * layer.shape.cin..).unwrap_or(&[]);
+                            let wr = w.get((ky0 + dy) * row + kx0 * layer.shape.cin..).unwrap_or(&[]);
                             acc += dot(a.get(..run).unwrap_or(&[]), wr);
                         }
                         emit(i, finish(acc, o));
@@ -411,12 +491,12 @@ const MAX_PATCH: usize = 1024;
 
 /// Copies the `k × k × cin` receptive field of output `(oy, ox)` into `patch`, zeros outside the image.
 fn gather(src: &[i8], input: Shape, layer: &Layer<'_>, (oy, ox): (usize, usize), patch: &mut [i8]) {
-    let (k, cin) = (layer.kernel, layer.cin);
+    let (k, cin) = (layer.shape.kernel, layer.shape.cin);
     let pad = k / 2;
     for (ky, row) in patch.chunks_exact_mut(k * cin).enumerate() {
-        let iy = (oy * layer.stride + ky).checked_sub(pad).filter(|&y| y < input.h);
+        let iy = (oy * layer.shape.stride + ky).checked_sub(pad).filter(|&y| y < input.h);
         for (kx, px) in row.chunks_exact_mut(cin).enumerate() {
-            let ix = (ox * layer.stride + kx).checked_sub(pad).filter(|&x| x < input.w);
+            let ix = (ox * layer.shape.stride + kx).checked_sub(pad).filter(|&x| x < input.w);
             let from = iy.zip(ix).and_then(|(y, x)| src.get((y * input.w + x) * cin..(y * input.w + x + 1) * cin));
             match from {
                 Some(v) => px.copy_from_slice(v),

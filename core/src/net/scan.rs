@@ -12,12 +12,11 @@
 
 use heapless::Vec;
 
-use super::face::{
-    find_faces, intersection, iou, is_face, run_finder, same_face, second_look, FaceBox, FinderCells, InitFile, MAX_NET_OUTPUT,
-    SAME_FACE_IOU,
-};
+use super::face::{find_faces, run_finder, same_face, second_look, FinderCells};
+use super::face_box::{intersection, iou, is_face, FaceBox, SAME_FACE_IOU};
 use super::resample::Window;
 use super::{NetError, NetScratch};
+use crate::format::init_file::{InitFile, MAX_NET_OUTPUT};
 
 /// The face sizes the finder was trained on, as shares of its view's shorter side (the training
 /// scenes draw theirs from this range).

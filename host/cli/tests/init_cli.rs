@@ -458,7 +458,7 @@ fn fine_tuning_on_a_mixture_writes_a_file_detect_reads_and_refuses_what_does_not
     assert!(report["steps"].as_u64().unwrap() > 0);
     let bytes = std::fs::read(&tuned).unwrap();
     assert_ne!(bytes, std::fs::read(&f.init).unwrap());
-    let file = gpmm_core::net::face::InitFile::parse(&bytes).unwrap();
+    let file = gpmm_core::format::init_file::InitFile::parse(&bytes).unwrap();
     let metadata: serde_json::Value = serde_json::from_str(file.metadata).unwrap();
     assert_eq!((metadata["models"].as_array().map(Vec::len), &metadata["fine_tuned_from"]["seed"]), (Some(2), &serde_json::json!(7)));
     let detected = ok(&gpmm(&["detect", s(&f.synth.join("0000_yaw30.png")), "--init", s(&tuned)]));
@@ -467,19 +467,14 @@ fn fine_tuning_on_a_mixture_writes_a_file_detect_reads_and_refuses_what_does_not
 
     // An init file whose initializer reads 5 landmarks: refused, naming it.
     let geo = gpmm_train::train::geometry(5);
-    let net = |side: usize, specs: Vec<gpmm_train::nets::Spec>| gpmm_train::encode::FloatNet {
+    let net = |side: usize, specs: Vec<gpmm_core::net::LayerShape>| gpmm_train::encode::FloatNet {
         input: gpmm_core::net::Shape { h: side, w: side, c: 3 },
         layers: specs
             .iter()
-            .map(|l| gpmm_train::encode::FloatLayer {
-                kind: l.kind,
-                kernel: l.kernel,
-                stride: l.stride,
-                relu: l.relu,
-                cin: l.cin,
-                cout: l.cout,
-                weights: vec![0.01; l.cout * l.kernel * l.kernel * l.cin],
-                bias: vec![0.0; l.cout],
+            .map(|&shape| gpmm_train::encode::FloatLayer {
+                shape,
+                weights: vec![0.01; shape.cout * shape.weights_per_output()],
+                bias: vec![0.0; shape.cout],
                 out_max: 1.0,
             })
             .collect(),

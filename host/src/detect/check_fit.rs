@@ -4,7 +4,8 @@
 use super::check::{features, CheckError, FaceCheck};
 use super::photos::{list_photos, on_each_photo, score_image};
 use super::{DetectError, Detector};
-use gpmm_core::net::face::{write_init_file, InitFile, Reading};
+use gpmm_core::format::init_file::{write_init_file, InitFile};
+use gpmm_core::net::face::Reading;
 use gpmm_core::net::NetError;
 use std::path::Path;
 

@@ -4,7 +4,8 @@
 
 use super::{DetectError, Detector};
 use crate::photo::pts::read_pts;
-use gpmm_core::net::face::{landmark_box, Detection};
+use gpmm_core::net::face::Detection;
+use gpmm_core::net::face_box::landmark_box;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 

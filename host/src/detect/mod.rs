@@ -8,8 +8,10 @@ pub mod eval;
 pub mod photos;
 
 use check::FaceCheck;
+use gpmm_core::format::init_file::InitFile;
 use gpmm_core::net::agreement::ReadingAgreement;
-use gpmm_core::net::face::{detect, read_landmarks, read_landmarks_measured, Detection, FaceBox, InitFile, Reading};
+use gpmm_core::net::face::{detect, read_landmarks, read_landmarks_measured, Detection, Reading};
+use gpmm_core::net::face_box::FaceBox;
 use gpmm_core::net::scan::scan_faces;
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;

@@ -6,7 +6,8 @@
 use super::eval::{quantile, score_detection};
 use super::{DetectError, Detector};
 use gpmm_core::model::ibug::mirrored_ibug68;
-use gpmm_core::net::face::{iou, landmark_box, Detection, FaceBox, Reading};
+use gpmm_core::net::face::{Detection, Reading};
+use gpmm_core::net::face_box::{iou, landmark_box, FaceBox};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

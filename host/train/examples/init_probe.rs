@@ -9,25 +9,25 @@
 use candle_core::Device;
 use candle_core::{Tensor, Var, D};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
-use gpmm_core::net::{LayerKind, NetScratch, Network, Shape};
+use gpmm_core::net::{LayerKind, LayerShape, NetScratch, Network, Shape};
 use gpmm_host::detect::eval::quantile;
 use gpmm_train::data::{samples, Geometry, Sample};
 use gpmm_train::encode::encode_network;
-use gpmm_train::nets::{batch_tensor, initializer_specs, Net, Spec};
+use gpmm_train::nets::{batch_tensor, initializer_specs, Net};
 use gpmm_train::scene::head::HeadContext;
 use gpmm_train::scene::{FaceModel, Openings, SceneRanges, SceneSource};
 use gpmm_train::train::{cosine_lr, geometry, output_loss, pass_order};
 
-const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
-    Spec { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
+const fn conv(cin: usize, cout: usize, stride: usize) -> LayerShape {
+    LayerShape { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
 }
-const fn dense(cin: usize, cout: usize, relu: bool) -> Spec {
-    Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu, cin, cout }
+const fn dense(cin: usize, cout: usize, relu: bool) -> LayerShape {
+    LayerShape { kind: LayerKind::Dense, kernel: 1, stride: 1, relu, cin, cout }
 }
 
 /// The default initializer's layout with first-layer channels `c` (doubled twice on the way
 /// down), a last map of `side × side` cells and a hidden layer of `hidden` values.
-fn stack(c: usize, side: usize, hidden: usize, d: usize) -> Vec<Spec> {
+fn stack(c: usize, side: usize, hidden: usize, d: usize) -> Vec<LayerShape> {
     vec![
         conv(3, c, 2),
         conv(c, 2 * c, 2),
@@ -39,7 +39,7 @@ fn stack(c: usize, side: usize, hidden: usize, d: usize) -> Vec<Spec> {
     ]
 }
 
-fn specs(variant: &str, d: usize) -> Vec<Spec> {
+fn specs(variant: &str, d: usize) -> Vec<LayerShape> {
     match variant {
         "base" | "wing" | "m12" => initializer_specs(d),
         "r80" => stack(16, 5, 128, d),
@@ -91,7 +91,7 @@ impl Heat {
             Net::new(Shape { h: g, w: g, c }, vec![conv(c, 64, 2), dense(g * g * 16, 128, true), dense(128, rest, false)], 3, device)?;
         let head = Net::new(
             Shape { h: g, w: g, c },
-            vec![Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: false, cin: c, cout: l }],
+            vec![LayerShape { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: false, cin: c, cout: l }],
             4,
             device,
         )?;

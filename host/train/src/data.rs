@@ -2,7 +2,8 @@
 //! initializer's crop exactly as the core cuts them at run time, with their targets.
 
 use crate::scene::{face_free_frame, photo_face_frame, render_scene, Scene, SceneSource};
-use gpmm_core::net::face::{landmark_box, mirror_outputs};
+use gpmm_core::net::face::mirror_outputs;
+use gpmm_core::net::face_box::landmark_box;
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::render::Renderer;
 use rand::{RngExt, SeedableRng};

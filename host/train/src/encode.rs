@@ -3,27 +3,16 @@
 //! a finder and an initializer so encoded make an init file. And back: an encoded network
 //! dequantized into floats, for training to start from ([`decode_network`]).
 
-use gpmm_core::format::bytes::Writer;
+use gpmm_core::format::init_file::write_init_file;
 use gpmm_core::format::FormatError;
-use gpmm_core::net::face::write_init_file;
-use gpmm_core::net::{LayerKind, Network, Shape};
+use gpmm_core::net::{network_header, LayerShape, Network, Shape};
 use gpmm_host::detect::Detector;
 
 /// One trained layer in `f32`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FloatLayer {
-    /// Convolution or dense.
-    pub kind: LayerKind,
-    /// Kernel side (1 for dense).
-    pub kernel: usize,
-    /// Stride (1 for dense).
-    pub stride: usize,
-    /// Whether `max(y, 0)` follows.
-    pub relu: bool,
-    /// Input channels (dense: flattened input length, in `(y·W + x)·C + c` order).
-    pub cin: usize,
-    /// Output channels.
-    pub cout: usize,
+    /// What it computes, over how many channels.
+    pub shape: LayerShape,
     /// Weights `[cout][kernel][kernel][cin]`.
     pub weights: Vec<f32>,
     /// Biases `[cout]`.
@@ -69,36 +58,26 @@ pub enum EncodeError {
 /// Quantizes and encodes `net`.
 pub fn encode_network(net: &FloatNet) -> Result<Vec<u8>, EncodeError> {
     let mut out = Vec::new();
-    let u16_of = |v: usize, layer: usize, what: &'static str| u16::try_from(v).map_err(|_| EncodeError::Layer { layer, what });
-    let mut head = [0u8; 12];
-    {
-        let mut w = Writer::new(&mut head);
-        let fields = [net.layers.len(), 0, net.input.h, net.input.w, net.input.c, 0];
-        for (i, v) in fields.into_iter().enumerate() {
-            w.u16(u16_of(v, 0, if i == 0 { "too many layers" } else { "input shape too large" })?)
-                .map_err(|_| EncodeError::Layer { layer: 0, what: "header" })?;
-        }
-    }
+    let head = network_header(net.layers.len(), net.input)
+        .map_err(|_| EncodeError::Layer { layer: 0, what: "layer count or input shape out of range" })?;
     out.extend_from_slice(&head);
     let mut in_scale = INPUT_SCALE;
     let last = net.layers.len().saturating_sub(1);
     for (li, l) in net.layers.iter().enumerate() {
-        let per = l.kernel * l.kernel * l.cin;
-        if l.weights.len() != l.cout * per || l.bias.len() != l.cout {
+        let per = l.shape.weights_per_output();
+        if l.weights.len() != l.shape.cout * per || l.bias.len() != l.shape.cout {
             return Err(EncodeError::Layer { layer: li, what: "weight or bias count differs from the shape" });
         }
         if !l.weights.iter().chain(&l.bias).all(|v| v.is_finite()) || !l.out_max.is_finite() {
             return Err(EncodeError::NonFinite(li));
         }
         let out_scale = if li == last { 0.0 } else { l.out_max.max(1e-6) / 127.0 };
-        out.push(l.kind.code());
-        out.push(u8::try_from(l.kernel).map_err(|_| EncodeError::Layer { layer: li, what: "kernel" })?);
-        out.push(u8::try_from(l.stride).map_err(|_| EncodeError::Layer { layer: li, what: "stride" })?);
-        out.push(u8::from(l.relu));
-        out.extend_from_slice(&u16_of(l.cin, li, "input channels")?.to_le_bytes());
-        out.extend_from_slice(&u16_of(l.cout, li, "output channels")?.to_le_bytes());
-        out.extend_from_slice(&out_scale.to_le_bytes());
-        let mut mults = Vec::with_capacity(l.cout);
+        out.extend_from_slice(
+            &l.shape
+                .header(out_scale)
+                .map_err(|_| EncodeError::Layer { layer: li, what: "kernel, stride or channels out of the format's range" })?,
+        );
+        let mut mults = Vec::with_capacity(l.shape.cout);
         for w in l.weights.chunks_exact(per.max(1)) {
             let scale = w.iter().fold(0.0f32, |m, v| m.max(v.abs())) / 127.0;
             let scale = if scale > 0.0 { scale } else { 1.0 };
@@ -140,7 +119,7 @@ pub fn decode_network(net: &Network<'_>) -> FloatNet {
     let mut in_scale = INPUT_SCALE;
     let mut layers = Vec::with_capacity(net.layer_count());
     for l in net.layers_iter() {
-        let per = l.kernel * l.kernel * l.cin;
+        let per = l.shape.weights_per_output();
         let weights = l
             .weights
             .chunks_exact(per.max(1))
@@ -151,14 +130,9 @@ pub fn decode_network(net: &Network<'_>) -> FloatNet {
             })
             .collect();
         layers.push(FloatLayer {
-            kind: l.kind,
-            kernel: l.kernel,
-            stride: l.stride,
-            relu: l.relu,
-            cin: l.cin,
-            cout: l.cout,
+            shape: l.shape,
             weights,
-            bias: (0..l.cout).map(|o| l.bias(o)).collect(),
+            bias: (0..l.shape.cout).map(|o| l.bias(o)).collect(),
             out_max: l.out_scale * 127.0,
         });
         in_scale = l.out_scale;

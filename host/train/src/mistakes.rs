@@ -10,7 +10,7 @@
 
 use crate::scene::backgrounds::{overlaps, Backgrounds};
 use crate::train::TrainError;
-use gpmm_core::net::face::FaceBox;
+use gpmm_core::net::face_box::FaceBox;
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::detect::Detector;
 use image::RgbImage;

@@ -4,35 +4,18 @@
 use crate::encode::{FloatLayer, FloatNet};
 use crate::patches::Patches;
 use candle_core::{DType, Device, Result, Tensor, Var, D};
-use gpmm_core::net::{LayerKind, Shape};
+use gpmm_core::net::{LayerKind, LayerShape, Shape};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-/// One layer's shape.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Spec {
-    /// Convolution or dense.
-    pub kind: LayerKind,
-    /// Kernel side.
-    pub kernel: usize,
-    /// Stride.
-    pub stride: usize,
-    /// Followed by ReLU.
-    pub relu: bool,
-    /// Input channels (dense: flattened length).
-    pub cin: usize,
-    /// Output channels.
-    pub cout: usize,
-}
-
-const fn conv(cin: usize, cout: usize, stride: usize) -> Spec {
-    Spec { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
+const fn conv(cin: usize, cout: usize, stride: usize) -> LayerShape {
+    LayerShape { kind: LayerKind::Conv, kernel: 3, stride, relu: true, cin, cout }
 }
 
 /// The finder: a `side × side` RGB frame to a grid of `side / 16` cells × 4 values. Its last
 /// cells see 79 px of the input, as large as the largest faces it is trained on.
-pub fn finder_specs() -> Vec<Spec> {
+pub fn finder_specs() -> Vec<LayerShape> {
     vec![
         conv(3, 8, 2),
         conv(8, 16, 2),
@@ -40,39 +23,21 @@ pub fn finder_specs() -> Vec<Spec> {
         conv(32, 32, 1),
         conv(32, 64, 2),
         conv(64, 64, 1),
-        Spec { kind: LayerKind::Conv, kernel: 1, stride: 1, relu: false, cin: 64, cout: 4 },
+        LayerShape { kind: LayerKind::Conv, kernel: 1, stride: 1, relu: false, cin: 64, cout: 4 },
     ]
 }
 
 /// The initializer: a 64 × 64 RGB crop to `outputs` values.
-pub fn initializer_specs(outputs: usize) -> Vec<Spec> {
+pub fn initializer_specs(outputs: usize) -> Vec<LayerShape> {
     vec![
         conv(3, 16, 2),
         conv(16, 32, 2),
         conv(32, 32, 1),
         conv(32, 64, 2),
         conv(64, 64, 2),
-        Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: true, cin: 4 * 4 * 64, cout: 128 },
-        Spec { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: false, cin: 128, cout: outputs },
+        LayerShape { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: true, cin: 4 * 4 * 64, cout: 128 },
+        LayerShape { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: false, cin: 128, cout: outputs },
     ]
-}
-
-impl Spec {
-    /// The shape of a trained layer.
-    pub fn of_layer(l: &FloatLayer) -> Self {
-        Self { kind: l.kind, kernel: l.kernel, stride: l.stride, relu: l.relu, cin: l.cin, cout: l.cout }
-    }
-}
-
-impl std::fmt::Display for Spec {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let kind = match self.kind {
-            LayerKind::Conv => "convolution",
-            LayerKind::Dense => "dense",
-        };
-        let relu = if self.relu { " + ReLU" } else { "" };
-        write!(f, "{kind} {}x{} stride {}, {} -> {} channels{relu}", self.kernel, self.kernel, self.stride, self.cin, self.cout)
-    }
 }
 
 /// How a trained network differs from the one a training builds.
@@ -100,14 +65,14 @@ pub enum ArchitectureMismatch {
         /// Layer index.
         layer: usize,
         /// The trained network's.
-        found: Spec,
+        found: LayerShape,
         /// The training's.
-        expected: Spec,
+        expected: LayerShape,
     },
 }
 
 /// Whether `net` has the input shape and layers a training builds (`input`, `specs`).
-pub fn check_architecture(net: &FloatNet, input: Shape, specs: &[Spec]) -> std::result::Result<(), ArchitectureMismatch> {
+pub fn check_architecture(net: &FloatNet, input: Shape, specs: &[LayerShape]) -> std::result::Result<(), ArchitectureMismatch> {
     if net.input != input {
         return Err(ArchitectureMismatch::Input { found: net.input, expected: input });
     }
@@ -115,7 +80,7 @@ pub fn check_architecture(net: &FloatNet, input: Shape, specs: &[Spec]) -> std::
         return Err(ArchitectureMismatch::Layers { found: net.layers.len(), expected: specs.len() });
     }
     for (layer, (l, &expected)) in net.layers.iter().zip(specs).enumerate() {
-        let found = Spec::of_layer(l);
+        let found = l.shape;
         if found != expected {
             return Err(ArchitectureMismatch::Layer { layer, found, expected });
         }
@@ -129,7 +94,7 @@ pub struct Net {
     /// Input shape.
     pub input: Shape,
     /// Layer shapes.
-    pub specs: Vec<Spec>,
+    pub specs: Vec<LayerShape>,
     /// Weights `[cout, k·k·cin]` (columns in `[ky][kx][cin]` order; dense: `k = 1`).
     pub weights: Vec<Var>,
     /// Biases `[cout]`.
@@ -138,7 +103,7 @@ pub struct Net {
 
 impl Net {
     /// He-initialized weights from `seed`, zero biases.
-    pub fn new(input: Shape, specs: Vec<Spec>, seed: u64, device: &Device) -> Result<Self> {
+    pub fn new(input: Shape, specs: Vec<LayerShape>, seed: u64, device: &Device) -> Result<Self> {
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
         let (mut weights, mut biases) = (Vec::new(), Vec::new());
         for s in &specs {
@@ -158,11 +123,11 @@ impl Net {
     pub fn from_float(net: &FloatNet, device: &Device) -> Result<Self> {
         let (mut weights, mut biases) = (Vec::new(), Vec::new());
         for l in &net.layers {
-            let w = Tensor::from_vec(l.weights.clone(), (l.cout, l.kernel * l.kernel * l.cin), device)?;
+            let w = Tensor::from_vec(l.weights.clone(), (l.shape.cout, l.shape.weights_per_output()), device)?;
             weights.push(Var::from_tensor(&w)?);
-            biases.push(Var::from_tensor(&Tensor::from_vec(l.bias.clone(), l.cout, device)?)?);
+            biases.push(Var::from_tensor(&Tensor::from_vec(l.bias.clone(), l.shape.cout, device)?)?);
         }
-        Ok(Self { input: net.input, specs: net.layers.iter().map(Spec::of_layer).collect(), weights, biases })
+        Ok(Self { input: net.input, specs: net.layers.iter().map(|l| l.shape).collect(), weights, biases })
     }
 
     /// Multiply-accumulates of one forward pass of one sample.
@@ -226,12 +191,7 @@ impl Net {
         for (i, ((s, w), b)) in self.specs.iter().zip(&self.weights).zip(&self.biases).enumerate() {
             let w = w.as_tensor();
             layers.push(FloatLayer {
-                kind: s.kind,
-                kernel: s.kernel,
-                stride: s.stride,
-                relu: s.relu,
-                cin: s.cin,
-                cout: s.cout,
+                shape: *s,
                 weights: w.flatten_all()?.to_vec1()?,
                 bias: b.as_tensor().to_vec1()?,
                 out_max: out_max.get(i).copied().unwrap_or(1.0),

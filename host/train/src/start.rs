@@ -6,7 +6,7 @@ use crate::data::Geometry;
 use crate::encode::decode_network;
 use crate::nets::{check_architecture, finder_specs, initializer_specs, ArchitectureMismatch, Net};
 use candle_core::Device;
-use gpmm_core::net::face::InitFile;
+use gpmm_core::format::init_file::InitFile;
 use gpmm_core::net::{NetError, Shape};
 
 /// Why an init file cannot be the start of a training.

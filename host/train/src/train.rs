@@ -466,7 +466,7 @@ pub fn train_on(
     let source = SceneSource { faces: &faces, head, ranges: &opts.ranges, backgrounds };
     let model = faces[0].model;
     let landmarks = model.landmarks.len();
-    if landmarks == 0 || landmarks > gpmm_core::net::face::MAX_INIT_LANDMARKS {
+    if landmarks == 0 || landmarks > gpmm_core::format::init_file::MAX_INIT_LANDMARKS {
         return Err(TrainError::Landmarks(landmarks));
     }
     if opts.mirror && landmarks != gpmm_core::model::ibug::IBUG68_POINTS {

@@ -1,10 +1,12 @@
 //! The int8 networks and the init file: the core's quantized run against a float reference,
 //! corrupted and truncated files refused, and the detector's outputs on any image.
 
+use gpmm_core::format::init_file::{FINDER_CHANNELS, INIT_MAGIC};
 use gpmm_core::format::FormatError;
 use gpmm_core::model::ibug::ibug68_partner;
-use gpmm_core::net::face::{read_landmarks, FaceBox, Reading, FINDER_CHANNELS, INIT_MAGIC};
-use gpmm_core::net::{LayerKind, NetError, NetScratch, Network, Shape};
+use gpmm_core::net::face::{read_landmarks, Reading};
+use gpmm_core::net::face_box::FaceBox;
+use gpmm_core::net::{LayerKind, LayerShape, NetError, NetScratch, Network, Shape};
 use gpmm_host::detect::Detector;
 use gpmm_train::encode::init_file_bytes;
 use gpmm_train::encode::{encode_network, FloatLayer, FloatNet};
@@ -16,12 +18,7 @@ fn layer(rng: &mut Xoshiro256PlusPlus, kind: LayerKind, kernel: usize, stride: u
     let n = cout * kernel * kernel * cin;
     let scale = (2.0 / (kernel * kernel * cin) as f32).sqrt();
     FloatLayer {
-        kind,
-        kernel,
-        stride,
-        relu,
-        cin,
-        cout,
+        shape: LayerShape { kind, kernel, stride, relu, cin, cout },
         weights: (0..n).map(|_| rng.random_range(-1.0f32..1.0) * scale).collect(),
         bias: (0..cout).map(|_| rng.random_range(-0.1f32..0.1)).collect(),
         out_max: 0.0,
@@ -34,22 +31,22 @@ fn reference(net: &FloatNet, input: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let mut shape = net.input;
     let mut maxima = Vec::new();
     for l in &net.layers {
-        let y = match l.kind {
+        let y = match l.shape.kind {
             LayerKind::Dense => {
-                shape = Shape { h: 1, w: 1, c: l.cout };
+                shape = Shape { h: 1, w: 1, c: l.shape.cout };
                 l.weights
-                    .chunks(l.cin)
+                    .chunks(l.shape.cin)
                     .zip(&l.bias)
                     .map(|(w, b)| w.iter().zip(&x).map(|(a, b)| a * b).sum::<f32>() + b)
                     .collect::<Vec<f32>>()
             }
             LayerKind::Conv => {
-                let (k, s, p) = (l.kernel, l.stride, l.kernel / 2);
+                let (k, s, p) = (l.shape.kernel, l.shape.stride, l.shape.kernel / 2);
                 let (oh, ow) = ((shape.h + 2 * p - k) / s + 1, (shape.w + 2 * p - k) / s + 1);
-                let mut y = vec![0.0; oh * ow * l.cout];
+                let mut y = vec![0.0; oh * ow * l.shape.cout];
                 for oy in 0..oh {
                     for ox in 0..ow {
-                        for o in 0..l.cout {
+                        for o in 0..l.shape.cout {
                             let mut acc = l.bias[o];
                             for ky in 0..k {
                                 for kx in 0..k {
@@ -57,21 +54,21 @@ fn reference(net: &FloatNet, input: &[f32]) -> (Vec<f32>, Vec<f32>) {
                                     if iy < 0 || ix < 0 || iy >= shape.h as isize || ix >= shape.w as isize {
                                         continue;
                                     }
-                                    for c in 0..l.cin {
-                                        acc += l.weights[((o * k + ky) * k + kx) * l.cin + c]
-                                            * x[(iy as usize * shape.w + ix as usize) * l.cin + c];
+                                    for c in 0..l.shape.cin {
+                                        acc += l.weights[((o * k + ky) * k + kx) * l.shape.cin + c]
+                                            * x[(iy as usize * shape.w + ix as usize) * l.shape.cin + c];
                                     }
                                 }
                             }
-                            y[(oy * ow + ox) * l.cout + o] = acc;
+                            y[(oy * ow + ox) * l.shape.cout + o] = acc;
                         }
                     }
                 }
-                shape = Shape { h: oh, w: ow, c: l.cout };
+                shape = Shape { h: oh, w: ow, c: l.shape.cout };
                 y
             }
         };
-        x = if l.relu { y.into_iter().map(|v| v.max(0.0)).collect() } else { y };
+        x = if l.shape.relu { y.into_iter().map(|v| v.max(0.0)).collect() } else { y };
         maxima.push(x.iter().fold(0.0f32, |m, v| m.max(v.abs())));
     }
     (x, maxima)

@@ -5,7 +5,9 @@
 
 mod common;
 
-use gpmm_core::net::face::{landmark_box, FaceBox, InitFile, Reading};
+use gpmm_core::format::init_file::InitFile;
+use gpmm_core::net::face::Reading;
+use gpmm_core::net::face_box::{landmark_box, FaceBox};
 use gpmm_core::net::{NetScratch, Shape};
 use gpmm_host::detect::photos::ReferenceFace;
 use gpmm_host::detect::Detector;
@@ -95,7 +97,7 @@ fn an_init_file_dequantized_and_requantized_detects_as_before() {
         let back = gpmm_core::net::Network::parse(&again).unwrap().0;
         for (a, b) in net.layers_iter().zip(back.layers_iter()) {
             assert_eq!(a.weights, b.weights);
-            assert!((0..a.cout).all(|o| (a.multiplier(o) / b.multiplier(o) - 1.0).abs() < 1e-5 && a.bias(o) == b.bias(o)));
+            assert!((0..a.shape.cout).all(|o| (a.multiplier(o) / b.multiplier(o) - 1.0).abs() < 1e-5 && a.bias(o) == b.bias(o)));
         }
     }
     // No training step: the networks are only re-calibrated and re-quantized.

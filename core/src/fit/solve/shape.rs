@@ -31,8 +31,8 @@ use crate::geometry::mat_vec;
 use crate::geometry::{TriIndex, Vec3};
 use crate::model::instance::{Instance, Vertices};
 use crate::model::morphable::MorphableModel;
-use crate::model::morphable::MAX_LANDMARKS;
 use crate::model::params::FitParams;
+use crate::model::MAX_LANDMARKS;
 use crate::render::{Camera, Pose, ShLight};
 
 /// Most shape components one solve moves.

@@ -1,7 +1,8 @@
 //! Multiply-add passes of dense basis sums (component `k` stores three values per vertex), used by
 //! [`super::DenseBasis`] and the dense layout of [`super::QuantizedBasis`].
 
-use super::{in_blocks_of_four, Vec3};
+use super::blocks::in_blocks_of_four;
+use super::Vec3;
 
 /// Multiply-adds `out[v][a] += m · q[v][a]` for the components `(m, values)` in their order, four
 /// per pass over `out`: each entry sums the same terms in the same order as one pass per

@@ -18,7 +18,7 @@ pub mod occluders;
 
 use backgrounds::{Backgrounds, FaceView};
 use eyes::OpenEyes;
-use gpmm_core::net::face::landmark_box;
+use gpmm_core::net::face_box::landmark_box;
 use gpmm_core::render::light::SH_COEFFS;
 use gpmm_core::render::{Cull, ShLight};
 use gpmm_host::gp::model::GpModel;
