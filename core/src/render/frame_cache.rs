@@ -149,7 +149,9 @@ impl<'c> Slot<'c> {
 /// // Two slots for an 8 × 8 frame in 4 × 4 tiles: a fragment per pixel and an end per tile each.
 /// # let (mut fa, mut fb) = ([CachedFragment::EMPTY; 64], [CachedFragment::EMPTY; 64]);
 /// # let (mut ta, mut tb) = ([0u32; 4], [0u32; 4]);
-/// let mut cache = FrameCache::new(FrameBuffers { fragments: &mut fa, tile_ends: &mut ta }, FrameBuffers { fragments: &mut fb, tile_ends: &mut tb });
+/// let slot_a = FrameBuffers { fragments: &mut fa, tile_ends: &mut ta };
+/// let slot_b = FrameBuffers { fragments: &mut fb, tile_ends: &mut tb };
+/// let mut cache = FrameCache::new(slot_a, slot_b);
 /// let key = GeometryKey::new(0, &Pose::frontal(100.0), 50.0, 8, 8);
 ///
 /// // A white triangle rendered once through the recorder, which keeps its covered pixels.
