@@ -110,7 +110,7 @@ pub fn write<S: Serialize>(
 ///
 /// # Examples
 ///
-/// A fit input written by [`write`] and read back; a size over the reader's limits and a
+/// A fit input written by [`write()`] and read back; a size over the reader's limits and a
 /// changed byte are refused:
 ///
 /// ```
