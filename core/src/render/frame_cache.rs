@@ -140,7 +140,6 @@ impl<'c> Slot<'c> {
 ///     fn fragment(&mut self, pixel: u32, color: Vec3) {
 ///         self.colors.push((pixel, color));
 ///     }
-///
 ///     fn end_tile(&mut self) {
 ///         self.tiles += 1;
 ///     }
@@ -149,8 +148,8 @@ impl<'c> Slot<'c> {
 /// // Two slots for an 8 × 8 frame in 4 × 4 tiles: a fragment per pixel and an end per tile each.
 /// # let (mut fa, mut fb) = ([CachedFragment::EMPTY; 64], [CachedFragment::EMPTY; 64]);
 /// # let (mut ta, mut tb) = ([0u32; 4], [0u32; 4]);
-/// let slot_a = FrameBuffers { fragments: &mut fa, tile_ends: &mut ta };
-/// let slot_b = FrameBuffers { fragments: &mut fb, tile_ends: &mut tb };
+/// # let slot_a = FrameBuffers { fragments: &mut fa, tile_ends: &mut ta };
+/// # let slot_b = FrameBuffers { fragments: &mut fb, tile_ends: &mut tb };
 /// let mut cache = FrameCache::new(slot_a, slot_b);
 /// let key = GeometryKey::new(0, &Pose::frontal(100.0), 50.0, 8, 8);
 ///
@@ -167,12 +166,10 @@ impl<'c> Slot<'c> {
 /// let mut pixels = Pixels::default();
 /// assert!(cache.reshade(&key, &vertices, &triangles, &mut pixels));
 /// assert_eq!((pixels.colors.len(), pixels.tiles), (36, 4));
-/// assert_eq!(pixels.colors[0].0, 0); // the top-left pixel comes first
 /// assert!(pixels.colors.iter().all(|(_, c)| c.iter().zip([0.2, 0.4, 0.6]).all(|(a, b)| (a - b).abs() < 1e-6)));
 ///
 /// // A geometry the cache does not hold is refused: render it instead.
-/// let moved = GeometryKey::new(0, &Pose::frontal(120.0), 50.0, 8, 8);
-/// assert!(!cache.reshade(&moved, &vertices, &triangles, &mut pixels));
+/// assert!(!cache.reshade(&GeometryKey::new(0, &Pose::frontal(120.0), 50.0, 8, 8), &vertices, &triangles, &mut pixels));
 /// # Ok::<(), gpmm_core::render::RasterError>(())
 /// ```
 pub trait FragmentSink {

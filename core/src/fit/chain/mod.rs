@@ -255,8 +255,8 @@ fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: 
 ///
 /// ```
 /// use gpmm_core::error::FitError;
-/// use gpmm_core::fit::{run_chain, ChainState, ImageEval, Mixture, NoObserver, Prior, Problem, SecondStage};
-/// # use gpmm_core::fit::{project_landmarks, LandmarkTarget};
+/// use gpmm_core::fit::{run_chain, ChainState, ImageEval, Problem, SecondStage};
+/// # use gpmm_core::fit::{project_landmarks, LandmarkTarget, Mixture, NoObserver, Prior};
 /// # use gpmm_core::model::{Basis, FactoredBasis, MorphableModel};
 /// use gpmm_core::geometry::TriIndex;
 /// use gpmm_core::model::FitParams;
@@ -273,15 +273,12 @@ fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: 
 ///     fn active(&self) -> bool {
 ///         true
 ///     }
-///
 ///     fn start(&mut self, p: &Problem<'_, I, P>, x: &FitParams<KS, KC>) -> Result<Option<ImageEval>, FitError> {
 ///         self.evaluate(p, x, x).map(Some)
 ///     }
-///
 ///     fn light_solution<R: Rng + ?Sized>(&mut self, _: &Problem<'_, I, P>, _: &ChainState<KS, KC>, _: &mut R) -> Option<ShLight> {
 ///         None
 ///     }
-///
 ///     fn evaluate(&mut self, _: &Problem<'_, I, P>, x: &FitParams<KS, KC>, _: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
 ///         self.calls += 1;
 ///         let z = (x.pose.yaw - self.yaw) / self.sigma;
@@ -298,11 +295,11 @@ fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: 
 /// # let mut points = [[0.0f32; 2]; 4];
 /// # project_landmarks(&model, &params(0.3), 32, 32, &mut points)?;
 /// # let landmarks = LandmarkTarget::new(&points, &[true; 4], 0.5)?;
-/// // The landmarks of a tetrahedron turned by 0.3 rad, a frontal start, the standard mixture.
-/// let start = params(0.0);
-/// let (prior, mixture) = (Prior::around(&start), Mixture::landmark_default(32.0));
-/// let problem = Problem { model, landmarks, prior: &prior, mixture: &mixture, width: 32, height: 32, silhouette: None };
-///
+/// # let start = params(0.0);
+/// # let (prior, mixture) = (Prior::around(&start), Mixture::landmark_default(32.0));
+/// # let problem = Problem { model, landmarks, prior: &prior, mixture: &mixture, width: 32, height: 32, silhouette: None };
+/// // `problem`: the landmarks of a tetrahedron turned by 0.3 rad and the standard mixture;
+/// // `start`: frontal (both set up as in the `ChainObserver` example).
 /// let mut stage = MeasuredYaw { yaw: 0.3, sigma: 0.05, calls: 0 };
 /// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(1);
 /// let fit = run_chain(&problem, &mut stage, &start, 300, &mut rng, NoObserver)?;
