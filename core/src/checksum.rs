@@ -51,6 +51,31 @@ pub fn pixel_hash(x: u32, y: u32, rgb: [u8; 3]) -> u64 {
 }
 
 /// Order-independent checksum of a frame's covered pixels (position + colour quantized to `u8`).
+///
+/// # Examples
+///
+/// The same frame rendered in 4 × 4 tiles (as a small device would) and in one 8 × 8 tile gives
+/// the same checksum; another colour gives another:
+///
+/// ```
+/// use gpmm_core::checksum::FrameChecksum;
+/// use gpmm_core::render::{Cull, ProjectedVertex, RasterError, TileRasterizer};
+///
+/// let triangle = |color| {
+///     let vertex = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color };
+///     [vertex(0.0, 0.0), vertex(8.5, 0.0), vertex(0.0, 8.5)]
+/// };
+/// let (orange, blue) = (triangle([1.0, 0.6, 0.2]), triangle([0.2, 0.4, 1.0]));
+/// let (mut small, mut large, mut other) = (FrameChecksum::new(), FrameChecksum::new(), FrameChecksum::new());
+/// TileRasterizer::<4, 4, 16>::new().render(&orange, &[[0u32, 1, 2]], 8, 8, Cull::None, &mut small)?;
+/// TileRasterizer::<8, 8, 16>::new().render(&orange, &[[0u32, 1, 2]], 8, 8, Cull::None, &mut large)?;
+/// TileRasterizer::<8, 8, 16>::new().render(&blue, &[[0u32, 1, 2]], 8, 8, Cull::None, &mut other)?;
+///
+/// assert_eq!(small.value(), large.value());
+/// assert_eq!((small.covered, small.color_sum), (36, [36 * 255, 36 * 153, 36 * 51]));
+/// assert_ne!(small.value(), other.value());
+/// # Ok::<(), RasterError>(())
+/// ```
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FrameChecksum {
     /// Wrapping sum of [`pixel_hash`] over the covered pixels.
@@ -128,6 +153,18 @@ pub fn crc32_update(crc: u32, bytes: &[u8]) -> u32 {
 }
 
 /// The standard CRC-32 (zlib, PNG, `crc32fast`) of `bytes`.
+///
+/// # Examples
+///
+/// ```
+/// use gpmm_core::checksum::{crc32, crc32_update};
+///
+/// // The standard check value of CRC-32 (IEEE 802.3).
+/// assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+/// // Over data that arrives in pieces: continue from the previous value.
+/// assert_eq!(crc32_update(crc32(b"1234"), b"56789"), crc32(b"123456789"));
+/// assert_eq!(crc32(b""), 0);
+/// ```
 pub fn crc32(bytes: &[u8]) -> u32 {
     crc32_update(0, bytes)
 }

@@ -12,6 +12,39 @@ pub type Vec3 = [f32; 3];
 pub type Mat3 = [[f32; 3]; 3];
 
 /// A vertex index type for triangle lists (`u16` on the device, `u32` on the host).
+///
+/// # Examples
+///
+/// An index type of one's own (one byte per index, for meshes of at most 256 vertices) works
+/// wherever the crate takes triangles, e.g. with the rasterizer:
+///
+/// ```
+/// use gpmm_core::geometry::TriIndex;
+/// use gpmm_core::render::{Cull, ProjectedVertex, RasterError, Tile, TileRasterizer};
+///
+/// #[derive(Clone, Copy)]
+/// struct Byte(u8);
+///
+/// impl TriIndex for Byte {
+///     fn index(self) -> usize {
+///         usize::from(self.0)
+///     }
+/// }
+///
+/// // A 4 × 4 square of two triangles.
+/// let vertex = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color: [1.0; 3] };
+/// let vertices = [vertex(0.0, 0.0), vertex(4.0, 0.0), vertex(4.0, 4.0), vertex(0.0, 4.0)];
+/// let square = [[Byte(0), Byte(1), Byte(2)], [Byte(0), Byte(2), Byte(3)]];
+/// let mut raster = TileRasterizer::<4, 4, 8>::new();
+/// let mut ignore = |_: &Tile<4, 4>| {};
+/// let stats = raster.render(&vertices, &square, 4, 4, Cull::None, &mut ignore)?;
+/// assert_eq!((stats.drawn, stats.covered_pixels), (2, 16));
+///
+/// // An index past the vertices is an error, not a panic.
+/// let broken = [[Byte(0), Byte(1), Byte(9)]];
+/// assert_eq!(raster.render(&vertices, &broken, 4, 4, Cull::None, &mut ignore), Err(RasterError::IndexOutOfRange));
+/// # Ok::<(), RasterError>(())
+/// ```
 pub trait TriIndex: Copy {
     /// The index as `usize`.
     fn index(self) -> usize;

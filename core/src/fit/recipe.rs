@@ -64,6 +64,65 @@ pub enum Stage {
 /// Receives progress: `step(stage, done, total)` before each step of a chain and once with
 /// `done == total` when it ends (the firmware reads its instruction counter here), and every
 /// proposal's outcome (`proposal`, by default ignored).
+///
+/// # Examples
+///
+/// An observer of one's own that keeps each stage's last progress report and counts the
+/// proposals of each stage of a short [`standard_fit`] (a device would read its cycle counter in
+/// `step`):
+///
+/// ```
+/// use gpmm_core::fit::{standard_fit, FitObserver, FitSettings, ProposalStep, Stage};
+/// # use gpmm_core::fit::{project_landmarks, TargetImage};
+/// # use gpmm_core::model::{Basis, FactoredBasis, FitParams, Instance, InstanceBuffers, MorphableModel};
+/// # use gpmm_core::render::{Pose, ProjectedVertex, ShLight, TileRasterizer};
+/// # use rand_core::SeedableRng;
+///
+/// #[derive(Default)]
+/// struct Log {
+///     last: Vec<(Stage, u32, u32)>,
+///     proposals: [u32; 2],
+/// }
+///
+/// impl FitObserver for Log {
+///     fn step(&mut self, stage: Stage, done: u32, total: u32) {
+///         self.last.retain(|(s, _, _)| *s != stage);
+///         self.last.push((stage, done, total));
+///     }
+///
+///     fn proposal(&mut self, stage: Stage, _step: &ProposalStep) {
+///         self.proposals[usize::from(stage == Stage::ImageChain)] += 1;
+///     }
+/// }
+///
+/// # // A tetrahedron (mm) with one shape component, every vertex a landmark, on a grey image.
+/// # let shape_mean = [[-10.0, -8.0, 0.0], [10.0, -8.0, 0.0], [0.0, 12.0, 0.0], [0.0, 0.0, 10.0]];
+/// # let (fields, directions) = ([0.0, 0.0, 0.0, 5.0], [[0.0, 0.0, 1.0]]);
+/// # let shape = Basis::Factored(FactoredBasis::new(&fields, &directions, 4)?);
+/// # let color = Basis::Factored(FactoredBasis::new(&[], &[], 4)?);
+/// # let triangles: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]];
+/// # let model = MorphableModel::new(&shape_mean, &[[0.6, 0.5, 0.4]; 4], shape, color, &triangles, &[0, 1, 2, 3])?;
+/// # let truth = FitParams::<1, 1>::new(Pose { yaw: 0.3, ..Pose::frontal(200.0) }, 200.0, ShLight::ambient_white(), 1, 0);
+/// # let mut points = [[0.0f32; 2]; 4];
+/// # project_landmarks(&model, &truth, 32, 32, &mut points)?;
+/// # let pixels = [[150u8, 125, 100]; 32 * 32];
+/// # let image = TargetImage::new(&pixels, 32, 32)?;
+/// # let (mut positions, mut albedos, mut normals) = ([[0.0; 3]; 4], [[0.0; 3]; 4], [[0.0; 3]; 4]);
+/// # let mut projected = [ProjectedVertex::INVALID; 4];
+/// # let bufs = InstanceBuffers { positions: &mut positions, albedos: &mut albedos, normals: &mut normals, projected: &mut projected };
+/// # let mut instance = Instance::<1, 1>::new(bufs, 4)?;
+/// # let mut raster = TileRasterizer::<16, 16, 64>::new();
+/// # let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
+/// // A short fit of a tetrahedron's landmarks and image (set up as in `standard_fit`'s example).
+/// let settings = FitSettings::DEFAULT.with_steps(200, 40).without_shape_solve().with_ranks(1, 0);
+/// let mut log = Log::default();
+/// standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut rng, &mut log)?;
+///
+/// // Both landmark phases report as one chain of 200 steps; each chain ends with done == total.
+/// assert_eq!(log.last, [(Stage::LandmarkChain, 200, 200), (Stage::ImageChain, 40, 40)]);
+/// assert_eq!(log.proposals, [200, 40]);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait FitObserver {
     /// One progress report.
     fn step(&mut self, stage: Stage, done: u32, total: u32);

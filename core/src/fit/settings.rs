@@ -23,6 +23,27 @@ pub const CHAIN_SHAPE_POSE_SHARE: f32 = 0.4;
 /// Settings of [`crate::fit::standard_fit`] (defaults: the documented default fit), in groups: the
 /// landmark chain, the image chain, the ranks fitted, the start, the proposal mixtures and the
 /// light solves.
+///
+/// # Examples
+///
+/// ```
+/// use gpmm_core::error::FitError;
+/// use gpmm_core::fit::FitSettings;
+///
+/// // The default fit with shorter chains, without the start's shape solve (as a device runs it)
+/// // and with 50 shape components and no colour.
+/// let settings = FitSettings::DEFAULT.with_steps(1000, 100).without_shape_solve().with_ranks(50, 0);
+/// assert_eq!((settings.landmarks.steps, settings.image.steps, settings.start.shape_rounds), (1000, 100, 0));
+/// assert_eq!((settings.ranks.shape, settings.ranks.color), (50, 0));
+/// // Without the solve the chains fit the shape: the landmark chain gives it part of its steps.
+/// assert!(settings.landmarks.pose_share < 1.0 && settings.proposals.image.shape > 0.0);
+/// assert_eq!(settings.validate(), Ok(()));
+///
+/// // A setting out of range is refused before anything runs.
+/// let mut bad = settings;
+/// bad.image.pixel_sigma = 0.0;
+/// assert_eq!(bad.validate(), Err(FitError::BadConfig));
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

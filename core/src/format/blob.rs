@@ -619,6 +619,69 @@ fn part<'a>(blob: &'a [u8], header: &BlobHeader, layout: Layout, sections: [Sect
 impl<'a> ModelBlob<'a> {
     /// Validates the blob at the start of `bytes` (which may be longer, e.g. a whole flash
     /// partition) and borrows its arrays in place. `bytes` must start 4-byte aligned.
+    ///
+    /// # Examples
+    ///
+    /// A one-triangle model with one shape component laid out by [`BlobDims::layout`] and
+    /// sealed by [`blob_crc`], parsed in place; the same bytes with one byte changed are refused:
+    ///
+    /// ```
+    /// use gpmm_core::format::blob::{blob_crc, BlobDims, BlobError, Layout, ModelBlob, Section, CRC_OFFSET};
+    /// # use gpmm_core::format::blob::{HEADER_BYTES, MAGIC, SECTION_COUNT, VERSION};
+    ///
+    /// let dims = BlobDims { vertices: 3, triangles: 1, landmarks: 1, rank_shape: 1, rank_color: 0, bits: 8,
+    ///     shape_layout: Layout::Factored, color_layout: Layout::Factored, metadata_bytes: 2 };
+    /// let f32s = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    /// let sections: [Vec<u8>; 11] = [
+    ///     f32s(&[0.0, 0.0, 0.0, 10.0, 0.0, 0.0, 0.0, 10.0, 0.0]),      // shape mean (mm)
+    ///     f32s(&[0.5; 9]),                                             // colour mean
+    ///     [0u16, 1, 2].iter().flat_map(|i| i.to_le_bytes()).collect(), // the triangle
+    ///     2u32.to_le_bytes().to_vec(),                                 // one landmark: vertex 2
+    ///     f32s(&[0.5]), f32s(&[0.0, 0.0, 1.0]), vec![0, 0, 10],        // shape: scale, direction, i8 values
+    ///     vec![], vec![], vec![],                                      // no colour component
+    ///     b"{}".to_vec(),                                              // metadata
+    /// ];
+    /// // Read in place: the blob's first byte must be 4-byte aligned, as `u32` words are.
+    /// let (table, total) = dims.layout()?;
+    /// let mut words = vec![0u32; total / 4];
+    /// let blob: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
+    /// # fn put(blob: &mut [u8], at: usize, bytes: &[u8]) { blob[at..at + bytes.len()].copy_from_slice(bytes) }
+    /// # // The header (docs/blob-format.md): magic, version, header size, total size, sizes,
+    /// # // bits, layouts, section count and the section table.
+    /// # put(blob, 0, &MAGIC);
+    /// # put(blob, 4, &VERSION.to_le_bytes());
+    /// # put(blob, 6, &(HEADER_BYTES as u16).to_le_bytes());
+    /// # put(blob, 8, &(total as u32).to_le_bytes());
+    /// # for (at, v) in [(16, dims.vertices), (20, dims.triangles), (24, dims.landmarks)] { put(blob, at, &v.to_le_bytes()) }
+    /// # put(blob, 28, &dims.rank_shape.to_le_bytes());
+    /// # put(blob, 30, &dims.rank_color.to_le_bytes());
+    /// # put(blob, 32, &[dims.bits, dims.shape_layout.code(), dims.color_layout.code()]);
+    /// # put(blob, 36, &(SECTION_COUNT as u16).to_le_bytes());
+    /// # for (i, e) in table.iter().enumerate() {
+    /// #     put(blob, 48 + 8 * i, &e.offset.to_le_bytes());
+    /// #     put(blob, 52 + 8 * i, &e.len.to_le_bytes());
+    /// # }
+    /// // The header (hidden here: magic, sizes, the table), each section at its offset, the CRC.
+    /// for (entry, bytes) in table.iter().zip(&sections) {
+    ///     blob[entry.offset as usize..][..bytes.len()].copy_from_slice(bytes);
+    /// }
+    /// let crc = blob_crc(blob);
+    /// blob[CRC_OFFSET..CRC_OFFSET + 4].copy_from_slice(&crc.to_le_bytes());
+    ///
+    /// let model = ModelBlob::parse(blob)?;
+    /// assert_eq!((model.vertices(), model.triangles(), model.landmarks()), (3, &[[0, 1, 2]][..], &[2][..]));
+    /// assert_eq!((model.rank_shape(), model.rank_color(), model.metadata_str()), (1, 0, "{}"));
+    /// // The first shape component lifts vertex 2 by 0.5 × 10 mm per unit coefficient.
+    /// let mut positions = [[0.0; 3]; 3];
+    /// model.morphable()?.shape_instance(&[1.0], &mut positions)?;
+    /// assert_eq!(positions[2], [0.0, 10.0, 5.0]);
+    ///
+    /// // A changed byte of the shape mean: the CRC no longer matches, the blob is refused.
+    /// let at = model.header().section(Section::ShapeMean).offset as usize;
+    /// blob[at] ^= 0x40;
+    /// assert!(matches!(ModelBlob::parse(blob), Err(BlobError::Crc { .. })));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn parse(bytes: &'a [u8]) -> Result<Self, BlobError> {
         if cfg!(target_endian = "big") {
             return Err(BlobError::BigEndian);

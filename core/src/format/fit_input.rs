@@ -107,6 +107,37 @@ pub fn write<S: Serialize>(
 
 /// Reads and checks the fit input at the start of `bytes` (more bytes may follow), for images
 /// of at most `max_side` pixels a side and at most `max_landmarks` landmarks.
+///
+/// # Examples
+///
+/// A fit input written by [`write()`] and read back; a size over the reader's limits and a
+/// changed byte are refused:
+///
+/// ```
+/// use gpmm_core::fit::FitSettings;
+/// use gpmm_core::format::{fit_input, FormatError};
+/// use gpmm_core::geometry::CoveredPixels;
+///
+/// // A 4 × 2 image, two landmarks and the default settings with shorter chains.
+/// let pixels: Vec<[u8; 3]> = (0u8..8).map(|i| [30 * i, 100, 200]).collect();
+/// let landmarks = [[0.5f32, 0.5], [3.5, 1.5]];
+/// let settings = FitSettings::DEFAULT.with_steps(500, 50);
+/// // Read in place: the landmarks are `f32`, so the buffer is 4-byte aligned (`u32` words).
+/// let mut words = vec![0u32; fit_input::buffer_len(4, 2, 2).div_ceil(4)];
+/// let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
+/// let n = fit_input::write(bytes, 4, 2, 7, CoveredPixels::whole(4, 2), &settings, &landmarks, &pixels)?;
+///
+/// let input: fit_input::FitInput<'_, FitSettings> = fit_input::parse(&bytes[..n], 128, 68)?;
+/// assert_eq!((input.width, input.height, input.seed, input.settings), (4, 2, 7, settings));
+/// assert_eq!((input.landmarks, input.pixels), (&landmarks[..], &pixels[..]));
+/// let narrow = fit_input::parse::<FitSettings>(&bytes[..n], 2, 68);
+/// assert_eq!(narrow.unwrap_err(), FormatError::BadField("image width"));
+///
+/// // The last pixel's blue byte changed (the CRC-32 follows it): refused, not read.
+/// bytes[n - 5] ^= 0x01;
+/// assert!(matches!(fit_input::parse::<FitSettings>(&bytes[..n], 128, 68), Err(FormatError::Crc { .. })));
+/// # Ok::<(), FormatError>(())
+/// ```
 pub fn parse<S: DeserializeOwned>(bytes: &[u8], max_side: u32, max_landmarks: usize) -> Result<FitInput<'_, S>, FormatError> {
     let mut r = Reader::after_header(bytes, MAGIC, VERSION)?;
     let (width, height, count, s) = (r.u32()?, r.u32()?, r.u32()? as usize, r.u32()? as usize);

@@ -119,6 +119,59 @@ impl<'c> Slot<'c> {
 }
 
 /// Receives a re-shaded frame: covered pixels tile by tile, in the rasterizer's order.
+///
+/// # Examples
+///
+/// A frame recorded while it was rendered, re-shaded in new colours into a sink of one's own that
+/// keeps the pixels and counts the tiles:
+///
+/// ```
+/// use gpmm_core::geometry::Vec3;
+/// use gpmm_core::render::frame_cache::{CachedFragment, FragmentSink, FrameBuffers, FrameCache, GeometryKey};
+/// use gpmm_core::render::{Cull, Pose, ProjectedVertex, Tile, TileRasterizer};
+///
+/// #[derive(Default)]
+/// struct Pixels {
+///     colors: Vec<(u32, Vec3)>,
+///     tiles: u32,
+/// }
+///
+/// impl FragmentSink for Pixels {
+///     fn fragment(&mut self, pixel: u32, color: Vec3) {
+///         self.colors.push((pixel, color));
+///     }
+///     fn end_tile(&mut self) {
+///         self.tiles += 1;
+///     }
+/// }
+///
+/// // Two slots for an 8 × 8 frame in 4 × 4 tiles: a fragment per pixel and an end per tile each.
+/// # let (mut fa, mut fb) = ([CachedFragment::EMPTY; 64], [CachedFragment::EMPTY; 64]);
+/// # let (mut ta, mut tb) = ([0u32; 4], [0u32; 4]);
+/// # let slot_a = FrameBuffers { fragments: &mut fa, tile_ends: &mut ta };
+/// # let slot_b = FrameBuffers { fragments: &mut fb, tile_ends: &mut tb };
+/// let mut cache = FrameCache::new(slot_a, slot_b);
+/// let key = GeometryKey::new(0, &Pose::frontal(100.0), 50.0, 8, 8);
+///
+/// // A white triangle rendered once through the recorder, which keeps its covered pixels.
+/// let white = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color: [1.0; 3] };
+/// let (mut vertices, triangles) = ([white(0.0, 0.0), white(8.5, 0.0), white(0.0, 8.5)], [[0u32, 1, 2]]);
+/// let mut display = |_: &Tile<4, 4>| {};
+/// let mut recorder = cache.recorder(key, None, &mut display);
+/// TileRasterizer::<4, 4, 16>::new().render(&vertices, &triangles, 8, 8, Cull::None, &mut recorder)?;
+/// recorder.finish();
+///
+/// // New vertex colours, the same geometry: re-shaded without the rasterizer.
+/// vertices.iter_mut().for_each(|v| v.color = [0.2, 0.4, 0.6]);
+/// let mut pixels = Pixels::default();
+/// assert!(cache.reshade(&key, &vertices, &triangles, &mut pixels));
+/// assert_eq!((pixels.colors.len(), pixels.tiles), (36, 4));
+/// assert!(pixels.colors.iter().all(|(_, c)| c.iter().zip([0.2, 0.4, 0.6]).all(|(a, b)| (a - b).abs() < 1e-6)));
+///
+/// // A geometry the cache does not hold is refused: render it instead.
+/// assert!(!cache.reshade(&GeometryKey::new(0, &Pose::frontal(120.0), 50.0, 8, 8), &vertices, &triangles, &mut pixels));
+/// # Ok::<(), gpmm_core::render::RasterError>(())
+/// ```
 pub trait FragmentSink {
     /// One covered pixel (row-major index in the frame) and its colour.
     fn fragment(&mut self, pixel: u32, color: Vec3);

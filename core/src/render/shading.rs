@@ -257,6 +257,33 @@ pub fn project_vertices(positions: &[Vec3], pose: &Pose, camera: &Camera, out: &
 }
 
 /// The whole per-vertex stage: normals into `normals` (scratch, one per vertex), then shading and projection into `out`.
+///
+/// # Examples
+///
+/// A grey triangle facing the camera 500 mm away under the frontal light, then rasterized with
+/// back faces culled:
+///
+/// ```
+/// use gpmm_core::render::{vertex_stage, Camera, Cull, Pose, ProjectedVertex, ShLight, Tile, TileRasterizer};
+///
+/// // Model space (mm, y up): counter-clockwise seen from +z, where the camera is.
+/// let positions = [[0.0, 0.0, 0.0], [50.0, 0.0, 0.0], [0.0, 50.0, 0.0]];
+/// let (albedos, triangles) = ([[0.5; 3]; 3], [[0u32, 1, 2]]);
+/// let (pose, camera) = (Pose::frontal(500.0), Camera::centered(64, 64, 200.0));
+/// let (mut normals, mut out) = ([[0.0; 3]; 3], [ProjectedVertex::INVALID; 3]);
+/// vertex_stage(&positions, &albedos, &triangles, &pose, &camera, &ShLight::frontal(), &mut normals, &mut out)?;
+///
+/// // The origin lands on the image centre; 50 mm at 500 mm is 20 px with a 200 px focal length.
+/// assert_eq!((out[0].x, out[0].y, out[0].inv_w), (32.0, 32.0, 1.0 / 500.0));
+/// assert_eq!((out[1].x, out[2].y), (52.0, 12.0));
+/// // Facing the light: irradiance 0.8 ambient + 0.2 diffuse, times the albedo.
+/// assert!(out.iter().flat_map(|v| v.color).all(|c| (c - 0.5).abs() < 1e-5));
+///
+/// let mut ignore = |_: &Tile<16, 16>| {};
+/// let stats = TileRasterizer::<16, 16, 8>::new().render(&out, &triangles, 64, 64, Cull::Clockwise, &mut ignore)?;
+/// assert_eq!(stats.drawn, 1); // a front face
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[allow(clippy::too_many_arguments)]
 pub fn vertex_stage<I: TriIndex>(
     positions: &[Vec3],

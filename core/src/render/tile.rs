@@ -122,6 +122,43 @@ impl<const TW: usize, const TH: usize> Default for Tile<TW, TH> {
 }
 
 /// Consumer of finished tiles (likelihood accumulation, copying into an image, checksums, …).
+///
+/// # Examples
+///
+/// A sink of one's own that copies the covered pixels into an RGB8 frame (a display's buffer):
+///
+/// ```
+/// use gpmm_core::checksum::quantize_rgb;
+/// use gpmm_core::render::{Cull, ProjectedVertex, Tile, TileRasterizer, TileSink};
+///
+/// struct Frame {
+///     width: usize,
+///     pixels: Vec<[u8; 3]>,
+/// }
+///
+/// impl<const TW: usize, const TH: usize> TileSink<TW, TH> for Frame {
+///     fn consume(&mut self, tile: &Tile<TW, TH>) {
+///         let (x0, y0) = tile.origin();
+///         let (w, h) = tile.size();
+///         for (x, y) in (0..h as usize).flat_map(|y| (0..w as usize).map(move |x| (x, y))) {
+///             if let Some(f) = tile.fragment(x, y) {
+///                 self.pixels[(y0 as usize + y) * self.width + x0 as usize + x] = quantize_rgb(f.color);
+///             }
+///         }
+///     }
+/// }
+///
+/// // An orange triangle over the upper-left half of an 8 × 8 frame, drawn in 4 × 4 tiles.
+/// let vertex = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color: [1.0, 0.6, 0.2] };
+/// let vertices = [vertex(0.0, 0.0), vertex(8.5, 0.0), vertex(0.0, 8.5)];
+/// let mut frame = Frame { width: 8, pixels: vec![[0; 3]; 64] };
+/// TileRasterizer::<4, 4, 16>::new().render(&vertices, &[[0u32, 1, 2]], 8, 8, Cull::None, &mut frame)?;
+///
+/// assert_eq!(frame.pixels[0], [255, 153, 51]); // the top-left pixel is inside
+/// assert_eq!(frame.pixels[63], [0, 0, 0]); // the bottom-right one is not
+/// assert_eq!(frame.pixels.iter().filter(|p| **p != [0; 3]).count(), 36);
+/// # Ok::<(), gpmm_core::render::RasterError>(())
+/// ```
 pub trait TileSink<const TW: usize, const TH: usize> {
     /// Called once per tile per frame, in row-major tile order, with the finished tile.
     fn consume(&mut self, tile: &Tile<TW, TH>);

@@ -247,6 +247,68 @@ fn filter_into<R: Rng + ?Sized, I: TriIndex, P, Q: Proposal + ?Sized, const KS: 
 
 /// The stage after the prior-and-landmark filter: nothing (the landmark chain) or the rendered
 /// image term (the image chain, [`RenderedImage`]).
+///
+/// # Examples
+///
+/// A second stage of one's own: the yaw another sensor measured (0.3 ± 0.05 rad) as a term
+/// [`run_chain`] evaluates only for the proposals that passed the prior and the landmarks:
+///
+/// ```
+/// use gpmm_core::error::FitError;
+/// use gpmm_core::fit::{run_chain, ChainState, ImageEval, Problem, SecondStage};
+/// # use gpmm_core::fit::{project_landmarks, LandmarkTarget, Mixture, NoObserver, Prior};
+/// # use gpmm_core::model::{Basis, FactoredBasis, MorphableModel};
+/// use gpmm_core::geometry::TriIndex;
+/// use gpmm_core::model::FitParams;
+/// use gpmm_core::render::{Pose, ShLight};
+/// use rand_core::{Rng, SeedableRng};
+///
+/// struct MeasuredYaw {
+///     yaw: f32,
+///     sigma: f32,
+///     calls: u32,
+/// }
+///
+/// impl<I: TriIndex, P, const KS: usize, const KC: usize> SecondStage<I, P, KS, KC> for MeasuredYaw {
+///     fn active(&self) -> bool {
+///         true
+///     }
+///     fn start(&mut self, p: &Problem<'_, I, P>, x: &FitParams<KS, KC>) -> Result<Option<ImageEval>, FitError> {
+///         self.evaluate(p, x, x).map(Some)
+///     }
+///     fn light_solution<R: Rng + ?Sized>(&mut self, _: &Problem<'_, I, P>, _: &ChainState<KS, KC>, _: &mut R) -> Option<ShLight> {
+///         None
+///     }
+///     fn evaluate(&mut self, _: &Problem<'_, I, P>, x: &FitParams<KS, KC>, _: &FitParams<KS, KC>) -> Result<ImageEval, FitError> {
+///         self.calls += 1;
+///         let z = (x.pose.yaw - self.yaw) / self.sigma;
+///         Ok(ImageEval { log_likelihood: -0.5 * z * z, covered: 0, sq_err: 0.0 })
+///     }
+/// }
+///
+/// # // A tetrahedron (mm) without components, every vertex a landmark.
+/// # let shape_mean = [[-10.0, -8.0, 0.0], [10.0, -8.0, 0.0], [0.0, 12.0, 0.0], [0.0, 0.0, 10.0]];
+/// # let none = || FactoredBasis::new(&[], &[], 4).map(Basis::Factored);
+/// # let triangles: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]];
+/// # let model = MorphableModel::new(&shape_mean, &[[0.5; 3]; 4], none()?, none()?, &triangles, &[0, 1, 2, 3])?;
+/// # let params = |yaw| FitParams::<0, 0>::new(Pose { yaw, ..Pose::frontal(300.0) }, 400.0, ShLight::ambient_white(), 0, 0);
+/// # let mut points = [[0.0f32; 2]; 4];
+/// # project_landmarks(&model, &params(0.3), 32, 32, &mut points)?;
+/// # let landmarks = LandmarkTarget::new(&points, &[true; 4], 0.5)?;
+/// # let start = params(0.0);
+/// # let (prior, mixture) = (Prior::around(&start), Mixture::landmark_default(32.0));
+/// # let problem = Problem { model, landmarks, prior: &prior, mixture: &mixture, width: 32, height: 32, silhouette: None };
+/// // `problem`: the landmarks of a tetrahedron turned by 0.3 rad and the standard mixture;
+/// // `start`: frontal (both set up as in the `ChainObserver` example).
+/// let mut stage = MeasuredYaw { yaw: 0.3, sigma: 0.05, calls: 0 };
+/// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(1);
+/// let fit = run_chain(&problem, &mut stage, &start, 300, &mut rng, NoObserver)?;
+/// // The start, then every proposal that passed the first stage.
+/// assert_eq!(stage.calls, 1 + fit.acceptance.passed_filter.iter().sum::<u32>());
+/// assert!(fit.best_image.is_some());
+/// assert!((fit.best.pose.yaw - 0.3).abs() < 0.05, "{}", fit.best.pose.yaw);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait SecondStage<I: TriIndex, P, const KS: usize, const KC: usize> {
     /// Whether there is a second stage: the Hastings term then goes to it (see the module docs).
     fn active(&self) -> bool;

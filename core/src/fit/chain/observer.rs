@@ -65,6 +65,55 @@ pub struct ChainSample<'a> {
 
 /// Watches a chain: progress before each step, the outcome of every proposal and the state
 /// after it.
+///
+/// # Examples
+///
+/// An observer of one's own that counts the proposals and the accepted ones of a short
+/// landmark chain:
+///
+/// ```
+/// use gpmm_core::fit::{landmark_chain, ChainObserver, Mixture, Prior, Problem, ProposalStep};
+/// # use gpmm_core::fit::{project_landmarks, LandmarkTarget};
+/// # use gpmm_core::model::{Basis, FactoredBasis, MorphableModel};
+/// use gpmm_core::model::FitParams;
+/// use gpmm_core::render::{Pose, ShLight};
+/// use rand_core::SeedableRng;
+///
+/// #[derive(Default)]
+/// struct Counts {
+///     proposed: u32,
+///     accepted: u32,
+/// }
+///
+/// impl ChainObserver for Counts {
+///     fn proposal(&mut self, step: &ProposalStep) {
+///         self.proposed += 1;
+///         self.accepted += u32::from(step.outcome.accepted());
+///     }
+/// }
+///
+/// # // A tetrahedron (mm) without components, every vertex a landmark.
+/// # let shape_mean = [[-10.0, -8.0, 0.0], [10.0, -8.0, 0.0], [0.0, 12.0, 0.0], [0.0, 0.0, 10.0]];
+/// # let none = || FactoredBasis::new(&[], &[], 4).map(Basis::Factored);
+/// # let triangles: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]];
+/// # let model = MorphableModel::new(&shape_mean, &[[0.5; 3]; 4], none()?, none()?, &triangles, &[0, 1, 2, 3])?;
+/// # let params = |yaw| FitParams::<0, 0>::new(Pose { yaw, ..Pose::frontal(300.0) }, 400.0, ShLight::ambient_white(), 0, 0);
+/// # let mut points = [[0.0f32; 2]; 4];
+/// # project_landmarks(&model, &params(0.3), 32, 32, &mut points)?;
+/// # let landmarks = LandmarkTarget::new(&points, &[true; 4], 0.5)?;
+/// // The landmarks of a tetrahedron turned by 0.3 rad, a frontal start, the standard mixture.
+/// let start = params(0.0);
+/// let (prior, mixture) = (Prior::around(&start), Mixture::landmark_default(32.0));
+/// let problem = Problem { model, landmarks, prior: &prior, mixture: &mixture, width: 32, height: 32, silhouette: None };
+///
+/// let mut counts = Counts::default();
+/// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(1);
+/// let fit = landmark_chain(&problem, &start, 300, &mut rng, &mut counts)?;
+/// assert_eq!(counts.proposed, 300);
+/// assert!(counts.accepted > 0);
+/// assert_eq!(counts.accepted, fit.acceptance.accepted.iter().sum::<u32>());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait ChainObserver {
     /// Called once per mixture component before the first step (index and
     /// [`crate::fit::Proposal::name`]), so that reports can list components never drawn.

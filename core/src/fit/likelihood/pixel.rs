@@ -16,6 +16,46 @@ use crate::render::frame_cache::FragmentSink;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 
 /// The foreground term: how well a rendered colour explains a target colour.
+///
+/// # Examples
+///
+/// A Laplace (L1) term of one's own, summed by [`ImageLikelihood`] over the pixels a rendered
+/// triangle covers:
+///
+/// ```
+/// use gpmm_core::fit::{BackgroundModel, ImageLikelihood, PixelLikelihood, TargetImage};
+/// use gpmm_core::geometry::Vec3;
+/// use gpmm_core::render::{Cull, ProjectedVertex, TileRasterizer};
+///
+/// #[derive(Clone, Copy)]
+/// struct Laplace {
+///     scale: f32,
+/// }
+///
+/// impl PixelLikelihood for Laplace {
+///     fn log_likelihood(&self, target: Vec3, rendered: Vec3, _sq_dist: f32) -> f32 {
+///         let l1: f32 = target.iter().zip(rendered).map(|(t, r)| (t - r).abs()).sum();
+///         -3.0 * (2.0 * self.scale).ln() - l1 / self.scale
+///     }
+/// }
+///
+/// // A white 4 × 4 target and a grey (0.5) triangle covering all of it.
+/// let pixels = [[255u8; 3]; 16];
+/// let image = TargetImage::new(&pixels, 4, 4)?;
+/// let grey = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color: [0.5; 3] };
+/// let vertices = [grey(0.0, 0.0), grey(9.0, 0.0), grey(0.0, 9.0)];
+///
+/// // The likelihood is a tile sink: it sums the terms while the frame is drawn, never stored.
+/// let background = BackgroundModel::uniform();
+/// let mut sink = ImageLikelihood::with_terms(image, Laplace { scale: 0.5 }, &background);
+/// TileRasterizer::<4, 4, 8>::new().render(&vertices, &[[0u32, 1, 2]], 4, 4, Cull::None, &mut sink)?;
+///
+/// // Each pixel is 3 × 0.5 off: −3 ln(1) − 1.5 / 0.5 = −3 per pixel.
+/// let eval = sink.eval();
+/// assert_eq!(eval.covered, 16);
+/// assert!((eval.log_likelihood - 16.0 * -3.0).abs() < 1e-3, "{}", eval.log_likelihood);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait PixelLikelihood {
     /// `log p(target | rendered)` of one covered pixel (colours linear, in [0, 1]); `sq_dist` is
     /// `|target − rendered|²` over the three channels, already computed for the RMSE.
@@ -23,6 +63,42 @@ pub trait PixelLikelihood {
 }
 
 /// The background term: how well the background explains a target colour.
+///
+/// # Examples
+///
+/// A background of one's own for a green screen: a green target pixel is well explained by the
+/// background, so the face covering it earns less than with the uniform background.
+///
+/// ```
+/// use gpmm_core::fit::{BackgroundLikelihood, BackgroundModel, GaussianPixel, ImageLikelihood, TargetImage};
+/// use gpmm_core::render::{Cull, ProjectedVertex, TileRasterizer};
+///
+/// struct GreenScreen;
+///
+/// impl BackgroundLikelihood for GreenScreen {
+///     fn log_density(&self, [r, g, b]: [u8; 3]) -> f32 {
+///         if g > 200 && r < 50 && b < 50 { 4.0 } else { 0.0 }
+///     }
+/// }
+///
+/// // A 4 × 4 target, green in its left half, grey in its right; a grey triangle covering it all.
+/// let pixels: Vec<[u8; 3]> = (0..16).map(|i| if i % 4 < 2 { [0, 255, 0] } else { [128; 3] }).collect();
+/// let image = TargetImage::new(&pixels, 4, 4)?;
+/// let grey = |x, y| ProjectedVertex { x, y, inv_w: 0.01, color: [0.5; 3] };
+/// let vertices = [grey(0.0, 0.0), grey(9.0, 0.0), grey(0.0, 9.0)];
+///
+/// // The image term with a given background (any `BackgroundLikelihood`, here as a trait object).
+/// let image_term = |background: &dyn BackgroundLikelihood| -> Result<f32, Box<dyn std::error::Error>> {
+///     let mut sink = ImageLikelihood::with_terms(image, GaussianPixel::new(0.1)?, background);
+///     TileRasterizer::<4, 4, 8>::new().render(&vertices, &[[0u32, 1, 2]], 4, 4, Cull::None, &mut sink)?;
+///     Ok(sink.eval().log_likelihood)
+/// };
+///
+/// // Each of the 8 green pixels the face covers costs the green screen's log density, 4.
+/// let (uniform, green) = (image_term(&BackgroundModel::uniform())?, image_term(&GreenScreen)?);
+/// assert!((uniform - green - 8.0 * 4.0).abs() < 1e-3, "{uniform} {green}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait BackgroundLikelihood {
     /// `log b(target)` of an 8-bit target colour.
     fn log_density(&self, target: [u8; 3]) -> f32;

@@ -32,6 +32,65 @@ pub struct ProposalContext {
 }
 
 /// A Metropolis-Hastings proposal: draws a new state from the current one.
+///
+/// # Examples
+///
+/// A proposal of one's own, a uniform random walk on the yaw alone, finding the yaw of a turned
+/// tetrahedron from its landmarks:
+///
+/// ```
+/// use gpmm_core::fit::{landmark_chain, Mixture, NoObserver, Prior, Problem, Proposal, ProposalContext};
+/// # use gpmm_core::fit::{project_landmarks, LandmarkTarget};
+/// # use gpmm_core::model::{Basis, FactoredBasis, MorphableModel};
+/// use gpmm_core::model::FitParams;
+/// use gpmm_core::render::{Pose, ShLight};
+/// use rand_core::{Rng, SeedableRng};
+///
+/// struct YawWalk(f32);
+///
+/// impl Proposal for YawWalk {
+///     fn name(&self) -> &'static str {
+///         "yaw walk"
+///     }
+///
+///     fn changes_shape(&self) -> bool {
+///         false
+///     }
+///
+///     fn propose<R: Rng + ?Sized, const KS: usize, const KC: usize>(
+///         &self,
+///         current: &FitParams<KS, KC>,
+///         _ctx: &ProposalContext,
+///         rng: &mut R,
+///         out: &mut FitParams<KS, KC>,
+///     ) -> f32 {
+///         out.clone_from(current);
+///         out.pose.yaw += self.0 * (2.0 * (rng.next_u32() as f32 / u32::MAX as f32) - 1.0);
+///         0.0 // symmetric: no Hastings term
+///     }
+/// }
+///
+/// # // A tetrahedron (mm) without components, every vertex a landmark.
+/// # let shape_mean = [[-10.0, -8.0, 0.0], [10.0, -8.0, 0.0], [0.0, 12.0, 0.0], [0.0, 0.0, 10.0]];
+/// # let none = || FactoredBasis::new(&[], &[], 4).map(Basis::Factored);
+/// # let triangles: [[u32; 3]; 4] = [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]];
+/// # let model = MorphableModel::new(&shape_mean, &[[0.5; 3]; 4], none()?, none()?, &triangles, &[0, 1, 2, 3])?;
+/// # let params = |yaw| FitParams::<0, 0>::new(Pose { yaw, ..Pose::frontal(300.0) }, 400.0, ShLight::ambient_white(), 0, 0);
+/// # let mut points = [[0.0f32; 2]; 4];
+/// # project_landmarks(&model, &params(0.3), 32, 32, &mut points)?;
+/// # let landmarks = LandmarkTarget::new(&points, &[true; 4], 0.5)?;
+/// // The landmarks of a tetrahedron turned by 0.3 rad, a frontal start, a mixture of one walk.
+/// let start = params(0.0);
+/// let (prior, mut mixture) = (Prior::around(&start), Mixture::new());
+/// assert!(mixture.push(YawWalk(0.05), 1.0).is_ok());
+/// let problem = Problem { model, landmarks, prior: &prior, mixture: &mixture, width: 32, height: 32, silhouette: None };
+///
+/// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(1);
+/// let fit = landmark_chain(&problem, &start, 400, &mut rng, NoObserver)?;
+/// assert_eq!(fit.acceptance.proposed[0], 400);
+/// assert!((fit.best.pose.yaw - 0.3).abs() < 0.01, "{}", fit.best.pose.yaw);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait Proposal {
     /// A short name for reports and acceptance counts (e.g. `"yaw"`).
     fn name(&self) -> &'static str;
