@@ -41,6 +41,46 @@ pub struct InitFile<'a> {
 
 impl<'a> InitFile<'a> {
     /// Reads and checks an init file (magic, version, sizes, CRC, both networks, output sizes).
+    ///
+    /// # Examples
+    ///
+    /// Two one-layer networks over a 2 × 2 RGB image, written into an init file and read back in
+    /// place; a changed byte is refused.
+    ///
+    /// ```
+    /// use gpmm_core::format::init_file::{write_init_file, InitFile};
+    /// use gpmm_core::format::FormatError;
+    /// use gpmm_core::net::{network_header, LayerKind, LayerShape, NetError, Shape};
+    ///
+    /// /// A network of one layer with `f32` output: header, layer header, `i8` weights (padded to
+    /// /// four bytes), then one multiplier and one bias per output channel.
+    /// fn one_layer(input: Shape, shape: LayerShape) -> Vec<u8> {
+    ///     let mut b = network_header(1, input).unwrap().to_vec();
+    ///     b.extend(shape.header(0.0).unwrap());
+    ///     b.resize(b.len() + shape.cout * shape.weights_per_output(), 1);
+    ///     b.resize(b.len().next_multiple_of(4), 0);
+    ///     (0..shape.cout).for_each(|_| b.extend(0.5f32.to_le_bytes()));
+    ///     (0..shape.cout).for_each(|_| b.extend(0.0f32.to_le_bytes()));
+    ///     b
+    /// }
+    /// let rgb = Shape { h: 2, w: 2, c: 3 };
+    /// // The finder: four values per cell of a 2 × 2 grid.
+    /// let finder = one_layer(rgb, LayerShape { kind: LayerKind::Conv, kernel: 1, stride: 1, relu: false, cin: 3, cout: 4 });
+    /// // The initializer: one landmark (x, y), three angles and no light.
+    /// let reader = one_layer(rgb, LayerShape { kind: LayerKind::Dense, kernel: 1, stride: 1, relu: false, cin: 12, cout: 5 });
+    ///
+    /// let mut bytes = vec![0u8; 512];
+    /// let len = write_init_file(&mut bytes, &finder, &reader, 2.0, 1, 0, r#"{"trained_on":"example"}"#).unwrap();
+    /// let file = InitFile::parse(&bytes[..len]).unwrap();
+    /// assert_eq!((file.landmarks, file.light, file.crop_margin), (1, 0, 2.0));
+    /// assert_eq!(file.finder.output(), Shape { h: 2, w: 2, c: 4 });
+    /// assert_eq!(file.initializer.output().len(), 5);
+    /// assert_eq!(file.metadata, r#"{"trained_on":"example"}"#);
+    /// assert_eq!(InitFile::byte_len(&bytes).unwrap(), len);
+    ///
+    /// bytes[60] ^= 1;
+    /// assert!(matches!(InitFile::parse(&bytes[..len]), Err(NetError::Format(FormatError::Crc { .. }))));
+    /// ```
     pub fn parse(bytes: &'a [u8]) -> Result<Self, NetError> {
         let mut r = Reader::after_header(bytes, INIT_MAGIC, INIT_VERSION)?;
         let body = r.u32()? as usize;
