@@ -198,6 +198,7 @@ pub fn bank_nystrom(
     max_ranks: &[usize],
     split: Option<(usize, &[usize])>,
 ) -> Vec<ScalarEigen> {
+    faer::set_global_parallelism(faer::Par::rayon(FAER_TASKS));
     let n = points.len();
     let c = kernels.len();
     assert_eq!(max_ranks.len(), c, "bank_nystrom: one rank per kernel");
@@ -384,6 +385,14 @@ fn plain_nystrom(knz: MatRef<'_, f64>, z: &[usize], tolerance: f64, max_rank: us
 /// Rows of the kernel matrix per Rayleigh–Ritz block.
 const BLOCK: usize = 128;
 
+/// Groups the block rows of [`rayleigh_ritz_bank`] are summed in (at most as many workers).
+const SUM_GROUPS: usize = 8;
+
+/// Tasks faer splits a product or a decomposition into, whatever the cores: its default follows
+/// the thread count, and its sums then fall in another order, so a model built on 8 cores had
+/// other bits than one built on 2.
+const FAER_TASKS: usize = 4;
+
 /// Gram eigenvalues below this fraction of the largest are dropped from a Rayleigh–Ritz basis
 /// (directions the basis does not resolve to better than about 1e-7).
 const GRAM_TOLERANCE: f64 = 1e-9;
@@ -411,11 +420,15 @@ fn rayleigh_ritz_bank(
     let c = bank.len();
     let starts: Vec<usize> = (0..n).step_by(BLOCK).collect();
     let zeros = || ys.iter().map(|y| Mat::<f64>::zeros(y.ncols(), y.ncols())).collect::<Vec<_>>();
-    let h = starts
-        .par_iter()
-        .fold(
-            || (zeros(), Vec::new()),
-            |(mut acc, mut t), &start| {
+    // The block rows in a fixed number of contiguous groups, each summed in order by one worker
+    // and the groups' sums added in order: the same bits whatever the threads (a work-stealing
+    // fold would add the partial sums in an order that depends on the scheduling).
+    let group_len = starts.len().div_ceil(SUM_GROUPS).max(1);
+    let partial: Vec<Vec<Mat<f64>>> = starts
+        .par_chunks(group_len)
+        .map(|group| {
+            let (mut acc, mut t) = (zeros(), Vec::new());
+            for &start in group {
                 let rows = BLOCK.min(n - start);
                 let len = n - start;
                 // Row r of the block against points start..n, every kernel: the block's transpose
@@ -435,16 +448,16 @@ fn rayleigh_ritz_bank(
                     let p = tk.transpose() * y.subrows(start, len);
                     *sk += y.subrows(start, rows).transpose() * &p;
                 }
-                (acc, t)
-            },
-        )
-        .map(|(acc, _)| acc)
-        .reduce(zeros, |mut a, b| {
-            for (x, y) in a.iter_mut().zip(b) {
-                *x += y;
             }
-            a
-        });
+            acc
+        })
+        .collect();
+    let h = partial.into_iter().fold(zeros(), |mut a, b| {
+        for (x, y) in a.iter_mut().zip(b) {
+            *x += y;
+        }
+        a
+    });
     ys.iter()
         .zip(h)
         .zip(max_ranks)
@@ -607,5 +620,26 @@ mod tests {
         let without_last: f64 = lr.components[..lr.components.len() - 1].iter().map(|c| c.eigenvalue).sum();
         assert!(without_last / lr.trace < 0.9);
         assert!(lr.components.windows(2).all(|w| w[0].eigenvalue >= w[1].eigenvalue));
+    }
+
+    #[test]
+    fn a_low_rank_model_has_the_same_bits_whatever_the_threads() {
+        // Enough points for several block rows in several groups of the refinement's sum.
+        let pts = grid(1200);
+        let hp = Hyperparameters::default();
+        let k = ModelKernel::SymmetricFull.shape_kernel(&hp);
+        let opts = NystromOptions { points: 300, ..Default::default() };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
+            pool.install(|| low_rank(&k, &pts, RankSpec::Count(20), &opts, |_, _| {}))
+        };
+        let bits = |lr: &LowRank| -> Vec<u64> {
+            lr.components.iter().flat_map(|c| std::iter::once(c.eigenvalue.to_bits()).chain(c.field.iter().map(|v| v.to_bits()))).collect()
+        };
+        let one = bits(&run(1));
+        assert!(one.len() > 20 * 1200, "{} values", one.len());
+        for threads in [2, 3, 8] {
+            assert!(bits(&run(threads)) == one, "{threads} threads give other bits than one");
+        }
     }
 }
