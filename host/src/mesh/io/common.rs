@@ -106,7 +106,7 @@ impl MeshIoError {
     }
 }
 
-/// Where the colours of a mesh read by [`read_mesh_with_info`] came from.
+/// Where the colours of a mesh read by [`read_mesh_with_info`](crate::mesh::io::read_mesh_with_info) came from.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ColorSource {
     /// Per-vertex colours stored in the file.
