@@ -3,6 +3,7 @@
 //! conversion message of the binding library).
 
 use crate::errors::value_error;
+use gpmm_host::fit::FitFlags;
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyString;
@@ -67,6 +68,65 @@ pub(crate) fn overrides(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Vec<String>>
     }
     obj.extract::<Vec<String>>()
         .map_err(|_| value_error("set must be a list of \"key=value\" strings, e.g. set=[\"landmarks.student_t=4\"]"))
+}
+
+/// The fit keywords `Model.fit` and `learn` share, as given (`None`: the default).
+pub(crate) struct FitKeywords<'a, 'py> {
+    /// `seed`.
+    pub seed: Option<Int>,
+    /// `size`.
+    pub size: Option<Int>,
+    /// `landmark_steps`.
+    pub landmark_steps: Option<Int>,
+    /// `image_steps`.
+    pub image_steps: Option<Int>,
+    /// `shape_rank`.
+    pub shape_rank: Option<Int>,
+    /// `color_rank`.
+    pub color_rank: Option<Int>,
+    /// `landmark_sigma`.
+    pub landmark_sigma: Option<f32>,
+    /// `contour_sigma`.
+    pub contour_sigma: Option<f32>,
+    /// `set`.
+    pub set: Option<&'a Bound<'py, PyAny>>,
+}
+
+impl FitKeywords<'_, '_> {
+    /// The fit's flags (no initializer σ), each keyword checked under its name in the order of
+    /// the signature; `ranks` (the model's shape and colour ranks), when given, bound the fitted ones.
+    pub(crate) fn flags(&self, ranks: Option<[usize; 2]>) -> PyResult<FitFlags> {
+        let rank = |given: &Option<Int>, name: &str, model_rank: Option<usize>| match model_rank {
+            Some(m) => within_rank(opt(given, name)?, name, m),
+            None => opt(given, name),
+        };
+        Ok(FitFlags {
+            size: opt(&self.size, "size")?,
+            seed: opt(&self.seed, "seed")?,
+            landmark_steps: opt(&self.landmark_steps, "landmark_steps")?,
+            image_steps: opt(&self.image_steps, "image_steps")?,
+            shape_rank: rank(&self.shape_rank, "shape_rank", ranks.map(|r| r[0]))?,
+            color_rank: rank(&self.color_rank, "color_rank", ranks.map(|r| r[1]))?,
+            landmark_sigma: self.landmark_sigma,
+            contour_sigma: self.contour_sigma,
+            initializer_sigma: None,
+            overrides: overrides(self.set)?,
+        })
+    }
+}
+
+/// A fit's settings refused, as a `GpmmValueError`: the program's messages name its flag
+/// (`--set`), here the parameter is `set`.
+pub(crate) fn fit_settings_error(e: impl std::fmt::Display) -> PyErr {
+    value_error(e.to_string().replace("--set ", "set: "))
+}
+
+/// A rank the caller asked for, refused when the model has fewer components (`name` is the parameter).
+pub(crate) fn within_rank(rank: Option<usize>, name: &str, model_rank: usize) -> PyResult<Option<usize>> {
+    match rank {
+        Some(r) if r > model_rank => Err(value_error(format!("{name} = {r} is more than the model's {model_rank} components"))),
+        _ => Ok(rank),
+    }
 }
 
 /// Coefficients (`shape` or `color` of `instance` / `render`): a sequence of finite numbers,

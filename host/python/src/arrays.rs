@@ -1,10 +1,11 @@
-//! Conversions between numpy arrays and the host library's images, points and vectors.
+//! Conversions between Python objects and the host library's values: numpy arrays of images,
+//! points and vectors, and serializable values as dicts and lists.
 
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 
-use crate::errors::value_error;
+use crate::errors::{err, value_error};
 use numpy::ndarray::s;
 
 /// An `H x W x 3` uint8 array of an RGB image.
@@ -88,4 +89,11 @@ pub(crate) fn shape_text(shape: &[usize]) -> String {
         [one] => format!("({one},)"),
         _ => format!("({})", shape.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")),
     }
+}
+
+/// A serializable value as Python objects (dicts, lists, numbers) through its JSON text, so that
+/// floats are the ones the `gpmm` program writes (an f32 reads back as the program's decimal).
+pub(crate) fn json_to_py<'py, T: serde::Serialize + ?Sized>(py: Python<'py>, value: &T) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(value).map_err(err)?;
+    py.import("json")?.call_method1("loads", (text,))
 }

@@ -3,8 +3,7 @@
 
 use crate::arrays::shape_text;
 use crate::errors::value_error;
-use gpmm_host::gp::kernel::Hyperparameters;
-use gpmm_host::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
+use gpmm_host::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis};
 use gpmm_host::gp::model_io;
 use gpmm_host::mesh::template::Provenance;
 use pyo3::prelude::*;
@@ -163,26 +162,14 @@ fn part(p: &PartArrays<'_>, prefix: &str, n: usize) -> PyResult<ModelPart> {
 /// docs/model-format.md's fields) over the defaults.
 fn metadata(given: Option<&Bound<'_, PyAny>>, shape: &ModelPart, color: &ModelPart, landmarks: usize) -> PyResult<ModelMetadata> {
     let n = shape.mean.len();
-    let defaults = ModelMetadata {
-        format: "gpmm-model".into(),
-        version: MODEL_VERSION,
-        kernel: "pca".into(),
-        hyperparameters: Hyperparameters::default(),
-        nystrom_points: 0,
-        nystrom_seed: 0,
-        // `+ 0.0`: the sum of no eigenvalues is -0.0.
-        shape_trace: shape.eigenvalues.iter().sum::<f64>() + 0.0,
-        color_trace: color.eigenvalues.iter().sum::<f64>() + 0.0,
-        landmark_scheme: match landmarks {
-            0 => "none".into(),
-            68 => "ibug68".into(),
-            _ => "custom".into(),
-        },
-        template: Provenance { source: "<arrays>".into(), scale_mm_per_unit: 1.0, source_vertices: n, ..Provenance::default() },
-        units: "mm".into(),
-        created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION"), " python from_arrays").into(),
-        learning: None,
+    let scheme = match landmarks {
+        0 => "none",
+        68 => "ibug68",
+        _ => "custom",
     };
+    let template = Provenance { source: "<arrays>".into(), scale_mm_per_unit: 1.0, source_vertices: n, ..Provenance::default() };
+    let created_by = concat!("gpmm ", env!("CARGO_PKG_VERSION"), " python from_arrays").into();
+    let defaults = ModelMetadata::pca(shape, color, scheme.into(), template, created_by);
     let Some(given) = given.filter(|g| !g.is_none()) else { return Ok(defaults) };
     let py = given.py();
     let text: String = py

@@ -2,10 +2,9 @@
 //! this process's threads or handed back to Python (a Dask cluster), and one view's fit for a
 //! worker (`learn_wake`).
 
-use crate::args::{opt, overrides, Int};
-use crate::arrays::vec3_to_numpy;
+use crate::args::{fit_settings_error, opt, FitKeywords, Int};
+use crate::arrays::{json_to_py, vec3_to_numpy};
 use crate::errors::{io_error, read_error, value_error};
-use crate::json_to_py;
 use crate::model::Model;
 use gpmm_host::fit::FitFlags;
 use gpmm_host::learn::dev::{DevPoints, DevSet};
@@ -145,20 +144,12 @@ pub fn learn_run<'py>(
     }
     // The initializer's points are fitted as `gpmm fit --init` fits them; landmark files as
     // `gpmm fit --landmarks` does.
+    let keywords = FitKeywords { seed, size, landmark_steps, image_steps, shape_rank, color_rank, landmark_sigma, contour_sigma, set };
     let flags = FitFlags {
-        size: opt(&size, "size")?,
-        seed: opt(&seed, "seed")?,
-        landmark_steps: opt(&landmark_steps, "landmark_steps")?,
-        image_steps: opt(&image_steps, "image_steps")?,
-        shape_rank: opt(&shape_rank, "shape_rank")?,
-        color_rank: opt(&color_rank, "color_rank")?,
-        landmark_sigma,
-        contour_sigma,
         initializer_sigma: landmarks_dir.is_none().then_some(init_landmark_sigma.unwrap_or(gpmm_host::detect::INIT_LANDMARK_SIGMA)),
-        overrides: overrides(set)?,
+        ..keywords.flags(None)?
     };
-    let (fit, dev_fit) =
-        gpmm_host::learn::loop_and_check_options(&flags).map_err(|e| value_error(e.to_string().replace("--set ", "set: ")))?;
+    let (fit, dev_fit) = gpmm_host::learn::loop_and_check_options(&flags).map_err(fit_settings_error)?;
     let images = image_files(&images).map_err(|e| run_error(e, &model))?;
     let jobs = match opt::<usize>(&jobs, "jobs")? {
         Some(j) => j.max(1),

@@ -14,6 +14,7 @@ mod learn;
 mod model;
 
 use args::{opt, Int};
+use arrays::json_to_py;
 use errors::{err, read_error, value_error};
 use gpmm_host::device::quantize::BlobBuf;
 use gpmm_host::gp::kernel::{Hyperparameters, ModelKernel};
@@ -26,27 +27,16 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
 
-/// A serializable value as Python objects (dicts, lists, numbers) through its JSON text, so that
-/// floats are the ones the `gpmm` program writes (an f32 reads back as the program's decimal).
-pub(crate) fn json_to_py<'py, T: serde::Serialize + ?Sized>(py: Python<'py>, value: &T) -> PyResult<Bound<'py, PyAny>> {
-    let text = serde_json::to_string(value).map_err(err)?;
-    py.import("json")?.call_method1("loads", (text,))
-}
-
 /// Loads a model file (`.gpmm`, safetensors).
 #[pyfunction]
 fn load(py: Python<'_>, path: PathBuf) -> PyResult<Model> {
-    let name = path.display().to_string();
-    let m = py.detach(|| gpmm_host::gp::model_io::load(&path)).map_err(|e| read_error(e, &[&path]))?;
-    Ok(Model::new(m, name))
+    Model::load(py, path)
 }
 
 /// A model from the bytes of a model file (what `Model.to_bytes()` and pickling give).
 #[pyfunction]
 fn model_from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<Model> {
-    let data = data.to_vec();
-    let m = py.detach(move || gpmm_host::gp::model_io::from_bytes(&data, "<bytes>")).map_err(err)?;
-    Ok(Model::new(m, "<bytes>".into()))
+    Model::from_bytes(py, data)
 }
 
 /// The nine kernel names `build` takes.

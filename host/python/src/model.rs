@@ -1,14 +1,13 @@
 //! `gpmm.Model`: a morphable model, its arrays, and what can be done with it.
 
-use crate::args::{coefficients, opt, overrides, Int};
+use crate::args::{coefficients, fit_settings_error, opt, within_rank, FitKeywords, Int};
 use crate::arrays::{
-    basis_to_numpy, numpy_to_points, numpy_to_rgb, points_to_numpy, rgb_to_numpy, rgba_to_numpy, vec3_to_numpy, vec_to_numpy,
+    basis_to_numpy, json_to_py, numpy_to_points, numpy_to_rgb, points_to_numpy, rgb_to_numpy, rgba_to_numpy, vec3_to_numpy, vec_to_numpy,
 };
 use crate::errors::{err, read_error, value_error, write_error};
 use crate::from_arrays::{model_from_arrays, PartArrays};
-use crate::json_to_py;
 use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
-use gpmm_host::fit::{fit_image, overlay, report, FitFlags, ReportInputs};
+use gpmm_host::fit::{fit_image, overlay, report, ReportInputs};
 use gpmm_host::gp::model::{GpModel, PartBasis};
 use gpmm_host::gp::{model_io, statismo};
 use gpmm_host::learn::shading::ShadingBases;
@@ -85,14 +84,18 @@ fn light_arg(obj: &Bound<'_, PyAny>) -> PyResult<gpmm_core::render::ShLight> {
 impl Model {
     /// Loads a model file (`.gpmm`).
     #[staticmethod]
-    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        crate::load(py, path)
+    pub(crate) fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let name = path.display().to_string();
+        let m = py.detach(|| model_io::load(&path)).map_err(|e| read_error(e, &[&path]))?;
+        Ok(Self::new(m, name))
     }
 
     /// A model from the bytes of a model file.
     #[staticmethod]
-    fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<Self> {
-        crate::model_from_bytes(py, data)
+    pub(crate) fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<Self> {
+        let data = data.to_vec();
+        let m = py.detach(move || model_io::from_bytes(&data, "<bytes>")).map_err(err)?;
+        Ok(Self::new(m, "<bytes>".into()))
     }
 
     /// A model from numpy arrays: `shape_mean` `N x 3` (mm), `triangles` `T x 3` vertex ids, and for shape
@@ -358,20 +361,9 @@ impl Model {
         set: Option<&Bound<'py, PyAny>>,
         landmark_calibration: Option<PathBuf>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let flags = FitFlags {
-            size: opt(&size, "size")?,
-            seed: opt(&seed, "seed")?,
-            landmark_steps: opt(&landmark_steps, "landmark_steps")?,
-            image_steps: opt(&image_steps, "image_steps")?,
-            shape_rank: within_rank(opt(&shape_rank, "shape_rank")?, "shape_rank", self.inner.shape.rank())?,
-            color_rank: within_rank(opt(&color_rank, "color_rank")?, "color_rank", self.inner.color.rank())?,
-            landmark_sigma,
-            contour_sigma,
-            initializer_sigma: None,
-            overrides: overrides(set)?,
-        };
-        // The program's messages name its flag (`--set`); here the parameter is `set`.
-        let opts = flags.resolve().map_err(|e| value_error(e.to_string().replace("--set ", "set: ")))?;
+        let keywords = FitKeywords { seed, size, landmark_steps, image_steps, shape_rank, color_rank, landmark_sigma, contour_sigma, set };
+        let flags = keywords.flags(Some([self.inner.shape.rank(), self.inner.color.rank()]))?;
+        let opts = flags.resolve().map_err(fit_settings_error)?;
         let photo = numpy_to_rgb(image)?;
         let mut points = numpy_to_points(py, landmarks)?;
         let calibration_name = landmark_calibration.as_ref().map(|p| p.display().to_string());
@@ -455,14 +447,6 @@ impl Model {
     fn export_h5(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let m = self.inner.clone();
         py.detach(|| statismo::export(&m, &path)).map_err(|e| write_error(e, &path))
-    }
-}
-
-/// A rank the caller asked for, refused when the model has fewer components (`name` is the parameter).
-fn within_rank(rank: Option<usize>, name: &str, model_rank: usize) -> PyResult<Option<usize>> {
-    match rank {
-        Some(r) if r > model_rank => Err(value_error(format!("{name} = {r} is more than the model's {model_rank} components"))),
-        _ => Ok(rank),
     }
 }
 

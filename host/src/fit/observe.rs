@@ -2,9 +2,25 @@
 //! chain's wall time, acceptance counts per proposal name as the chains report them, and the
 //! image chain's posterior moments.
 
-use super::{AcceptanceReport, KindCounts, KC, KS};
+use super::params::{KC, KS};
 use gpmm_core::fit::{ChainObserver, ChainSample, FitObserver, PosteriorMoments, ProposalStep, Stage};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::time::Instant;
+
+/// Proposal counts of one proposal kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KindCounts {
+    /// Times drawn.
+    pub proposed: u64,
+    /// Times it passed the prior-and-landmark stage.
+    pub passed: u64,
+    /// Times accepted.
+    pub accepted: u64,
+}
+
+/// Counts per proposal kind name (`yaw`, `shape`, `light-solve`, ...).
+pub type AcceptanceReport = BTreeMap<String, KindCounts>;
 
 /// Landmark-chain steps between progress reports.
 const LANDMARK_CHUNK: u32 = 1000;

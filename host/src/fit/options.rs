@@ -1,6 +1,9 @@
 //! A host fit's options and the one place where what the user gave (flags, keywords) becomes them.
 
-use super::{override_settings, FitRunError, FitSettings, KC, KS};
+use super::error::FitRunError;
+use super::overrides::override_settings;
+use super::params::{KC, KS};
+use gpmm_core::fit::FitSettings;
 use gpmm_core::fit::RankSettings;
 use serde::{Deserialize, Serialize};
 

@@ -1,6 +1,7 @@
 //! `--set PATH=VALUE`: any field of the one [`FitSettings`] by its path in fit.json's settings.
 
-use super::{FitRunError, FitSettings};
+use super::error::FitRunError;
+use gpmm_core::fit::FitSettings;
 use serde_json::Value;
 
 /// `settings` with each `PATH=VALUE` applied in order: `PATH` is a dot-separated field path of

@@ -1,6 +1,6 @@
 //! The image chain's posterior summary as fit.json and the evaluation read it.
 
-use super::{Params, KC, KS};
+use super::params::{Params, KC, KS};
 use gpmm_core::fit::PosteriorMoments;
 use serde::{Deserialize, Serialize};
 

@@ -149,6 +149,42 @@ pub struct LearningRecord {
 /// The current model file format version.
 pub const MODEL_VERSION: u32 = 1;
 
+impl ModelMetadata {
+    /// Metadata of a model that was not built from a kernel (a PCA, an import, a learned model):
+    /// `kernel` names what it is; no hyperparameters or Nyström sample; traces as given.
+    pub fn without_kernel(
+        kernel: &str,
+        [shape_trace, color_trace]: [f64; 2],
+        landmark_scheme: String,
+        template: Provenance,
+        created_by: String,
+    ) -> Self {
+        Self {
+            format: "gpmm-model".into(),
+            version: MODEL_VERSION,
+            kernel: kernel.into(),
+            hyperparameters: Hyperparameters::default(),
+            nystrom_points: 0,
+            nystrom_seed: 0,
+            shape_trace,
+            color_trace,
+            landmark_scheme,
+            template,
+            units: "mm".into(),
+            created_by,
+            learning: None,
+        }
+    }
+
+    /// Metadata of a PCA model given by its parts (arrays, a statismo file): kernel `pca`, each
+    /// trace the sum of its part's eigenvalues (`0.0` for a part without components, not `-0.0`).
+    pub fn pca(shape: &ModelPart, color: &ModelPart, landmark_scheme: String, template: Provenance, created_by: String) -> Self {
+        // `+ 0.0`: the sum of no eigenvalues is -0.0, which the metadata would keep as written.
+        let trace = |part: &ModelPart| part.eigenvalues.iter().sum::<f64>() + 0.0;
+        Self::without_kernel("pca", [trace(shape), trace(color)], landmark_scheme, template, created_by)
+    }
+}
+
 /// A Gaussian-process morphable model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GpModel {
@@ -299,5 +335,58 @@ pub fn build_model(template: &Template, opts: &BuildOptions, mut progress: impl 
             created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION")).into(),
             learning: None,
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn part(eigenvalues: &[f64]) -> ModelPart {
+        ModelPart { mean: vec![[0.0; 3]], eigenvalues: eigenvalues.to_vec(), basis: PartBasis::Dense { values: Vec::new() } }
+    }
+
+    /// The metadata as `gpmm.Model.from_arrays` (`plus_zero`) and `gpmm import-h5` wrote it field
+    /// by field before both called [`ModelMetadata::pca`].
+    fn as_written_before(shape: &ModelPart, color: &ModelPart, template: Provenance, created_by: &str, plus_zero: bool) -> ModelMetadata {
+        let zero = if plus_zero { 0.0 } else { -0.0 };
+        ModelMetadata {
+            format: "gpmm-model".into(),
+            version: MODEL_VERSION,
+            kernel: "pca".into(),
+            hyperparameters: Hyperparameters::default(),
+            nystrom_points: 0,
+            nystrom_seed: 0,
+            shape_trace: shape.eigenvalues.iter().sum::<f64>() + zero,
+            color_trace: color.eigenvalues.iter().sum::<f64>() + zero,
+            landmark_scheme: "ibug68".into(),
+            template,
+            units: "mm".into(),
+            created_by: created_by.into(),
+            learning: None,
+        }
+    }
+
+    #[test]
+    fn pca_metadata_is_written_as_from_arrays_and_import_wrote_it() {
+        let arrays = Provenance { source: "<arrays>".into(), scale_mm_per_unit: 1.0, source_vertices: 1, ..Provenance::default() };
+        let h5 = Provenance { source: "m.h5".into(), source_sha256: "ab".into(), scale_mm_per_unit: 1000.0, ..Provenance::default() };
+        let json = |m: &ModelMetadata| serde_json::to_string(m).expect("metadata as JSON");
+        let new = |s: &ModelPart, c: &ModelPart, t: &Provenance, by: &str| ModelMetadata::pca(s, c, "ibug68".into(), t.clone(), by.into());
+        for (s, c) in [(&[4.0, 1.0e-3][..], &[0.5][..]), (&[], &[]), (&[2.0], &[]), (&[0.0], &[0.0])] {
+            let (s, c) = (part(s), part(c));
+            assert_eq!(json(&new(&s, &c, &arrays, "py")), json(&as_written_before(&s, &c, arrays.clone(), "py", true)));
+        }
+        // A statismo part has at least one component: the same bytes as before, unless every
+        // variance of a part is -0.0 (then its trace is now written 0.0, as from arrays).
+        for (s, c) in [(&[4.0, 1.0e-3][..], &[0.5][..]), (&[0.0], &[0.0]), (&[-0.0, 1.0], &[-0.0, 0.0])] {
+            let (s, c) = (part(s), part(c));
+            assert_eq!(json(&new(&s, &c, &h5, "h5")), json(&as_written_before(&s, &c, h5.clone(), "h5", false)));
+        }
+        let (s, c) = (part(&[-0.0]), part(&[]));
+        let before = json(&as_written_before(&s, &c, h5.clone(), "h5", false));
+        let now = json(&new(&s, &c, &h5, "h5"));
+        assert!(before.contains(r#""shape_trace":-0.0,"color_trace":-0.0"#), "{before}");
+        assert!(now.contains(r#""shape_trace":0.0,"color_trace":0.0"#), "{now}");
     }
 }

@@ -12,8 +12,7 @@
 //! read and written by `hdf5-pure` (pure Rust, no system library). Every refusal names the file
 //! and the dataset; nothing panics on a malformed file.
 
-use crate::gp::kernel::Hyperparameters;
-use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
+use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis};
 use crate::mesh::template::Provenance;
 use hdf5_pure::{AttrValue, DType, File, FileBuilder, GroupBuilder};
 use serde::{Deserialize, Serialize};
@@ -448,17 +447,11 @@ pub fn import_bytes(bytes: Vec<u8>, name: &str, opts: &ImportOptions) -> Result<
     }
     let metadata = match extra {
         Some(x) => ModelMetadata { landmark_scheme: scheme.clone(), ..x.metadata },
-        None => ModelMetadata {
-            format: "gpmm-model".into(),
-            version: MODEL_VERSION,
-            kernel: "pca".into(),
-            hyperparameters: Hyperparameters::default(),
-            nystrom_points: 0,
-            nystrom_seed: 0,
-            shape_trace: shape_part.eigenvalues.iter().sum(),
-            color_trace: color_part.eigenvalues.iter().sum(),
-            landmark_scheme: scheme.clone(),
-            template: Provenance {
+        None => ModelMetadata::pca(
+            &shape_part,
+            &color_part,
+            scheme.clone(),
+            Provenance {
                 source: name.to_string(),
                 source_sha256: sha,
                 texture: None,
@@ -467,10 +460,8 @@ pub fn import_bytes(bytes: Vec<u8>, name: &str, opts: &ImportOptions) -> Result<
                 cropped: false,
                 source_vertices: n,
             },
-            units: "mm".into(),
-            created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION"), " import-h5").into(),
-            learning: None,
-        },
+            concat!("gpmm ", env!("CARGO_PKG_VERSION"), " import-h5").into(),
+        ),
     };
     let report = ImportReport {
         version: format!("{}.{}", shape.version.0, shape.version.1),

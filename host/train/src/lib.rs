@@ -4,6 +4,7 @@
 
 pub mod data;
 pub mod encode;
+pub mod error;
 pub mod mistakes;
 pub mod nets;
 pub mod patches;

@@ -8,8 +8,8 @@
 //! as the finder sees it at a few zooms, and mirrored, and the fine-tuning shows these frames with
 //! every cell "no face".
 
+use crate::error::TrainError;
 use crate::scene::backgrounds::{overlaps, Backgrounds};
-use crate::train::TrainError;
 use gpmm_core::net::face_box::FaceBox;
 use gpmm_core::net::resample::{flip_rows, sample_rgb, Window};
 use gpmm_host::detect::Detector;

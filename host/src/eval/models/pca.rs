@@ -6,8 +6,7 @@
 //! `G = f DᵀD = V Λ Vᵀ`: `C (D v_k) = λ_k (D v_k)` and `|D v_k|² = λ_k / f`, so the basis scaled by
 //! `sqrt(λ_k)` (what a model file stores) is `sqrt(f) D v_k`.
 
-use crate::gp::kernel::Hyperparameters;
-use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis, MODEL_VERSION};
+use crate::gp::model::{GpModel, ModelMetadata, ModelPart, PartBasis};
 use crate::mesh::template::Provenance;
 use crate::mesh::Mesh;
 
@@ -65,27 +64,15 @@ pub fn dense_part(mean: &[[f64; 3]], eigenvalues: Vec<f64>, basis: &[Vec<f64>]) 
 
 /// Metadata of a model that was not built from a kernel (`kernel` names what it is).
 pub fn learned_metadata(kernel: &str, shape_trace: f64, color_trace: f64, source: &str, attribution: &str) -> ModelMetadata {
-    ModelMetadata {
-        format: "gpmm-model".into(),
-        version: MODEL_VERSION,
-        kernel: kernel.into(),
-        hyperparameters: Hyperparameters::default(),
-        nystrom_points: 0,
-        nystrom_seed: 0,
-        shape_trace,
-        color_trace,
-        landmark_scheme: "ibug68".into(),
-        template: Provenance {
-            source: source.into(),
-            attribution: Some(attribution.into()),
-            scale_mm_per_unit: 1.0,
-            cropped: true,
-            ..Provenance::default()
-        },
-        units: "mm".into(),
-        created_by: concat!("gpmm ", env!("CARGO_PKG_VERSION")).into(),
-        learning: None,
-    }
+    let template = Provenance {
+        source: source.into(),
+        attribution: Some(attribution.into()),
+        scale_mm_per_unit: 1.0,
+        cropped: true,
+        ..Provenance::default()
+    };
+    let created_by = concat!("gpmm ", env!("CARGO_PKG_VERSION")).into();
+    ModelMetadata::without_kernel(kernel, [shape_trace, color_trace], "ibug68".into(), template, created_by)
 }
 
 /// Every scaled component of `part` as a dense `3N` vector, times `w`.

@@ -10,7 +10,7 @@ use crate::eval::{create_dir, file_sha256, write_text, EvalError, ImageFitError}
 use crate::fit::{fit_prepared, load_photo, FitOptions};
 use crate::synth::ImageTruth;
 
-use super::SynthSet;
+use super::set::SynthSet;
 
 /// One fitted image.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

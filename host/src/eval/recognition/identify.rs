@@ -13,20 +13,10 @@ use crate::eval::models::kde::score;
 use crate::eval::wilson_interval;
 
 use super::fits::{Feature, FitSet};
+pub use super::set::LabeledImage;
 
 /// The normal quantile of the reported Wilson intervals (95 %).
 const Z95: f64 = 1.96;
-
-/// An image as identification sees it: its file name, true identity and yaw (yaw 0: the gallery).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LabeledImage<'a> {
-    /// Image file name (the key of its fits).
-    pub image: &'a str,
-    /// True identity.
-    pub identity: usize,
-    /// Yaw (degrees).
-    pub yaw_deg: f32,
-}
 
 /// How one probe was identified.
 #[derive(Debug, Clone, PartialEq)]

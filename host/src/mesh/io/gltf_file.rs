@@ -1,6 +1,9 @@
 //! glTF input: the first mesh's triangles, albedo sampled from a texture at the UVs, vertices split at UV seams welded again.
 
-use super::*;
+use super::common::{ColorSource, MeshIoError};
+use crate::mesh::Mesh;
+use std::collections::HashMap;
+use std::path::Path;
 
 /// An RGB texture in [0,1] with bilinear lookup.
 pub(super) struct Texture {

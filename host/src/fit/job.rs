@@ -1,0 +1,93 @@
+//! `gpmm fit`'s file job: read the model, photo, landmarks and calibration, fit, and write
+//! `fit.json`, `overlay.png` and `fit.ply`.
+
+use super::error::FitRunError;
+use super::input::load_photo;
+use super::options::FitOptions;
+use super::overlay::overlay;
+use super::pipeline::fit_prepared;
+use super::report::{report, FitReport, ReportInputs};
+use crate::photo::calibration::LandmarkCalibration;
+use std::time::Instant;
+
+/// Inputs of [`fit_files`] (what `gpmm fit` is given).
+#[derive(Debug, Clone)]
+pub struct FitJob {
+    /// Model file.
+    pub model: std::path::PathBuf,
+    /// Photo (PNG, JPEG or PPM).
+    pub image: std::path::PathBuf,
+    /// Landmark file (iBUG `.pts`).
+    pub landmarks: std::path::PathBuf,
+    /// Read the landmark file as 1-based.
+    pub pts_one_based: bool,
+    /// A detector calibration (`gpmm calibrate-landmarks`) to correct the landmarks with.
+    pub landmark_calibration: Option<std::path::PathBuf>,
+    /// Fit settings.
+    pub settings: FitOptions,
+    /// Output directory (created if needed).
+    pub out_dir: std::path::PathBuf,
+    /// Record timing in `fit.json`.
+    pub timing: bool,
+}
+
+/// Why [`fit_files`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitFilesError {
+    /// The model file.
+    #[error(transparent)]
+    ModelFile(#[from] crate::gp::model_io::ModelIoError),
+    /// The fit.
+    #[error(transparent)]
+    Fit(#[from] FitRunError),
+    /// An output file.
+    #[error("{}: cannot write: {message}", path.display())]
+    Write {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+/// `gpmm fit`: loads everything, fits and writes `fit.json`, `overlay.png` and `fit.ply` into the output directory.
+pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Result<FitReport, FitFilesError> {
+    job.settings.validate()?;
+    let model = crate::gp::model_io::load(&job.model)?;
+    let t0 = Instant::now();
+    let calibration = match &job.landmark_calibration {
+        Some(path) => Some(LandmarkCalibration::read(path).map_err(FitRunError::CalibrationFile)?),
+        None => None,
+    };
+    let prepared = load_photo(&model, &job.image, &job.landmarks, job.pts_one_based, job.settings.size, calibration.as_ref())?;
+    let outcome = fit_prepared(&model, &prepared, &job.settings, progress)?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let calibration_name = job.landmark_calibration.as_ref().map(|p| p.display().to_string());
+    let inputs = ReportInputs {
+        model_path: &job.model.display().to_string(),
+        image_path: &job.image.display().to_string(),
+        pts_path: &job.landmarks.display().to_string(),
+        pts_one_based: job.pts_one_based,
+        landmark_calibration: calibration_name.as_deref(),
+    };
+    let rep = report(&model, &inputs, &prepared, &job.settings, &outcome, job.timing.then_some(seconds));
+    let dir = &job.out_dir;
+    let werr =
+        |path: &std::path::Path, e: &dyn std::fmt::Display| FitFilesError::Write { path: path.to_path_buf(), message: e.to_string() };
+    std::fs::create_dir_all(dir).map_err(|e| werr(dir, &e))?;
+    let json_path = dir.join("fit.json");
+    let text = serde_json::to_string_pretty(&rep).map_err(|e| werr(&json_path, &e))?;
+    std::fs::write(&json_path, text + "\n").map_err(|e| werr(&json_path, &e))?;
+    let ov_path = dir.join("overlay.png");
+    let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
+    crate::render::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
+    let ply_path = dir.join("fit.ply");
+    let mesh = model
+        .instance(outcome.params.shape_coeffs(), outcome.params.color_coeffs())
+        .map_err(|e| FitRunError::Model(format!("instance: {e}")))?;
+    let attribution = model.metadata.template.attribution.clone().unwrap_or_default();
+    let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
+    crate::mesh::io::write_ply_with(&ply_path, &mesh, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)
+        .map_err(|e| werr(&ply_path, &e))?;
+    Ok(rep)
+}

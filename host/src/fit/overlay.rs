@@ -1,0 +1,78 @@
+//! `overlay.png`: the working image, the rendered fit and their blend side by side, with the
+//! target and fitted landmarks drawn on.
+
+use image::{RgbImage, Rgba, RgbaImage};
+
+/// Upscaling of the overlay panels (nearest neighbour).
+pub const OVERLAY_SCALE: u32 = 3;
+/// Colour of the target landmarks in the overlay (green dots).
+pub const TARGET_COLOR: Rgba<u8> = Rgba([40, 230, 60, 255]);
+/// Colour of the fitted landmarks in the overlay (red crosses).
+pub const FITTED_COLOR: Rgba<u8> = Rgba([255, 40, 40, 255]);
+
+/// `input crop | rendered fit | 50 % blend`, each upscaled by [`OVERLAY_SCALE`], target landmarks
+/// as green dots and fitted ones as red crosses on the first and last panel, labels on top.
+pub fn overlay(crop: &RgbImage, render: &RgbaImage, target: &[[f32; 2]], fitted: &[[f32; 2]]) -> RgbaImage {
+    let (w, h) = crop.dimensions();
+    let s = OVERLAY_SCALE;
+    let (pw, ph) = (w * s, h * s);
+    let (gap, header) = (4u32, 14u32);
+    let bg = Rgba([24, 24, 24, 255]);
+    let mut out = RgbaImage::from_pixel(3 * pw + 4 * gap, ph + header + gap, bg);
+    let panel = |i: u32| (gap + i * (pw + gap), header);
+    for y in 0..ph {
+        for x in 0..pw {
+            let c = crop.get_pixel(x / s, y / s).0;
+            let r = render.get_pixel(x / s, y / s).0;
+            let covered = r[3] > 0;
+            let ren = if covered { Rgba([r[0], r[1], r[2], 255]) } else { Rgba([0, 0, 0, 255]) };
+            let blend = if covered {
+                let avg = |k: usize| (u16::from(c[k]) + u16::from(r[k])).div_ceil(2) as u8;
+                Rgba([avg(0), avg(1), avg(2), 255])
+            } else {
+                Rgba([c[0], c[1], c[2], 255])
+            };
+            for (i, px) in [Rgba([c[0], c[1], c[2], 255]), ren, blend].into_iter().enumerate() {
+                let (ox, oy) = panel(i as u32);
+                out.put_pixel(ox + x, oy + y, px);
+            }
+        }
+    }
+    let ink = Rgba([230, 230, 230, 255]);
+    for (i, label) in ["input", "fit", "blend"].iter().enumerate() {
+        let (ox, _) = panel(i as u32);
+        crate::render::figure::draw_text(&mut out, ox, 3, label, 1, ink);
+    }
+    for i in [0u32, 2] {
+        let (ox, oy) = panel(i);
+        let to = |p: &[f32; 2]| -> Option<(i64, i64)> {
+            let (x, y) = (p[0] * s as f32, p[1] * s as f32);
+            (x.is_finite() && y.is_finite() && x >= 0.0 && y >= 0.0 && x < pw as f32 && y < ph as f32)
+                .then(|| (i64::from(ox) + x as i64, i64::from(oy) + y as i64))
+        };
+        for p in target.iter().filter_map(to) {
+            for dy in -2..=2 {
+                for dx in -2..=2 {
+                    if dx * dx + dy * dy <= 5 {
+                        put(&mut out, p.0 + dx, p.1 + dy, TARGET_COLOR);
+                    }
+                }
+            }
+        }
+        for p in fitted.iter().filter_map(to) {
+            for d in -3..=3 {
+                for t in 0..2 {
+                    put(&mut out, p.0 + d + t, p.1 + d, FITTED_COLOR);
+                    put(&mut out, p.0 + d + t, p.1 - d, FITTED_COLOR);
+                }
+            }
+        }
+    }
+    out
+}
+
+fn put(img: &mut RgbaImage, x: i64, y: i64, c: Rgba<u8>) {
+    if x >= 0 && y >= 0 && x < i64::from(img.width()) && y < i64::from(img.height()) {
+        img.put_pixel(x as u32, y as u32, c);
+    }
+}
