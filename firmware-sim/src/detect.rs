@@ -35,17 +35,35 @@ pub(crate) fn frame_at(part: &'static [u8], at: usize) -> Frame<'static> {
     }
 }
 
+/// The init file at the start of `bytes` and its length; logs and fails if it is not a valid one
+/// (`after`: what it follows in the data partition, for the message, e.g. " after the fit job").
+pub(crate) fn init_file_at(bytes: &'static [u8], after: &str) -> (InitFile<'static>, usize) {
+    match InitFile::parse(bytes) {
+        Ok(init) => (init, InitFile::byte_len(bytes).unwrap_or(bytes.len())),
+        Err(e) => {
+            defmt::error!("data partition: not a valid init file{=str}: {}", after, defmt::Display2Format(&e));
+            fail();
+        }
+    }
+}
+
+/// Logs and fails if an init file's networks need more than [`SCRATCH`] bytes per activation
+/// buffer (`needed`, `InitFile::scratch_bytes`).
+pub(crate) fn check_scratch(needed: usize) {
+    if needed > SCRATCH {
+        defmt::error!(
+            "the init file's networks need {=u32} bytes per activation buffer; this firmware has {=u32}",
+            needed as u32,
+            SCRATCH as u32
+        );
+        fail();
+    }
+}
+
 /// Runs the detection on the init file and the frame in `part`; logs everything, fails on bad data.
 pub fn run(part: &'static [u8]) {
     let t_start = instructions_now();
-    let init = match InitFile::parse(part) {
-        Ok(i) => i,
-        Err(e) => {
-            defmt::error!("data partition: not a valid init file: {}", defmt::Display2Format(&e));
-            fail();
-        }
-    };
-    let init_len = InitFile::byte_len(part).unwrap_or(part.len());
+    let (init, init_len) = init_file_at(part, "");
     let frame = frame_at(part, detection::frame_offset(init_len));
     let t_parsed = instructions_now();
     let needed = init.scratch_bytes();
@@ -59,14 +77,7 @@ pub fn run(part: &'static [u8]) {
         init.finder.macs() as u32,
         init.initializer.macs() as u32
     );
-    if needed > SCRATCH {
-        defmt::error!(
-            "the init file's networks need {=u32} bytes per activation buffer; this firmware has {=u32}",
-            needed as u32,
-            SCRATCH as u32
-        );
-        fail();
-    }
+    check_scratch(needed);
     let mut counts = DetectCounts {
         instructions_parse: t_parsed - t_start,
         scratch_bytes: SCRATCH as u32,

@@ -22,8 +22,8 @@ use gpmm_core::format::detection::{DetectCounts, Frame};
 use gpmm_core::format::frame_fit::{self, FrameFitJob};
 use gpmm_core::model::MorphableModel;
 use gpmm_core::net::crop::crop_for_fit;
+use gpmm_core::format::init_file::MAX_INIT_LANDMARKS;
 use gpmm_core::net::face::Detection;
-use gpmm_core::format::init_file::{InitFile, MAX_INIT_LANDMARKS};
 
 /// Largest working side of this firmware's landmark-free fit.
 const SIDE: usize = PROFILE.frame_fit_side as usize;
@@ -45,14 +45,7 @@ pub fn run(part: &'static [u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_,
     };
     let init_at = frame_fit::next_section(job_at + job.len);
     let init_bytes = part.get(init_at..).unwrap_or(&[]);
-    let init = match InitFile::parse(init_bytes) {
-        Ok(i) => i,
-        Err(e) => {
-            defmt::error!("data partition: not a valid init file after the fit job: {}", defmt::Display2Format(&e));
-            fail();
-        }
-    };
-    let init_len = InitFile::byte_len(init_bytes).unwrap_or(init_bytes.len());
+    let (init, init_len) = detect::init_file_at(init_bytes, " after the fit job");
     let frame = detect::frame_at(part, frame_fit::next_section(init_at + init_len));
     if init.landmarks != model.landmarks().len() {
         defmt::error!(
@@ -63,14 +56,7 @@ pub fn run(part: &'static [u8], blob: &ModelBlob<'_>, model: &MorphableModel<'_,
         fail();
     }
     let needed = init.scratch_bytes();
-    if needed > detect::SCRATCH {
-        defmt::error!(
-            "the init file's networks need {=u32} bytes per activation buffer; this firmware has {=u32}",
-            needed as u32,
-            detect::SCRATCH as u32
-        );
-        fail();
-    }
+    detect::check_scratch(needed);
     let t_parsed = instructions_now();
 
     // 1. Detection: finder and initializer (their scratch is gone when `networks` returns).

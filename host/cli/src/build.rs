@@ -7,14 +7,14 @@ use gpmm_host::gp::kernel::{Hyperparameters, ModelKernel};
 use gpmm_host::gp::lowrank::{NystromOptions, RankSpec};
 use gpmm_host::gp::model::{build_model, BuildOptions, BuildStage, GpModel};
 use gpmm_host::gp::model_io;
-use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::mesh::template::{load_template, Template, TemplateOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-/// Arguments of `gpmm build`.
+/// The template scan and its landmarks, as `gpmm build` and `gpmm figure kernels` take them.
 #[derive(Debug, Args)]
-pub struct BuildArgs {
+pub struct TemplateArgs {
     /// The template scan: PLY with per-vertex colours, or glTF (.glb) with --texture.
     #[arg(long, value_name = "PATH")]
     pub template: PathBuf,
@@ -24,6 +24,21 @@ pub struct BuildArgs {
     /// Landmark file: {"scheme": "ibug68", "vertex_ids": [...]}.
     #[arg(long, value_name = "JSON")]
     pub landmarks: PathBuf,
+}
+
+impl TemplateArgs {
+    /// The template loaded and normalized with `options` (its texture the one given here).
+    pub fn load(&self, options: TemplateOptions) -> Result<Template> {
+        Ok(load_template(&self.template, &self.landmarks, &TemplateOptions { texture: self.texture.clone(), ..options })?)
+    }
+}
+
+/// Arguments of `gpmm build`.
+#[derive(Debug, Args)]
+pub struct BuildArgs {
+    /// The template scan, its texture and landmarks.
+    #[command(flatten)]
+    pub template: TemplateArgs,
     /// Kernel: standard-{full,rgb,xyz}, symmetric-{full,rgb,xyz} or correlated-{full,rgb,xyz}.
     #[arg(long, default_value = "symmetric-full", value_name = "NAME")]
     pub kernel: ModelKernel,
@@ -96,15 +111,9 @@ pub fn build(a: BuildArgs) -> Result<()> {
         rank_color: rank_spec(a.rank_color, a.captured_color, "color")?,
         nystrom: NystromOptions { points: a.nystrom_points.max(1), seed: a.seed, ..Default::default() },
     };
-    let topts = TemplateOptions {
-        texture: a.texture.clone(),
-        scale: a.scale,
-        no_crop: a.no_crop,
-        vertices: a.vertices,
-        default_color: a.default_color,
-    };
+    let topts = TemplateOptions { texture: None, scale: a.scale, no_crop: a.no_crop, vertices: a.vertices, default_color: a.default_color };
     let pb = spinner("loading and normalizing the template");
-    let template = load_template(&a.template, &a.landmarks, &topts)?;
+    let template = a.template.load(topts)?;
     pb.finish_and_clear();
     let t_template = t0.elapsed();
     eprintln!(

@@ -1,6 +1,6 @@
 //! `gpmm demo`: the main job end to end, through the same functions as the single commands.
 
-use crate::build::{build, info_json, BuildArgs};
+use crate::build::{build, info_json, BuildArgs, TemplateArgs};
 use crate::fit::run_fit;
 use crate::render::{figure_kernels, render, sample, KernelFigureArgs, RenderArgs, SampleArgs};
 use crate::synth::{synth, SynthArgs};
@@ -43,10 +43,9 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let (rank, vertices, nystrom_points, count) = if a.quick { (40, Some(1500), 600, 2) } else { (200, None, 2000, 6) };
 
     eprintln!("[1/6] building the symmetric-full model from the template");
+    let template = || TemplateArgs { template: ply.clone(), texture: None, landmarks: lm.clone() };
     build(BuildArgs {
-        template: ply.clone(),
-        texture: None,
-        landmarks: lm.clone(),
+        template: template(),
         kernel: ModelKernel::SymmetricFull,
         rank_shape: Some(rank),
         rank_color: Some(rank),
@@ -96,9 +95,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     eprintln!("[4/6] the kernel figure: samples of all nine kernels");
     let (fig_vertices, fig_ranks, fig_nystrom) = if a.quick { (800, (20, 20), 300) } else { (2000, (50, 50), 500) };
     figure_kernels(KernelFigureArgs {
-        template: ply,
-        texture: None,
-        landmarks: lm,
+        template: template(),
         vertices: fig_vertices,
         nystrom_points: fig_nystrom,
         ranks: fig_ranks,

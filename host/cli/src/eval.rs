@@ -1,6 +1,8 @@
 //! `gpmm eval recognition` and `gpmm eval specgen`: the paper's evaluation.
 
-use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalLandmarkArgs, EvalModelArgs};
+use crate::eval_setup::{
+    command_line, eval_factory, eval_selection, eval_world, start_on_synth, EvalFitArgs, EvalLandmarkArgs, EvalModelArgs,
+};
 use crate::progress::{bar_style, note, spinner};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -199,15 +201,11 @@ pub struct SpecgenArgs {
 /// Runs `gpmm eval recognition`.
 pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
     use gpmm_host::eval::recognition::report::{markdown, write_report, RecognitionReport};
-    use gpmm_host::eval::recognition::{evaluate, FitPlan, Progress, SynthSet};
+    use gpmm_host::eval::recognition::{evaluate, FitPlan, Progress};
     let t0 = Instant::now();
     let q = a.models.quick;
-    if !a.synth.is_dir() {
-        bail!("synth directory {} not found (make one with `gpmm synth --count 50 --seed 1 -o DIR`)", a.synth.display());
-    }
-    let landmarks = a.landmarks.source()?;
-    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(4)))?.with_landmarks(landmarks);
-    let mut sel = eval_selection(&a.models)?;
+    let start = start_on_synth(&a.synth, 50, a.identities.or(q.then_some(4)), &a.landmarks, &a.models, &a.output)?;
+    let (set, mut sel, mut factory) = (start.set, start.selection, start.factory);
     sel.kde = a.kde.map(|n| n as usize);
     if a.all {
         sel.kernels = ModelKernel::ALL.to_vec();
@@ -215,8 +213,6 @@ pub fn eval_recognition(a: RecognitionArgs) -> Result<()> {
         sel.pca = sel.pca.or(Some(10));
         sel.kde = sel.kde.or(Some(10));
     }
-    let world = eval_world(a.models.data.as_deref(), set.options.seed, set.options.identity_scale, set.options.modes);
-    let mut factory = eval_factory(&a.models, &a.output, world);
     eprintln!("{}: {} identities, {} images; probe yaws {:?}", a.synth.display(), set.identities.len(), set.images.len(), set.probe_yaws());
     let pb = spinner("preparing models");
     let rows = factory.rows(&sel, &mut |label, built| {

@@ -1,8 +1,8 @@
 //! `gpmm eval reconstruction`: the 3D error of fits against a set's true faces.
 
-use crate::eval_setup::{command_line, eval_factory, eval_selection, eval_world, EvalFitArgs, EvalLandmarkArgs, EvalModelArgs};
+use crate::eval_setup::{command_line, start_on_synth, EvalFitArgs, EvalLandmarkArgs, EvalModelArgs};
 use crate::progress::{bar_style, note, spinner};
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use gpmm_host::eval::reconstruction::report::{evaluate, markdown, write_report, Progress, ReconstructionReport};
 use gpmm_host::gp::kernel::ModelKernel;
@@ -38,21 +38,14 @@ pub struct ReconstructionArgs {
 
 /// Runs `gpmm eval reconstruction`.
 pub fn run(a: ReconstructionArgs) -> Result<()> {
-    use gpmm_host::eval::recognition::SynthSet;
     let t0 = Instant::now();
     let q = a.models.quick;
-    if !a.synth.is_dir() {
-        bail!("synth directory {} not found (make one with `gpmm synth --count 20 --seed 1 -o DIR`)", a.synth.display());
-    }
-    let landmarks = a.landmarks.source()?;
-    let describe = landmarks.describe();
-    let set = SynthSet::load(&a.synth, a.identities.or(q.then_some(2)))?.with_landmarks(landmarks);
-    let mut sel = eval_selection(&a.models)?;
+    let start = start_on_synth(&a.synth, 20, a.identities.or(q.then_some(2)), &a.landmarks, &a.models, &a.output)?;
+    let (set, mut sel, mut factory) = (start.set, start.selection, start.factory);
+    let describe = set.landmarks.describe();
     if sel.is_empty() {
         sel.kernels = vec![ModelKernel::SymmetricFull];
     }
-    let world_options = eval_world(a.models.data.as_deref(), set.options.seed, set.options.identity_scale, set.options.modes);
-    let mut factory = eval_factory(&a.models, &a.output, world_options);
     eprintln!("{}: {} identities, {} images", a.synth.display(), set.identities.len(), set.images.len());
     let pb = spinner("preparing models and true faces");
     let rows = factory.rows(&sel, &mut |label, built| {

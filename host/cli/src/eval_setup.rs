@@ -167,3 +167,37 @@ pub fn eval_world(data: Option<&Path>, seed: u64, scale: f32, modes: Option<usiz
     let data = data.map(Path::to_path_buf).unwrap_or_else(gpmm_host::data::default_data_dir);
     gpmm_host::synth::SynthOptions { seed, identity_scale: scale, modes, ..gpmm_host::synth::SynthOptions::with_data_dir(&data) }
 }
+
+/// What an evaluation on a `gpmm synth` set starts from: the set with its landmarks, the models
+/// the command line selects and the factory that builds them.
+pub struct SynthEvaluation {
+    /// The set's selected identities and images, their landmarks read as the flags say.
+    pub set: gpmm_host::eval::recognition::SynthSet,
+    /// The selected models (a command adds its defaults).
+    pub selection: gpmm_host::eval::models::ModelSelection,
+    /// Builds (or reuses) the models under the output directory, in the set's world.
+    pub factory: gpmm_host::eval::models::ModelFactory,
+}
+
+/// Starts an evaluation on the set in `synth` (its first `identities`, all when `None`): checks
+/// that the directory exists (the message suggests `gpmm synth --count {count}`), reads the
+/// landmark source and the set, and selects the models.
+pub fn start_on_synth(
+    synth: &Path,
+    count: usize,
+    identities: Option<usize>,
+    landmarks: &EvalLandmarkArgs,
+    models: &EvalModelArgs,
+    out: &Path,
+) -> Result<SynthEvaluation> {
+    use gpmm_host::eval::recognition::SynthSet;
+    if !synth.is_dir() {
+        anyhow::bail!("synth directory {} not found (make one with `gpmm synth --count {count} --seed 1 -o DIR`)", synth.display());
+    }
+    let landmarks = landmarks.source()?;
+    let set = SynthSet::load(synth, identities)?.with_landmarks(landmarks);
+    let selection = eval_selection(models)?;
+    let world = eval_world(models.data.as_deref(), set.options.seed, set.options.identity_scale, set.options.modes);
+    let factory = eval_factory(models, out, world);
+    Ok(SynthEvaluation { set, selection, factory })
+}

@@ -1,5 +1,6 @@
 //! `gpmm sample`, `gpmm render` and `gpmm figure`: pictures of a model.
 
+use crate::build::TemplateArgs;
 use crate::progress::spinner;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -7,7 +8,7 @@ use gpmm_core::render::ShLight;
 use gpmm_host::gp::model::GpModel;
 use gpmm_host::gp::model_io;
 use gpmm_host::mesh::io as mesh_io;
-use gpmm_host::mesh::template::{load_template, TemplateOptions};
+use gpmm_host::mesh::template::TemplateOptions;
 use gpmm_host::render::figure::{self, KernelFigureOptions};
 use gpmm_host::render::light::parse_background;
 use gpmm_host::render::{check_size, render_model, Background, RenderSettings, View};
@@ -102,15 +103,9 @@ pub enum FigureCommand {
 /// Arguments of `gpmm figure kernels`.
 #[derive(Debug, Args)]
 pub struct KernelFigureArgs {
-    /// The template scan: PLY with per-vertex colours, or glTF (.glb) with --texture.
-    #[arg(long, value_name = "PATH")]
-    pub template: PathBuf,
-    /// Albedo texture for a glTF template.
-    #[arg(long, value_name = "IMG")]
-    pub texture: Option<PathBuf>,
-    /// Landmark file: {"scheme": "ibug68", "vertex_ids": [...]}.
-    #[arg(long, value_name = "JSON")]
-    pub landmarks: PathBuf,
+    /// The template scan, its texture and landmarks.
+    #[command(flatten)]
+    pub template: TemplateArgs,
     /// Simplify the cropped template to at most N vertices.
     #[arg(long, default_value_t = 2000, value_name = "N")]
     pub vertices: usize,
@@ -281,9 +276,9 @@ pub fn figure_kernels(a: KernelFigureArgs) -> Result<()> {
     if !(a.shape_scale.is_finite() && a.shape_scale > 0.0 && a.shape_scale <= 10.0 && a.shape_yaw.is_finite()) {
         bail!("--shape-scale must be in (0, 10] and --shape-yaw a finite angle");
     }
-    let topts = TemplateOptions { texture: a.texture.clone(), vertices: Some(a.vertices.max(3)), ..Default::default() };
+    let topts = TemplateOptions { vertices: Some(a.vertices.max(3)), ..Default::default() };
     let pb = spinner("loading and normalizing the template");
-    let template = load_template(&a.template, &a.landmarks, &topts)?;
+    let template = a.template.load(topts)?;
     pb.finish_and_clear();
     let opts = KernelFigureOptions {
         rank_shape: a.ranks.0,
