@@ -14,7 +14,7 @@ use cortex_m::peripheral::{syst::SystClkSource, SYST};
 /// Nanoseconds per `TICK_DEN` SysTick ticks: instructions under QEMU `-icount shift=0`.
 const TICK_NS: u64 = 1_000_000_000;
 /// SysTick ticks per second (the core clock).
-const TICK_DEN: u64 = crate::MAP.core_clock_hz as u64;
+const TICK_DEN: u64 = crate::board::MAP.core_clock_hz as u64;
 
 /// Instructions (ns) in `ticks` SysTick ticks, rounded to nearest.
 fn ticks_to_instructions(ticks: u64) -> u64 {

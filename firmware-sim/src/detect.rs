@@ -8,11 +8,12 @@
 //! on this function's stack, not in the statics: a detection and a fit never run in one boot, so
 //! the fit's static RAM and stack margin stay as they were.
 
+use crate::board::{fail, PROFILE};
 use crate::clock::{self, instructions_now};
-use crate::{fail, hexlog, stack, PROFILE};
+use crate::{hexlog, stack};
 use gpmm_core::format::detection::{self, DetectCounts, Frame, MAX_RECORD_LANDMARKS, MAX_RECORD_LIGHT};
-use gpmm_core::net::face::{bounded_reading, find_face, read_landmarks, record_parts, Detection};
 use gpmm_core::format::init_file::InitFile;
+use gpmm_core::net::face::{bounded_reading, find_face, read_landmarks, record_parts, Detection};
 use gpmm_core::net::face_box::{is_face, FaceBox};
 use gpmm_core::net::{NetError, NetScratch};
 

@@ -9,8 +9,9 @@
 //! covered pixel) out of two static arrays; the rest (parameters, chain states, background
 //! model) is stack.
 
+use crate::board::{fail, Rasterizer, PROFILE};
 use crate::clock::instructions_now;
-use crate::{fail, hexlog, stack, Rasterizer, PROFILE};
+use crate::{hexlog, stack};
 use gpmm_core::error::FitError;
 use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, Stage, StandardFit, TargetImage};
 use gpmm_core::format::blob::ModelBlob;

@@ -11,18 +11,19 @@
 //! the working image (`PROFILE.frame_fit_side`² × 3 bytes) is on the stack frame that calls the
 //! fit, so it sits next to the fit's own stack (README, "The landmark-free fit").
 
+use crate::board::{fail, PROFILE};
 use crate::clock::{self, instructions_now};
+use crate::detect;
 use crate::fit::{self, fit_failed, Buffers, Sizes};
-use crate::{detect, fail, PROFILE};
 
 use gpmm_core::error::FitError;
 use gpmm_core::fit::{CoveredPixels, FitSettings, TargetImage};
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::detection::{DetectCounts, Frame};
 use gpmm_core::format::frame_fit::{self, FrameFitJob};
+use gpmm_core::format::init_file::MAX_INIT_LANDMARKS;
 use gpmm_core::model::MorphableModel;
 use gpmm_core::net::crop::crop_for_fit;
-use gpmm_core::format::init_file::MAX_INIT_LANDMARKS;
 use gpmm_core::net::face::Detection;
 
 /// Largest working side of this firmware's landmark-free fit.

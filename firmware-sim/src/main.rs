@@ -23,6 +23,7 @@
 #![no_std]
 #![no_main]
 
+mod board;
 mod clock;
 mod detect;
 mod fit;
@@ -31,58 +32,17 @@ mod hexlog;
 mod partition;
 mod stack;
 
+use board::{fail, Rasterizer, CACHE_PIXELS, CACHE_WORDS, MAP, MAX_PROJECTED, MAX_VERTICES, PROFILE};
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
 use gpmm_core::checksum::FrameChecksum;
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
 use gpmm_core::format::frame_fit as sections;
-use gpmm_core::geometry::Vec3;
 use gpmm_core::format::init_file::INIT_MAGIC;
-use gpmm_core::profile::{DeviceProfile, MemoryMap, M4F, M7, MPS2, NETDUINOPLUS2, NRF52840, STM32F405};
+use gpmm_core::geometry::Vec3;
 use gpmm_core::render::frame_cache::CompactBuffers;
-use gpmm_core::render::{vertex_stage, Cull, ProjectedVertex, TileRasterizer};
-
-/// The device profile this image is built and linked for (build.rs writes its memory map).
-pub(crate) const PROFILE: DeviceProfile = if cfg!(feature = "m7") { M7 } else { M4F };
-/// The memory map this image is linked for (build.rs picks it by the same features).
-pub(crate) const MAP: MemoryMap = if cfg!(feature = "stm32f405") {
-    STM32F405
-} else if cfg!(feature = "netduinoplus2") {
-    NETDUINOPLUS2
-} else if cfg!(feature = "nrf52840") {
-    NRF52840
-} else {
-    MPS2
-};
-
-/// The static per-vertex buffers: a `Vec3` pool of `vertex_pool` entries and a projected-vertex
-/// array of `projected_pool` entries (12 and 24 bytes of RAM each). A fit takes three `Vec3`
-/// (positions, albedos, normals) and one projected vertex per model vertex, a render one of each,
-/// so both take meshes of up to `projected_pool` vertices: 1,024 on `m4f` (its blob has at most
-/// 1,000), 3,072 on `m7` (at most 2,000). `m4f`: 36 + 24 KiB of buffers, the renderer's 46 KiB
-/// and the fit's 16 KiB frame cache leave about 70 KiB of the 192 KiB for the stack (the fit's
-/// peak is about 46 KiB: chain states and parameter copies). Nothing guards the stack's end, so
-/// these margins are checked by the tests (static + peak <= RAM).
-const MAX_VERTICES: usize = PROFILE.vertex_pool;
-/// Entries of the projected-vertex array: the largest mesh a fit or a render takes.
-const MAX_PROJECTED: usize = PROFILE.projected_pool;
-/// Tile side of the renderer (32: 28 KiB of tile buffers). Each tile row scans the whole triangle
-/// list once, so taller tiles scan less: at 16×16 a fit's image step took 2.95 M instructions, at
-/// 32×32 2.59 M (same fit). The host's parity runs use the profile's tile too.
-const TILE: usize = PROFILE.tile;
-/// Triangles binned per frame (12 bytes each); a frame with more drawn triangles bins per tile
-/// row, and a row with more scans the whole list (never lossy, but slow: with 1,024 per row the
-/// template's frame overflowed 2 rows and took 80 M instead of 28 M instructions). A 1,000-vertex
-/// blob has about 2,000 triangles, of which the front faces (about half) are drawn.
-const BIN: usize = PROFILE.bin;
-
-/// The renderer of this firmware (tile buffers + bin).
-pub(crate) type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
-/// Covered pixels the fit's compact frame cache holds (2 bytes each).
-const CACHE_PIXELS: usize = PROFILE.frame_cache_pixels;
-/// Words of the frame cache's coverage mask (one bit per image pixel).
-const CACHE_WORDS: usize = (PROFILE.image_side as usize * PROFILE.image_side as usize).div_ceil(32);
+use gpmm_core::render::{vertex_stage, Cull, ProjectedVertex};
 
 #[entry]
 fn main() -> ! {
@@ -226,12 +186,6 @@ fn render(m: &DeviceMeshView<'_>, normals: &mut [Vec3], projected: &mut [Project
         stats.drawn,
         stats.overflow_rows
     );
-}
-
-/// Ends the program with failure (QEMU exits with status 1).
-pub(crate) fn fail() -> ! {
-    defmt::error!("status=failed");
-    semihosting::process::exit(1)
 }
 
 #[panic_handler]

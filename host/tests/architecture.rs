@@ -1,6 +1,6 @@
-//! Architecture rules checked on the source tree: no import circle between the top-level modules
-//! of the host library, the `gpmm` program and the firmware, and no source file over 800 lines
-//! (tests aside).
+//! Architecture rules checked on the source tree: no import circle between the files of any crate
+//! of the workspace (nor between the top-level modules of the host library, the `gpmm` program and
+//! the firmware), the core's layers one way, and no source file over 800 lines (tests aside).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -187,10 +187,36 @@ fn super_references_are_found_at_the_top_level_only() {
     assert_eq!(module_path(src, Path::new("/r/src/fit.rs")), ["fit"].map(String::from).to_vec());
 }
 
+/// Lines of a source file that count towards its length: its own unit tests and the code of its
+/// doc examples (the lines between a doc comment's ``` fences) do not.
+fn counted_lines(text: &str) -> usize {
+    let code = text.split("\n#[cfg(test)]").next().unwrap_or("");
+    let mut in_example = false;
+    code.lines()
+        .filter(|line| {
+            let t = line.trim_start();
+            let doc = t.starts_with("///") || t.starts_with("//!");
+            let fence = doc && t[3..].trim_start().starts_with("```");
+            if fence {
+                in_example = !in_example;
+                return true;
+            }
+            !(in_example && doc)
+        })
+        .count()
+}
+
+#[test]
+fn an_example_does_not_count_towards_a_files_length() {
+    let text =
+        "/// Adds.\n///\n/// ```\n/// assert_eq!(1 + 1, 2);\n/// # let _ = 0;\n/// ```\npub fn add() {}\n#[cfg(test)]\nmod tests {}\n";
+    assert_eq!(counted_lines(text), 5);
+}
+
 #[test]
 fn no_source_file_is_over_800_lines() {
     let mut files = Vec::new();
-    for dir in ["core/src", "host/src", "host/cli/src", "firmware-sim/src", "tests/src"] {
+    for dir in ["core/src", "host/src", "host/cli/src", "host/python/src", "host/train/src", "firmware-sim/src", "tests/src"] {
         let d = repo().join(dir);
         if d.is_dir() {
             rust_files(&d, &mut files);
@@ -200,10 +226,7 @@ fn no_source_file_is_over_800_lines() {
     let long: Vec<String> = files
         .iter()
         .filter_map(|f| {
-            let text = std::fs::read_to_string(f).expect("read source");
-            // A file's own unit tests do not count.
-            let code = text.split("\n#[cfg(test)]").next().unwrap_or("");
-            let n = code.lines().count();
+            let n = counted_lines(&std::fs::read_to_string(f).expect("read source"));
             (n > 800).then(|| format!("{} ({n} lines)", f.display()))
         })
         .collect();
@@ -241,4 +264,307 @@ fn the_core_depends_one_way() {
     let code = code_of(&geometry);
     let refs = crate_refs(&code);
     assert!(refs.is_empty() && !code.contains("super::"), "{} (core geometry) imports {refs:?} of the crate", geometry.display());
+}
+
+// ---- File-level import graph -------------------------------------------------------------------
+
+/// Whether `c` may be part of an identifier.
+fn ident_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_'
+}
+
+/// The paths of a use tree or expression path starting at `text` (its first segment first):
+/// `a::b::{c, d::{e, f}}` gives `a::b::c`, `a::b::d::e` and `a::b::d::f`; `a::b::c(x)` gives
+/// `a::b::c`. A glob ends in `*`; `self` inside a group names the group's own path.
+fn use_paths(text: &str) -> Vec<Vec<String>> {
+    fn tree(chars: &[char], i: &mut usize, prefix: &[String], out: &mut Vec<Vec<String>>) {
+        let mut path = prefix.to_vec();
+        loop {
+            while *i < chars.len() && chars[*i].is_whitespace() {
+                *i += 1;
+            }
+            if chars.get(*i) == Some(&'{') {
+                *i += 1;
+                loop {
+                    tree(chars, i, &path, out);
+                    while *i < chars.len() && chars[*i].is_whitespace() {
+                        *i += 1;
+                    }
+                    match chars.get(*i) {
+                        Some(',') => *i += 1,
+                        Some('}') => {
+                            *i += 1;
+                            return;
+                        }
+                        _ => return,
+                    }
+                    while *i < chars.len() && chars[*i].is_whitespace() {
+                        *i += 1;
+                    }
+                    if chars.get(*i) == Some(&'}') {
+                        *i += 1;
+                        return;
+                    }
+                }
+            }
+            if chars.get(*i) == Some(&'*') {
+                *i += 1;
+                path.push("*".to_string());
+                out.push(path);
+                return;
+            }
+            let start = *i;
+            while *i < chars.len() && ident_char(chars[*i]) {
+                *i += 1;
+            }
+            if start == *i {
+                if path.len() > prefix.len() {
+                    out.push(path);
+                }
+                return;
+            }
+            let seg: String = chars[start..*i].iter().collect();
+            if seg == "self" && !prefix.is_empty() && path.len() == prefix.len() {
+                out.push(path);
+                return;
+            }
+            path.push(seg);
+            if chars.get(*i) == Some(&':') && chars.get(*i + 1) == Some(&':') {
+                *i += 2;
+            } else {
+                out.push(path);
+                return;
+            }
+        }
+    }
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = Vec::new();
+    tree(&chars, &mut 0, &[], &mut out);
+    out
+}
+
+/// The source files of the crate whose root is in `src`, by module path.
+fn crate_modules(src: &Path) -> BTreeMap<Vec<String>, PathBuf> {
+    let mut files = Vec::new();
+    rust_files(src, &mut files);
+    files.into_iter().map(|f| (module_path(src, &f), f)).collect()
+}
+
+/// Whether `code` defines an item called `name` (a function, type, constant, module or macro).
+fn defines(code: &str, name: &str) -> bool {
+    ["fn ", "struct ", "enum ", "trait ", "type ", "const ", "static ", "union ", "mod ", "macro_rules! "].iter().any(|kw| {
+        code.match_indices(&format!("{kw}{name}")).any(|(i, m)| {
+            let before = code[..i].chars().next_back().is_none_or(|c| !ident_char(c));
+            let after = code[i + m.len()..].chars().next().is_none_or(|c| !ident_char(c));
+            before && after
+        })
+    })
+}
+
+/// The `use` statements of `code` (re-exports and private imports alike, which a child module
+/// also sees), each as its text after `use` up to the `;`.
+fn use_statements(code: &str) -> Vec<&str> {
+    let mut out = Vec::new();
+    for (i, _) in code.match_indices("use ") {
+        let head = code[..i].rsplit('\n').next().unwrap_or("");
+        let t = head.trim();
+        if t.is_empty() || t == "pub" || (t.starts_with("pub(") && t.ends_with(')')) {
+            let rest = &code[i + 4..];
+            out.push(&rest[..rest.find(';').unwrap_or(rest.len())]);
+        }
+    }
+    out
+}
+
+/// `code` without its re-export statements (a facade's `pub use` passes names through; it is not
+/// an import of the file that says it).
+fn without_reexports(code: &str) -> String {
+    code.lines()
+        .scan(false, |inside, line| {
+            let starts = {
+                let t = line.trim_start();
+                t.starts_with("pub") && t.contains(" use ")
+            };
+            let skip = *inside || starts;
+            *inside = skip && !line.contains(';');
+            Some((!skip).then_some(line))
+        })
+        .flatten()
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Finds the file that defines what a path names, within one crate.
+struct Resolver<'a> {
+    /// The crate's files by module path.
+    modules: &'a BTreeMap<Vec<String>, PathBuf>,
+    /// Each file's code (no unit tests, no comments).
+    code: BTreeMap<Vec<String>, String>,
+}
+
+impl Resolver<'_> {
+    /// The file that `path` (absolute module segments, then item names) leads to, following the
+    /// re-exports of module facades; `None` outside the crate.
+    fn resolve(&self, path: &[String], depth: usize) -> Option<Vec<String>> {
+        let mut module: Vec<String> = Vec::new();
+        let mut rest = path;
+        while let Some((first, tail)) = rest.split_first() {
+            let mut next = module.clone();
+            next.push(first.clone());
+            if !self.modules.contains_key(&next) {
+                break;
+            }
+            module = next;
+            rest = tail;
+        }
+        let Some(item) = rest.first() else { return Some(module) };
+        let code = self.code.get(&module)?;
+        if depth > 8 || item == "*" || defines(code, item) {
+            return Some(module);
+        }
+        for statement in use_statements(code) {
+            for p in use_paths(statement) {
+                let leaf = p.last().map(String::as_str).unwrap_or("");
+                let alias_hit = statement.contains(&format!(" as {item}"));
+                if leaf == item || leaf == "*" || alias_hit {
+                    if let Some(abs) = self.absolute(&module, &p) {
+                        let target = if leaf == "*" {
+                            let mut t = abs[..abs.len() - 1].to_vec();
+                            t.push(item.clone());
+                            t
+                        } else {
+                            abs
+                        };
+                        if let Some(found) = self.resolve(&target, depth + 1) {
+                            if found != module && (leaf != "*" || self.code.get(&found).is_some_and(|c| defines(c, item))) {
+                                return Some(found);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Some(module)
+    }
+
+    /// `path` as written in module `from`, made absolute (`crate::`, `super::`, `self::` or a
+    /// child module's name first); `None` for a path that starts elsewhere (another crate).
+    fn absolute(&self, from: &[String], path: &[String]) -> Option<Vec<String>> {
+        let (first, tail) = path.split_first()?;
+        let mut base = from.to_vec();
+        let mut rest = tail;
+        match first.as_str() {
+            "crate" => base.clear(),
+            "self" => {}
+            "super" => {
+                base.pop();
+                while rest.first().is_some_and(|s| s == "super") {
+                    base.pop();
+                    rest = &rest[1..];
+                }
+            }
+            child => {
+                base.push(child.to_string());
+                if !self.modules.contains_key(&base) {
+                    return None;
+                }
+            }
+        }
+        let mut abs = base;
+        abs.extend(rest.iter().cloned());
+        Some(abs)
+    }
+}
+
+/// The import graph between the files of the crate whose root is in `src` (by module path): an
+/// edge from a file to each other file whose items its code names through `crate::`, `super::`,
+/// `self::` or a child module's name, re-exports followed to the file that defines the item.
+fn file_graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let modules = crate_modules(src);
+    let code: BTreeMap<Vec<String>, String> =
+        modules.iter().map(|(m, f)| (m.clone(), code_of(&std::fs::read_to_string(f).expect("read source")))).collect();
+    let resolver = Resolver { modules: &modules, code };
+    let name = |m: &[String]| {
+        let f = &modules[m];
+        f.strip_prefix(src).unwrap_or(f).display().to_string()
+    };
+    let mut graph = BTreeMap::new();
+    for (module, text) in &resolver.code {
+        let text = without_reexports(text);
+        let mut edges = BTreeSet::new();
+        for (i, _) in text.match_indices("::") {
+            // The start of the path this `::` belongs to: the identifier before it, if nothing but
+            // a non-path character precedes that identifier.
+            let head = &text[..i];
+            let start = head.rfind(|c: char| !ident_char(c)).map_or(0, |k| k + 1);
+            let before = &head[..start];
+            if before.ends_with("::") || before.ends_with('$') || start == i {
+                continue;
+            }
+            for path in use_paths(&text[start..]) {
+                let Some(abs) = resolver.absolute(module, &path) else { continue };
+                if let Some(target) = resolver.resolve(&abs, 0) {
+                    if target != *module {
+                        edges.insert(name(&target));
+                    }
+                }
+            }
+        }
+        graph.insert(name(module), edges);
+    }
+    graph
+}
+
+/// Asserts that no two files of the crate in `dir` (relative to the repository) import each
+/// other, directly or round a loop; it has at least `files` source files.
+fn assert_no_file_circle(dir: &str, files: usize) {
+    let graph = file_graph(&repo().join(dir));
+    assert!(graph.len() >= files, "expected the files of {dir}, found {:?}", graph.keys());
+    if let Some(circle) = find_circle(&graph) {
+        panic!("import circle between the files of {dir}: {}", circle.join(" -> "));
+    }
+}
+
+#[test]
+fn no_two_files_of_a_crate_import_each_other() {
+    for (dir, files) in [
+        ("core/src", 60),
+        ("host/src", 60),
+        ("host/cli/src", 15),
+        ("host/python/src", 5),
+        ("host/train/src", 8),
+        ("firmware-sim/src", 6),
+        ("tests/src", 1),
+    ] {
+        assert_no_file_circle(dir, files);
+    }
+}
+
+#[test]
+fn use_trees_are_expanded() {
+    let paths = |s: &str| use_paths(s).into_iter().map(|p| p.join("::")).collect::<Vec<_>>();
+    assert_eq!(paths("super::{a::X, b::{self, Y}, c};"), ["super::a::X", "super::b", "super::b::Y", "super::c"]);
+    assert_eq!(paths("crate::fit::run(x)"), ["crate::fit::run"]);
+    assert_eq!(paths("super::face::*;"), ["super::face::*"]);
+    let code = "pub use face::{FaceBox, find_face};\npub(crate) use scan::{\n    scan,\n};\nuse x::Y;";
+    assert_eq!(without_reexports(code), "use x::Y;");
+    assert!(defines("pub struct FaceBox {", "FaceBox") && !defines("pub struct FaceBoxes {", "FaceBox"));
+}
+
+#[test]
+fn a_file_circle_through_a_facade_is_found() {
+    let dir = std::env::temp_dir().join(format!("gpmm-arch-{}", std::process::id()));
+    let src = dir.join("src");
+    std::fs::create_dir_all(src.join("net")).expect("temp dir");
+    let write = |p: &str, t: &str| std::fs::write(src.join(p), t).expect("write");
+    write("lib.rs", "pub mod net;\n");
+    write("net/mod.rs", "pub mod face;\npub mod agreement;\npub use face::FaceBox;\npub use agreement::mean_gap;\n");
+    write("net/face.rs", "use super::mean_gap;\npub struct FaceBox;\n");
+    write("net/agreement.rs", "use super::FaceBox;\npub fn mean_gap() {}\n");
+    let circle = find_circle(&file_graph(&src));
+    write("net/face.rs", "pub struct FaceBox;\n");
+    let none = find_circle(&file_graph(&src));
+    std::fs::remove_dir_all(&dir).ok();
+    assert_eq!(circle.map(|c| c.len()), Some(3), "face -> agreement -> face");
+    assert_eq!(none, None);
 }
