@@ -135,14 +135,19 @@ fn find_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>
     graph.keys().find_map(|n| visit(n, graph, &mut Vec::new(), &mut done))
 }
 
+/// Asserts that `graph`, the import graph between the `what` (modules or files) of the crate in
+/// `dir`, has at least `least` nodes and no circle.
+fn assert_no_circle(graph: &BTreeMap<String, BTreeSet<String>>, dir: &str, what: &str, least: usize) {
+    assert!(graph.len() >= least, "expected the {what} of {dir}, found {:?}", graph.keys());
+    if let Some(circle) = find_circle(graph) {
+        panic!("import circle between the {what} of {dir}: {}", circle.join(" -> "));
+    }
+}
+
 /// Asserts that the crate in `dir` (relative to the repository) has at least `modules`
 /// top-level modules and no import circle between them.
 fn assert_no_import_circle(dir: &str, modules: usize) {
-    let graph = module_graph(&repo().join(dir));
-    assert!(graph.len() >= modules, "expected the modules of {dir}, found {:?}", graph.keys());
-    if let Some(circle) = find_circle(&graph) {
-        panic!("import circle between the modules of {dir}: {}", circle.join(" -> "));
-    }
+    assert_no_circle(&module_graph(&repo().join(dir)), dir, "modules", modules);
 }
 
 #[test]
@@ -518,11 +523,7 @@ fn file_graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
 /// Asserts that no two files of the crate in `dir` (relative to the repository) import each
 /// other, directly or round a loop; it has at least `files` source files.
 fn assert_no_file_circle(dir: &str, files: usize) {
-    let graph = file_graph(&repo().join(dir));
-    assert!(graph.len() >= files, "expected the files of {dir}, found {:?}", graph.keys());
-    if let Some(circle) = find_circle(&graph) {
-        panic!("import circle between the files of {dir}: {}", circle.join(" -> "));
-    }
+    assert_no_circle(&file_graph(&repo().join(dir)), dir, "files", files);
 }
 
 #[test]
