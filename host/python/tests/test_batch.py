@@ -49,10 +49,33 @@ def test_fit_folder_on_dask_equals_sequential(client, small_model_path, photo_fo
         same(a, b)
 
 
-def test_a_photo_without_landmarks_is_an_error(tmp_path, small_model_path, photo_folder):
-    (photo_folder / "extra.png").write_bytes((photo_folder / "p0_astronaut.png").read_bytes())
-    with pytest.raises(FileNotFoundError, match="extra.pts"):
-        gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
+def test_a_bad_photo_is_recorded_and_the_others_are_fitted(small_model_path, photo_folder):
+    """A photo without landmarks, a malformed .pts and an image that is not one each give a result
+    that says why; every other photo is fitted as in a folder without them."""
+    clean = gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
+    astronaut = (photo_folder / "p0_astronaut.png").read_bytes()
+    (photo_folder / "a_no_points.png").write_bytes(astronaut)
+    (photo_folder / "b_bad_points.png").write_bytes(astronaut)
+    (photo_folder / "b_bad_points.pts").write_text("version: 1\nn_points: 68\n{\n1 2\n}\n")
+    (photo_folder / "c_not_an_image.png").write_bytes(b"not a png")
+    (photo_folder / "c_not_an_image.pts").write_bytes((photo_folder / "p0_astronaut.pts").read_bytes())
+    try:
+        results = gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
+    finally:
+        for name in ("a_no_points.png", "b_bad_points.png", "b_bad_points.pts", "c_not_an_image.png", "c_not_an_image.pts"):
+            (photo_folder / name).unlink()
+    by_name = {r["name"]: r for r in results}
+    assert len(results) == len(clean) + 3
+    assert "a_no_points.pts" in by_name["a_no_points.png"]["error"]
+    assert by_name["a_no_points.png"]["landmarks_file"] is None
+    assert "b_bad_points.pts" in by_name["b_bad_points.png"]["error"]
+    assert "c_not_an_image.png" in by_name["c_not_an_image.png"]["error"]
+    for want in clean:
+        got = by_name[want["name"]]
+        assert got["error"] is None and want["error"] is None
+        same(got, want)
+    # The errors are what json.dumps takes too.
+    assert json.loads(json.dumps(gpmm.jsonable(results)))[0]["error"] == by_name["a_no_points.png"]["error"]
 
 
 def test_each_result_names_its_photo(small_model_path, photo_folder):

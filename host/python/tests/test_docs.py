@@ -1,6 +1,7 @@
 """docs/python.md runs as written: its ```python blocks are executed in order, in one namespace,
 in an empty directory, with the data directory given by GPMM_DATA (as gpmm.data_dir() reads it)."""
 
+import os
 import re
 
 import numpy as np
@@ -46,3 +47,17 @@ def test_the_tour_runs_as_written(tmp_path, monkeypatch, data_dir):
     assert (tmp_path / learned["model"]).is_file() and learned["iterations"][0]["accepted"] >= 2
     two = [r for r in learned["iterations"][0]["records"] if r["image"].endswith("two_people.jpg")]
     assert len(two) == 1 and not two[0]["accepted"] and "two_people.pts" in two[0]["reason"], two
+
+
+def test_the_tour_runs_as_a_script(tmp_path, data_dir):
+    """The tour's blocks pasted one after another into a file run as a program: nothing in them
+    needs the `if __name__ == "__main__":` guard a cluster of worker processes would."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "tour.py"
+    script.write_text("\n".join(code for _, code in python_blocks(DOC.read_text())))
+    env = {**os.environ, "GPMM_DATA": str(data_dir)}
+    p = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert (tmp_path / "face.gpmm").is_file()

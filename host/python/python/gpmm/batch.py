@@ -6,11 +6,13 @@
 ...     results = gpmm.batch.fit_folder("face.gpmm", "photos/", client=client, image_steps=300)
 
 Every image ``NAME.png`` / ``.jpg`` / ``.jpeg`` / ``.ppm`` is fitted with the landmark file
-``NAME.pts`` beside it (an image without one is an error, see :func:`find_photos`). Each fit is
-the same deterministic fit as ``gpmm fit`` with the same settings and seed, so the results equal
-sequential fits (``client=None``). Each result names its photo: ``name`` (the file name),
-``path`` and ``image`` (its path), ``landmarks_file``; :func:`gpmm.jsonable` makes the results
-what ``json.dumps`` takes.
+``NAME.pts`` beside it. Each fit is the same deterministic fit as ``gpmm fit`` with the same
+settings and seed, so the results equal sequential fits (``client=None``). Each result names its
+photo: ``name`` (the file name), ``path`` and ``image`` (its path), ``landmarks_file``, and
+``error``: ``None``, or, for a photo that could not be fitted (no landmark file beside it, an
+unreadable image, a malformed ``.pts``, landmarks the fit refuses), the message saying why; one
+bad photo loses nothing of the others. :func:`gpmm.jsonable` makes the results what
+``json.dumps`` takes.
 
 The model reaches the workers in one of two ways: a *path* (every worker loads it once, from a
 file system all workers see) or a :class:`gpmm.Model` (scattered once to every worker; it
@@ -26,7 +28,7 @@ import threading
 from pathlib import Path
 from typing import Any, Iterable, Optional, Union
 
-from . import Model, load, load_image, read_pts
+from . import GpmmError, Model, load, load_image, read_pts
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".ppm")
 
@@ -52,16 +54,15 @@ def model_loads() -> int:
     return _loads
 
 
-def find_photos(folder: Union[str, os.PathLike]) -> list[tuple[str, str]]:
-    """The (image, landmarks) path pairs of a folder, sorted by name; an image without a
-    ``.pts`` beside it is an error (so that nothing is skipped silently)."""
-    pairs = []
+def find_photos(folder: Union[str, os.PathLike]) -> list[tuple[str, Optional[str]]]:
+    """The (image, landmarks) path pairs of a folder, sorted by name; the landmarks are ``None``
+    for an image without a ``.pts`` beside it (its result says so). A folder without images is
+    an error."""
+    pairs: list[tuple[str, Optional[str]]] = []
     for p in sorted(Path(folder).iterdir()):
         if p.suffix.lower() in IMAGE_SUFFIXES:
             pts = p.with_suffix(".pts")
-            if not pts.is_file():
-                raise FileNotFoundError(f"{p}: no landmark file {pts.name} beside it")
-            pairs.append((str(p), str(pts)))
+            pairs.append((str(p), str(pts) if pts.is_file() else None))
     if not pairs:
         raise FileNotFoundError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in it")
     return pairs
@@ -79,15 +80,30 @@ def _summary(name: str, path: Optional[str], landmarks: Optional[str], fit: dict
     out["path"] = path
     out["image"] = path if path is not None else name
     out["landmarks_file"] = landmarks
+    out["error"] = None
     return out
 
 
-def fit_file(model: Union[str, Model], image: str, landmarks: str, pts_one_based: bool = False,
+def fit_file(model: Union[str, Model], image: str, landmarks: Optional[str], pts_one_based: bool = False,
              keep_images: bool = False, **settings: Any) -> dict[str, Any]:
-    """Fits one photo (on whichever process runs it); ``model`` is a path (cached per process) or a Model."""
+    """Fits one photo (on whichever process runs it); ``model`` is a path (cached per process) or a
+    Model. A photo that cannot be fitted (no landmarks, a bad image or ``.pts``, refused data)
+    gives a result with its ``error`` instead of raising, so a batch goes on."""
+    name = os.path.basename(image)
+    if landmarks is None:
+        missing = os.path.splitext(image)[0] + ".pts"
+        return _failed(name, image, None, f"{image}: no landmark file {os.path.basename(missing)} beside it")
     m = worker_model(model) if isinstance(model, str) else model
-    fit = m.fit(load_image(image), read_pts(landmarks, pts_one_based), **settings)
-    return _summary(os.path.basename(image), image, landmarks, fit, keep_images)
+    try:
+        fit = m.fit(load_image(image), read_pts(landmarks, pts_one_based), **settings)
+    except GpmmError as e:
+        return _failed(name, image, landmarks, str(e))
+    return _summary(name, image, landmarks, fit, keep_images)
+
+
+def _failed(name: str, path: str, landmarks: Optional[str], error: str) -> dict[str, Any]:
+    """The result of a photo that could not be fitted: its names and why."""
+    return {"name": name, "path": path, "image": path, "landmarks_file": landmarks, "error": error}
 
 
 def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os.PathLike],
@@ -98,8 +114,9 @@ def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os
     ``client``: a ``distributed.Client`` (a ``LocalCluster`` here, a scheduler address in
     production); ``None`` fits sequentially in this process. Results come back in file-name
     order: fit.json's fields (pose, coefficients, light, fitted landmarks, log-likelihood,
-    acceptance, ...) with ``name`` (the photo's file name), ``path`` and ``image`` (its path)
-    and ``landmarks_file``; the images (``overlay`` ...) only with ``keep_images=True``.
+    acceptance, ...) with ``name`` (the photo's file name), ``path`` and ``image`` (its path),
+    ``landmarks_file`` and ``error`` (``None``); the images (``overlay`` ...) only with
+    ``keep_images=True``. A photo that could not be fitted has only its names and ``error``.
     """
     pairs = find_photos(folder)
     model: Union[str, Model] = model_path if isinstance(model_path, Model) else os.fspath(model_path)
