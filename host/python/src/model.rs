@@ -7,7 +7,7 @@ use crate::arrays::{
 use crate::errors::{err, read_error, value_error, write_error};
 use crate::from_arrays::{model_from_arrays, PartArrays};
 use gpmm_host::device::quantize::{self as q, Bits, Profile, QuantizeOptions};
-use gpmm_host::fit::{fit_image, overlay, report, ReportInputs};
+use gpmm_host::fit::{camera_space_mesh, fit_image, overlay, report, ReportInputs};
 use gpmm_host::gp::model::{GpModel, PartBasis};
 use gpmm_host::gp::{model_io, statismo};
 use gpmm_host::learn::shading::ShadingBases;
@@ -399,6 +399,13 @@ impl Model {
         dict.set_item("light", vec3_to_numpy(py, &rep.light)?)?;
         dict.set_item("translation_mm", vec_to_numpy(py, rep.translation_mm.to_vec()))?;
         dict.set_item("fitted_landmarks", points_to_numpy(py, &rep.fitted_landmarks)?)?;
+        let mesh = camera_space_mesh(&self.inner, &outcome.params).map_err(err)?;
+        let mesh_dict = PyDict::new(py);
+        let f32s = |v: &[[f64; 3]]| v.iter().map(|p| p.map(|x| x as f32)).collect::<Vec<[f32; 3]>>();
+        mesh_dict.set_item("vertices", vec3_to_numpy(py, &f32s(&mesh.positions))?)?;
+        mesh_dict.set_item("triangles", vec3_to_numpy(py, &mesh.triangles)?)?;
+        mesh_dict.set_item("colors", vec3_to_numpy(py, &f32s(&mesh.colors))?)?;
+        dict.set_item("mesh", mesh_dict)?;
         if let (Some(post), Ok(Some(d))) = (&rep.posterior, dict.get_item("posterior")) {
             let d = d.cast::<PyDict>().map_err(|_| value_error("posterior summary is not a dict"))?;
             for (key, v) in [

@@ -85,3 +85,27 @@ def test_fit_settings_and_errors(small_model_path, astronaut, tmp_path):
     a = model.fit(image, points, landmark_steps=200, image_steps=5, seed=1, set=["image.pixel_sigma=0.05"])
     b = model.fit(image, points, landmark_steps=200, image_steps=5, seed=2)
     assert a["shape"].tolist() != b["shape"].tolist(), "seeds and settings reach the fit"
+
+
+def test_a_fit_gives_its_face_as_a_mesh_in_camera_space(small_model_path, py_fit):
+    """The fit's mesh is the fitted instance moved rigidly by the fitted pose: the same colours,
+    every distance between vertices kept, the centre where the translation puts it."""
+    model = gpmm.load(small_model_path)
+    fit = py_fit
+    mesh = fit["mesh"]
+    positions, colors = model.instance(fit["shape"], fit["color"])
+    n = model.vertices
+    assert mesh["vertices"].shape == (n, 3) and mesh["vertices"].dtype == np.float32
+    tri = mesh["triangles"]
+    assert tri.ndim == 2 and tri.shape[1] == 3 and len(tri) > n and tri.dtype == np.uint32 and tri.max() < n
+    np.testing.assert_array_equal(mesh["colors"], colors)
+    # A rigid motion: pairwise distances (a sample of pairs) are those of the model-space instance.
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, n, 200), rng.integers(0, n, 200)
+    moved = np.linalg.norm(mesh["vertices"][a] - mesh["vertices"][b], axis=1)
+    rest = np.linalg.norm(positions[a] - positions[b], axis=1)
+    np.testing.assert_allclose(moved, rest, rtol=1e-4, atol=1e-3)
+    # In front of the camera, about the translation's distance away, and not the model-space instance.
+    assert (mesh["vertices"][:, 2] > 0).all() or (mesh["vertices"][:, 2] < 0).all()
+    assert abs(np.linalg.norm(mesh["vertices"].mean(axis=0)) - np.linalg.norm(fit["translation_mm"])) < 0.2 * np.linalg.norm(fit["translation_mm"])
+    assert not np.allclose(mesh["vertices"], positions)

@@ -9,6 +9,7 @@ use super::options::FitOptions;
 use super::params::{Params, KC, KS};
 use super::posterior::PosteriorSummary;
 use crate::gp::model::GpModel;
+use crate::mesh::Mesh;
 use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::error::FitError;
 use gpmm_core::fit::{standard_fit, TargetImage};
@@ -136,6 +137,18 @@ pub fn fit_prepared(
         landmark_seconds,
         image_seconds,
     })
+}
+
+/// The fitted face in camera space: the fitted instance (mm) moved by the fitted pose, with its
+/// fitted albedo and the model's triangles (the frame whose points the camera projects).
+pub fn camera_space_mesh(model: &GpModel, params: &Params) -> Result<Mesh, FitRunError> {
+    let mut mesh =
+        model.instance(params.shape_coeffs(), params.color_coeffs()).map_err(|e| FitRunError::Model(format!("instance: {e}")))?;
+    for p in &mut mesh.positions {
+        let q = params.pose.transform_point([p[0] as f32, p[1] as f32, p[2] as f32]);
+        *p = q.map(f64::from);
+    }
+    Ok(mesh)
 }
 
 /// The core's view of a model.

@@ -148,7 +148,8 @@ class Model:
         landmark_calibration: Optional[Union[str, PathLike[str]]] = None,
     ) -> dict[str, Any]:
         """Fits the model to a photo (H x W x 3 uint8 RGB, or RGBA: alpha dropped) as `gpmm fit` does;
-        fit.json's fields plus 'overlay', 'render', 'working_image'."""
+        fit.json's fields plus 'overlay', 'render', 'working_image' and 'mesh': the fitted face in
+        camera space ('vertices' N x 3 float32 mm, 'triangles' T x 3 uint32, 'colors' N x 3 float32)."""
     def quantize(
         self,
         profile: str = "m4f",

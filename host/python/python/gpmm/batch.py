@@ -68,14 +68,15 @@ def find_photos(folder: Union[str, os.PathLike]) -> list[tuple[str, Optional[str
     return pairs
 
 
-IMAGES = ("overlay", "render", "working_image")
+# A fit's large fields: kept in a batch's results only when asked for.
+LARGE = ("overlay", "render", "working_image", "mesh")
 
 
 def _summary(name: str, path: Optional[str], landmarks: Optional[str], fit: dict[str, Any],
              keep_images: bool) -> dict[str, Any]:
-    """A fit's fields (its images only with ``keep_images``) named after the photo: the fit of an
+    """A fit's fields (its images and mesh only with ``keep_images``) named after the photo: the fit of an
     array calls its image and landmarks ``<array>``, which the photo's own names replace."""
-    out = {k: v for k, v in fit.items() if keep_images or k not in IMAGES}
+    out = {k: v for k, v in fit.items() if keep_images or k not in LARGE}
     out["name"] = name
     out["path"] = path
     out["image"] = path if path is not None else name
@@ -115,8 +116,8 @@ def fit_folder(model_path: Union[str, os.PathLike, Model], folder: Union[str, os
     production); ``None`` fits sequentially in this process. Results come back in file-name
     order: fit.json's fields (pose, coefficients, light, fitted landmarks, log-likelihood,
     acceptance, ...) with ``name`` (the photo's file name), ``path`` and ``image`` (its path),
-    ``landmarks_file`` and ``error`` (``None``); the images (``overlay`` ...) only with
-    ``keep_images=True``. A photo that could not be fitted has only its names and ``error``.
+    ``landmarks_file`` and ``error`` (``None``); the images (``overlay`` ...) and the ``mesh`` only
+    with ``keep_images=True``. A photo that could not be fitted has only its names and ``error``.
     """
     pairs = find_photos(folder)
     model: Union[str, Model] = model_path if isinstance(model_path, Model) else os.fspath(model_path)
