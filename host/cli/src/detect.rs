@@ -4,6 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_core::net::face::{Detection, Reading};
+use gpmm_host::detect::record::FaceRecord;
 use gpmm_host::detect::{CheckedFaces, Detector};
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};
@@ -90,18 +91,7 @@ pub fn detect(a: DetectArgs) -> Result<()> {
         drawn.save(path).with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
-    let list: Vec<serde_json::Value> = faces
-        .iter()
-        .map(|det| {
-            serde_json::json!({
-                "box": { "cx": det.face.cx, "cy": det.face.cy, "size": det.face.size, "score": det.face.score },
-                "yaw_deg": det.angles[0].to_degrees(),
-                "pitch_deg": det.angles[1].to_degrees(),
-                "roll_deg": det.angles[2].to_degrees(),
-                "landmarks": det.landmarks.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>(),
-            })
-        })
-        .collect();
+    let list: Vec<FaceRecord> = faces.iter().map(FaceRecord::from).collect();
     let json = serde_json::json!({ "image": a.image, "chosen": chosen, "faces": list });
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())

@@ -8,6 +8,7 @@
 
 mod args;
 mod arrays;
+mod detect;
 mod errors;
 mod from_arrays;
 mod learn;
@@ -175,6 +176,7 @@ fn _gpmm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
     m.add_function(wrap_pyfunction!(load_image, m)?)?;
     m.add_function(wrap_pyfunction!(read_pts, m)?)?;
+    m.add_function(wrap_pyfunction!(detect::detect, m)?)?;
     m.add_function(wrap_pyfunction!(data_dir, m)?)?;
     m.add_function(wrap_pyfunction!(learn::learn_wake, m)?)?;
     m.add_function(wrap_pyfunction!(learn::learn_run, m)?)?;

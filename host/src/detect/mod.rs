@@ -6,6 +6,7 @@ pub mod check;
 pub mod check_fit;
 pub mod eval;
 pub mod photos;
+pub mod record;
 
 use check::FaceCheck;
 use gpmm_core::format::init_file::InitFile;

@@ -16,6 +16,7 @@ __all__ = [
     "__version__",
     "build",
     "data_dir",
+    "detect",
     "import_h5",
     "inspect",
     "kernels",
@@ -203,6 +204,17 @@ def load_image(path: _Path) -> npt.NDArray[np.uint8]:
 
 def read_pts(path: _Path, one_based: bool = False) -> npt.NDArray[np.float32]:
     """Reads an iBUG .pts file as L x 2 float32."""
+
+def detect(
+    image: npt.ArrayLike,
+    init: _Path,
+    min_score: float = 0.05,
+    smallest_face: float = 32.0,
+    refine: int = 3,
+    face_check: bool = True,
+) -> list[dict[str, Any]]:
+    """Every face the init file finds in an image (H x W x 3 uint8), best first, as `gpmm detect`
+    lists them: 'box' (cx, cy, size, score), 'yaw_deg', 'pitch_deg', 'roll_deg', 'landmarks' (L x 2)."""
 
 def data_dir() -> Path:
     """The data directory: $GPMM_DATA if set, else ../shared/data (FileNotFoundError if absent)."""
