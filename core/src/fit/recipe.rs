@@ -534,14 +534,7 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
     /// Accepted over proposed in the whole landmark chain, its pose and shape phases together
     /// (either may have no steps: by default the pose phase has them all).
     pub fn landmark_acceptance(&self) -> f32 {
-        let phases = [&self.pose_acceptance, &self.landmark.acceptance];
-        let proposed: u32 = phases.iter().flat_map(|a| a.proposed.iter()).fold(0, |s, &n| s.saturating_add(n));
-        let accepted: u32 = phases.iter().flat_map(|a| a.accepted.iter()).fold(0, |s, &n| s.saturating_add(n));
-        if proposed == 0 {
-            0.0
-        } else {
-            accepted as f32 / proposed as f32
-        }
+        self.pose_acceptance.combined(&self.landmark.acceptance).overall()
     }
 
     /// The fit record's figures of this fit (`GPFR`): the firmware logs them and the host's parity

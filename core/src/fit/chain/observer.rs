@@ -233,6 +233,17 @@ impl Acceptance {
         }
     }
 
+    /// The counts of `self` and `other` together (two phases of one chain, say).
+    pub fn combined(&self, other: &Acceptance) -> Acceptance {
+        let mut out = *self;
+        for (mine, theirs) in
+            [(&mut out.proposed, &other.proposed), (&mut out.passed_filter, &other.passed_filter), (&mut out.accepted, &other.accepted)]
+        {
+            mine.iter_mut().zip(theirs).for_each(|(a, b)| *a = a.saturating_add(*b));
+        }
+        out
+    }
+
     /// Counts one proposal of component `id` (ids beyond [`MAX_PROPOSALS`] are ignored).
     pub fn count(&mut self, id: usize, passed: bool, accepted: bool) {
         if let Some(v) = self.proposed.get_mut(id) {
