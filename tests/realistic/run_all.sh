@@ -5,6 +5,7 @@
 # /tmp/gpmm-realistic), never into the repository.
 #
 #   bash tests/realistic/run_all.sh [--quick] [--model MODEL.gpmm] [--seed S] [--count N] [--calibration CAL.json]
+#   bash tests/realistic/run_all.sh --mapping-only     # only $REALISTIC_DATA/mapping.json (a few renders)
 #
 # --calibration: also fit with the detector's landmarks corrected by a landmark calibration
 # (`gpmm calibrate-landmarks`), learned on ANOTHER set (e.g. the seed-21 development set), never
@@ -20,7 +21,7 @@ data="${GPMM_DATA:-$(cd "$root/.." && pwd)/shared/data}"
 out="${REALISTIC_DATA:-/tmp/gpmm-realistic}"
 venv="${REALISTIC_VENV:-/tmp/gpmm-realistic-venv}"
 gpmm="${GPMM_BIN:-$root/target/release/gpmm}"
-count=50; yaws="-45,-30,-15,0,15,30,45"; spp=64; model=""; seed=11; calibration=""
+count=50; yaws="-45,-30,-15,0,15,30,45"; spp=64; model=""; seed=11; calibration=""; mapping_only=""
 while [ $# -gt 0 ]; do
     case "$1" in
         --quick) count=2; yaws="0,30"; spp=16; shift ;;
@@ -28,6 +29,7 @@ while [ $# -gt 0 ]; do
         --seed) seed="$2"; shift 2 ;;
         --count) count="$2"; shift 2 ;;
         --calibration) calibration="$2"; shift 2 ;;
+        --mapping-only) mapping_only=1; spp=16; shift ;;
         *) echo "unknown argument $1" >&2; exit 2 ;;
     esac
 done
@@ -38,7 +40,7 @@ if [ ! -x "$venv/bin/python" ]; then
 fi
 py="$venv/bin/python"
 mkdir -p "$out"
-if [ -z "$model" ]; then
+if [ -z "$model" ] && [ -z "$mapping_only" ]; then
     model="$out/model.gpmm"
     [ -f "$model" ] || "$gpmm" build --template "$data/template/lee-perry-smith/lee-perry-smith.ply" \
         --landmarks "$data/template/lee-perry-smith/landmarks_ibug68.json" --kernel symmetric-full -o "$model"
@@ -47,6 +49,7 @@ fi
 "$gpmm" synth --ict "$data/ict" --template-dir "$data/template/lee-perry-smith" --count 6 --seed 100 --yaws=0 -o "$out/calib-scenes"
 "$py" "$here/make_set.py" "$out/calib-scenes" "$out/calib" --ict "$data/ict" --spp "$spp" --seed 100
 "$py" "$here/detect_landmarks.py" calibrate "$out/calib" -o "$out/mapping.json"
+[ -z "$mapping_only" ] || exit 0
 # The set (seed 11 is the reported test set; another seed, e.g. 21, makes a development set to tune
 # on): other identities, poses, lights than the calibration set.
 "$gpmm" synth --ict "$data/ict" --template-dir "$data/template/lee-perry-smith" --count "$count" --seed "$seed" --yaws="$yaws" -o "$out/scenes"

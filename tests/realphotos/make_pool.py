@@ -99,6 +99,10 @@ FACE_FREE = {
     "open-mmlab/mmpose": r"^tests/data/(interhand2\.6m|onehand10k|deepfasion2)/",
 }
 
+# The repositories the recipe trains on (docs/real-photos.md, "The recipe"), and so the start gpmm ships:
+# the first RECIPE_SOURCES of SOURCES. The others make the unseen pool set the recipe is tuned on.
+RECIPE_SOURCES = 4
+
 # Two photos whose hashes (below) differ in at most this many of their 256 bits are the same photo (another
 # size, another compression, a few pixels of border): only the first one met is kept, and one that matches a
 # photo of an --exclude folder is left out as its byte-identical copy would be.
@@ -164,7 +168,14 @@ def main():
                     help="where a repository of SOURCES is checked out (repeat per repository)")
     ap.add_argument("--exclude", action="append", default=[], metavar="DIR",
                     help="photos of DIR (and its subfolders) are never taken into the pool")
+    ap.add_argument("--recipe", action="store_true",
+                    help=f"only the first {RECIPE_SOURCES} repositories of SOURCES, the recipe's (each needs a --checkout)")
+    ap.add_argument("--held", action="store_true",
+                    help=f"only the repositories after the first {RECIPE_SOURCES}: the unseen pool set")
     a = ap.parse_args()
+    if a.recipe and a.held:
+        sys.exit("--recipe and --held take disjoint repositories: give one")
+    sources = SOURCES[:RECIPE_SOURCES] if a.recipe else SOURCES[RECIPE_SOURCES:] if a.held else SOURCES
     from PIL import Image
     checkouts = {}
     for c in a.checkout:
@@ -190,8 +201,10 @@ def main():
     for repo, _, _ in SOURCES:  # a short file-name prefix per repository; the full name where short ones clash
         short = repo.split("/")[1].split("-")[0].lower()
         prefixes[repo] = short if short not in prefixes.values() else re.sub(r"[^a-z0-9]+", "_", repo.lower())
-    for repo, licence, pattern in SOURCES:
+    for repo, licence, pattern in sources:
         co = checkouts.get(repo)
+        if co is None and a.recipe:
+            sys.exit(f"--recipe: no --checkout for {repo}; the recipe's pool needs all of its first {RECIPE_SOURCES} repositories")
         if co is None:
             print(f"warning: no --checkout for {repo}; its photos are left out", file=sys.stderr)
             continue
@@ -200,8 +213,9 @@ def main():
         for name in sorted(n for n in co.files() if re.match(pattern, n)):
             data = co.read(name)
             stem = f"{prefix}_{os.path.splitext(name)[0].replace('/', '_')}"
-            if not data:
-                print(f"warning: {repo}: {name} is empty (a large-file pointer?); left out", file=sys.stderr)
+            if not data or data.startswith(b"version https://git-lfs"):
+                what = "a Git LFS pointer, not the photo" if data else "empty"
+                print(f"warning: {repo}: {name} is {what}; left out", file=sys.stderr)
                 summary["left_out"] += 1
                 continue
             if hashlib.sha256(data).hexdigest() in excluded:
@@ -247,7 +261,7 @@ def main():
             summary["with_landmarks"] += sum(f["landmarks"] is not None for f in faces)
             print(f"{stem}.jpg: {len(faces)} face(s)")
     with open(os.path.join(a.out, "sources.json"), "w") as f:
-        json.dump({"sources": [{"repository": r, "licence": l, "photos": p} for r, l, p in SOURCES],
+        json.dump({"sources": [{"repository": r, "licence": l, "photos": p} for r, l, p in sources],
                    "photos": listed, "summary": summary}, f, indent=1)
     print(json.dumps(summary))
 
