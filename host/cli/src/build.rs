@@ -86,8 +86,9 @@ pub struct BuildArgs {
 /// Arguments of `gpmm info`.
 #[derive(Debug, Args)]
 pub struct InfoArgs {
-    /// Model file.
-    pub model: PathBuf,
+    /// Model file, or an init file (`gpmm train-init`): its sizes and metadata (what it was
+    /// trained for and on). Without a file: the start gpmm ships.
+    pub model: Option<PathBuf>,
 }
 
 pub use gpmm_host::render::light::parse_rgb;
@@ -192,9 +193,36 @@ pub fn model_summary(model: &GpModel, bytes: u64) -> serde_json::Value {
     model.summary(bytes)
 }
 
-/// Runs `gpmm info`: the model file's key figures as JSON on stdout.
+/// Runs `gpmm info`: the model file's key figures, or an init file's sizes and metadata, as JSON
+/// on stdout.
 pub fn info(a: InfoArgs) -> Result<()> {
-    let json = info_json(&a.model)?;
+    let json = match &a.model {
+        Some(path) if !is_init_file(path) => info_json(path)?,
+        path => init_info(path.as_deref())?,
+    };
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
+}
+
+/// Whether the file at `path` starts as an init file does (`GPMI`).
+fn is_init_file(path: &Path) -> bool {
+    use std::io::Read;
+    let mut magic = [0u8; 4];
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && &magic == b"GPMI"
+}
+
+/// An init file's (the shipped start's, for `None`) sizes and metadata as JSON.
+fn init_info(path: Option<&Path>) -> Result<serde_json::Value> {
+    let detector = gpmm_host::detect::shipped::open(path)?;
+    let file = detector.file().map_err(|e| anyhow::anyhow!("{}: {e}", gpmm_host::detect::shipped::init_name(path)))?;
+    let metadata: serde_json::Value = serde_json::from_str(file.metadata).unwrap_or(serde_json::Value::String(file.metadata.to_string()));
+    Ok(serde_json::json!({
+        "init_file": gpmm_host::detect::shipped::init_name(path),
+        "bytes": detector.bytes().len(),
+        "landmarks": file.landmarks,
+        "light_values": file.light,
+        "scratch_bytes": file.scratch_bytes(),
+        "sha256": gpmm_host::detect::provenance::sha256_hex(detector.bytes()),
+        "metadata": metadata,
+    }))
 }

@@ -54,7 +54,7 @@ pub fn check_init(a: CheckInitArgs) -> Result<()> {
     std::fs::write(&a.output, bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     report(&check);
     eprintln!(
-        "wrote {} (fitted on boxes scoring {FIT_MIN_SCORE} or more; for photos use --min-score {PHOTO_MIN_SCORE})",
+        "wrote {} (fitted on boxes scoring {FIT_MIN_SCORE} or more; with its check, its faces count from a score of {PHOTO_MIN_SCORE} by default)",
         a.output.display()
     );
     Ok(())

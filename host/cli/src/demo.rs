@@ -42,7 +42,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let model = out.join("model.gpmm");
     let (rank, vertices, nystrom_points, count) = if a.quick { (40, Some(1500), 600, 2) } else { (200, None, 2000, 6) };
 
-    eprintln!("[1/6] building the symmetric-full model from the template");
+    eprintln!("[1/7] building the symmetric-full model from the template");
     let template = || TemplateArgs { template: ply.clone(), texture: None, landmarks: lm.clone() };
     build(BuildArgs {
         template: template(),
@@ -64,7 +64,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
     let info = info_json(&model)?;
     std::fs::write(out.join("info.json"), serde_json::to_string_pretty(&info)?)?;
 
-    eprintln!("[2/6] rendering the mean face");
+    eprintln!("[2/7] rendering the mean face");
     for (name, yaw) in [("mean.png", 0.0), ("mean_yaw30.png", 30.0)] {
         render(RenderArgs {
             model: model.clone(),
@@ -80,7 +80,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
             output: out.join(name),
         })?;
     }
-    eprintln!("[3/6] random samples (PLY meshes and a picture)");
+    eprintln!("[3/7] random samples (PLY meshes and a picture)");
     sample(SampleArgs {
         model: model.clone(),
         count: 5,
@@ -92,7 +92,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         side_yaw: 45.0,
     })?;
 
-    eprintln!("[4/6] the kernel figure: samples of all nine kernels");
+    eprintln!("[4/7] the kernel figure: samples of all nine kernels");
     let (fig_vertices, fig_ranks, fig_nystrom) = if a.quick { (800, (20, 20), 300) } else { (2000, (50, 50), 500) };
     figure_kernels(KernelFigureArgs {
         template: template(),
@@ -106,7 +106,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         output: out.join("kernels.png"),
     })?;
 
-    eprintln!("[5/6] synthetic faces with known truth (ICT identities)");
+    eprintln!("[5/7] synthetic faces with known truth (ICT identities)");
     synth(SynthArgs {
         ict: Some(data.join("ict")),
         template_dir: Some(tdir),
@@ -119,7 +119,7 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         output: out.join("synth"),
     })?;
 
-    eprintln!("[6/6] fitting a photo (astronaut.png, public domain, with its 68 landmarks) by MCMC");
+    eprintln!("[6/7] fitting a photo (astronaut.png, public domain, with its 68 landmarks) by MCMC");
     let (photo, pts) = (data.join("images/astronaut.png"), data.join("images/astronaut.pts"));
     if photo.is_file() && pts.is_file() {
         let (landmark_steps, image_steps) = if a.quick { (2000, 150) } else { (5000, 600) };
@@ -137,6 +137,30 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         eprintln!("  skipped: {} or {} is absent", photo.display(), pts.display());
     }
 
+    let group = data.join("images/two_people.jpg");
+    eprintln!("[7/7] fitting every face of a group photo (two_people.jpg) with no landmark file: the shipped start finds the faces");
+    if group.is_file() {
+        let (landmark_steps, image_steps) = if a.quick { (1000, 50) } else { (5000, 600) };
+        let flags = gpmm_host::fit::FitFlags {
+            landmark_steps: Some(landmark_steps),
+            image_steps: Some(image_steps),
+            initializer_sigma: Some(gpmm_host::detect::INIT_LANDMARK_SIGMA),
+            ..Default::default()
+        };
+        let settings = flags.resolve()?;
+        crate::fit_faces::fit_all_faces(&crate::fit_faces::AllFaces {
+            model: &out.join("model.gpmm"),
+            image: &group,
+            init: None,
+            min_score: None,
+            settings: &settings,
+            out_dir: &out.join("group"),
+            timing: true,
+        })?;
+    } else {
+        eprintln!("  skipped: {} is absent", group.display());
+    }
+
     eprintln!("\ndemo finished in {:.1} s; in {}:", t0.elapsed().as_secs_f64(), out.display());
     for f in [
         "model.gpmm",
@@ -151,6 +175,9 @@ pub fn demo(a: DemoArgs) -> Result<()> {
         "fit/overlay.png",
         "fit/fit.json",
         "fit/fit.ply",
+        "group/faces.png",
+        "group/faces.json",
+        "group/face-00/",
     ] {
         eprintln!("  {f}");
     }

@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use gpmm_core::net::face::{Detection, Reading};
 use gpmm_host::detect::record::FaceRecord;
-use gpmm_host::detect::{CheckedFaces, Detector};
+use gpmm_host::detect::{shipped, CheckedFaces, Detector};
 use image::{Rgb, RgbImage};
 use std::path::{Path, PathBuf};
 
@@ -14,9 +14,10 @@ use std::path::{Path, PathBuf};
 pub struct DetectArgs {
     /// Image: PNG, JPEG or PPM.
     pub image: PathBuf,
-    /// Init file from `gpmm train-init`.
+    /// Init file from `gpmm train-init`. Default: the start gpmm ships, trained on real photos
+    /// for the default model (it reads the 68 iBUG points of any face; docs/real-photos.md).
     #[arg(long, value_name = "INIT")]
-    pub init: PathBuf,
+    pub init: Option<PathBuf>,
     /// Write the 68 landmarks of one face (the largest, or --face) as an iBUG .pts file (0-based,
     /// pixel centres at +0.5, as `gpmm fit` reads; a point beyond the margin a fit accepts outside
     /// the image is moved onto its edge).
@@ -36,9 +37,10 @@ pub struct DetectArgs {
     /// (one initializer run fewer; for comparisons and the device's budget).
     #[arg(long)]
     pub single_read: bool,
-    /// Smallest finder score (0..1) counted as a face.
-    #[arg(long, default_value_t = DEFAULT_MIN_SCORE)]
-    pub min_score: f32,
+    /// Smallest finder score (0..1) counted as a face. Default: 0.9 with an init file trained on
+    /// real photos (one with a face check, as the shipped start), else 0.05.
+    #[arg(long, value_name = "S")]
+    pub min_score: Option<f32>,
     /// Smallest face (px) looked for: beside the finder's view of the whole image, windows half
     /// its shorter side wide, a quarter, … are scanned while a face this small still fills too
     /// little of the last one (small images: none); a window's face is kept only if the finder,
@@ -54,24 +56,26 @@ pub struct DetectArgs {
 
 /// Runs `gpmm detect`.
 pub fn detect(a: DetectArgs) -> Result<()> {
-    let mut detector = Detector::load(&a.init)?;
+    let mut detector = shipped::open(a.init.as_deref())?;
+    let init_name = shipped::init_name(a.init.as_deref());
+    let min_score = a.min_score.unwrap_or(detector.advised_min_score());
     if a.no_face_check {
         detector.set_check(None);
     }
     let image = image::open(&a.image).with_context(|| format!("cannot read image {}", a.image.display()))?.to_rgb8();
     let reading = Reading { refine: a.refine, mirror: !a.single_read };
-    let CheckedFaces { kept: faces, refused } = detector.scan_split(&image, a.min_score, a.smallest_face, reading)?;
+    let CheckedFaces { kept: faces, refused } = detector.scan_split(&image, min_score, a.smallest_face, reading)?;
     if faces.is_empty() {
         let Some(best) = refused.first() else {
-            bail!("{}: no face found (finder score below --min-score {})", a.image.display(), a.min_score);
+            bail!("{}: no face found by {init_name} (finder score below --min-score {min_score})", a.image.display());
         };
         bail!(
             "{}: no face passed the face check of {}: {} box(es) scored at least --min-score {} (the best {:.2}, {:.0} px at ({:.0}, {:.0})) \
              but their readings did not look like a face's; --no-face-check lists them",
             a.image.display(),
-            a.init.display(),
+            init_name,
             refused.len(),
-            a.min_score,
+            min_score,
             best.face.score,
             best.face.size,
             best.face.cx,
@@ -92,7 +96,7 @@ pub fn detect(a: DetectArgs) -> Result<()> {
         eprintln!("wrote {}", path.display());
     }
     let list: Vec<FaceRecord> = faces.iter().map(FaceRecord::from).collect();
-    let json = serde_json::json!({ "image": a.image, "chosen": chosen, "faces": list });
+    let json = serde_json::json!({ "image": a.image, "init": init_name, "min_score": min_score, "chosen": chosen, "faces": list });
     println!("{}", serde_json::to_string_pretty(&json)?);
     Ok(())
 }
@@ -106,16 +110,19 @@ fn pick(image: &Path, faces: &[Detection], index: Option<usize>) -> Result<usize
     })
 }
 
-/// Detects the faces in `image_path` with the init file `init_path` (default refinement and
-/// score), writes the chosen face's ([`gpmm_host::detect::choose_face`]) landmarks to OUTDIR/detected.pts and
-/// every face to OUTDIR/detected.png, and returns the .pts path.
-pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: Option<usize>) -> Result<PathBuf> {
-    let mut detector = Detector::load(init_path)?;
-    let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
-    let faces = detector.scan_for_fit(&image, DEFAULT_MIN_SCORE, gpmm_host::detect::DEFAULT_SMALLEST_FACE, Reading::DEFAULT)?;
-    if faces.is_empty() {
-        bail!("{}: no face found by {}", image_path.display(), init_path.display());
-    }
+/// Detects the faces in `image_path` with the init file `init` (the shipped start if `None`;
+/// default refinement; `min_score` or the file's advised one), writes the chosen face's
+/// ([`gpmm_host::detect::choose_face`]) landmarks to OUTDIR/detected.pts and every face to
+/// OUTDIR/detected.png, and returns the .pts path. When no face reaches the advised score the
+/// best weaker one is taken, with a warning: the photo was given as a face's.
+pub fn detect_to_dir(
+    image_path: &Path,
+    init: Option<&Path>,
+    out_dir: &Path,
+    face: Option<usize>,
+    min_score: Option<f32>,
+) -> Result<PathBuf> {
+    let (image, faces) = faces_for_fit(image_path, init, min_score, false)?;
     let chosen = pick(image_path, &faces, face)?;
     let det = &faces[chosen];
     std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
@@ -137,6 +144,29 @@ pub fn detect_to_dir(image_path: &Path, init_path: &Path, out_dir: &Path, face: 
         pts.display()
     );
     Ok(pts)
+}
+
+/// The photo at `image_path` and the faces a fit takes from it: those the init file (the shipped
+/// start if `None`) finds at `min_score` (default: the file's advised score) that pass its face
+/// check. With `all` that is every such face; otherwise, when there are none, every face of the
+/// check's or of the lowest default score instead, with a warning (the photo was given as a face's).
+pub fn faces_for_fit(image_path: &Path, init: Option<&Path>, min_score: Option<f32>, all: bool) -> Result<(RgbImage, Vec<Detection>)> {
+    let mut detector = shipped::open(init)?;
+    let name = shipped::init_name(init);
+    let image = image::open(image_path).with_context(|| format!("cannot read image {}", image_path.display()))?.to_rgb8();
+    let found = gpmm_host::detect::for_fit::faces_for_fit(&mut detector, &image, min_score, all)?;
+    if let (true, Some(best)) = (found.weaker, found.faces.first()) {
+        eprintln!(
+            "warning: {}: no face scores {} or more with {name}; fitting the best box, which scores {:.2} (check detected.png)",
+            image_path.display(),
+            found.min_score,
+            best.face.score
+        );
+    }
+    if found.faces.is_empty() {
+        bail!("{}: no face found by {name} (finder score below {}; --min-score sets it)", image_path.display(), found.min_score);
+    }
+    Ok((image, found.faces))
 }
 
 pub use gpmm_host::detect::DEFAULT_MIN_SCORE;
@@ -199,8 +229,8 @@ pub fn draw_box(out: &mut RgbImage, [x0, y0, x1, y1]: [f32; 4], color: Rgb<u8>, 
 pub struct PhotoSetRun<'a> {
     /// The set.
     pub dir: &'a Path,
-    /// The init file (named in detect.json).
-    pub init: &'a Path,
+    /// The init file's name (in detect.json).
+    pub init: &'a str,
     /// Smallest finder score counted as a face.
     pub min_score: f32,
     /// Smallest face (px) the scan looks for.

@@ -19,38 +19,40 @@ pub struct DeviceFitArgs {
     /// The model blob (`gpmm quantize`).
     pub blob: PathBuf,
     /// Photo: PNG, JPEG or PPM. With --landmarks: cropped around them and resampled to the
-    /// profile's image size on the host. With --init: scaled to cover the device's camera frame
+    /// profile's image size on the host. Without: scaled to cover the device's camera frame
     /// (--width x --height) and cut to it, as a camera would give; the device does the rest.
     pub image: PathBuf,
-    /// Landmarks: iBUG .pts (68 points), 0-based continuous pixel coordinates.
-    #[arg(long, value_name = "PTS", required_unless_present = "init", conflicts_with = "init")]
+    /// Landmarks: iBUG .pts (68 points), 0-based continuous pixel coordinates. Without them
+    /// everything runs on the device, from the camera frame (--init).
+    #[arg(long, value_name = "PTS", conflicts_with = "init")]
     pub landmarks: Option<PathBuf>,
-    /// No landmark file: everything on the device. The partition holds the blob, the fit job, this
-    /// init file (`gpmm train-init`) and the whole camera frame; the firmware finds the face,
-    /// reads its landmarks, cuts the working image (--side) around them and fits it with the
-    /// initializer's landmarks as the landmark term (σ: --init-landmark-sigma, as `gpmm fit --init`).
+    /// Without --landmarks, the init file (`gpmm train-init`; default: the start gpmm ships). The
+    /// partition holds the blob, the fit job, the init file and the whole camera frame; the
+    /// firmware finds the face, reads its landmarks, cuts the working image (--side) around them
+    /// and fits it with the initializer's landmarks as the landmark term (σ:
+    /// --init-landmark-sigma, as `gpmm fit` without landmarks).
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
-    /// With --init: the landmark σ (fraction of the working side) of the initializer's landmarks.
-    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, requires = "init")]
+    /// Without --landmarks: the landmark σ (fraction of the working side) of the initializer's landmarks.
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, conflicts_with = "landmarks")]
     pub init_landmark_sigma: f32,
-    /// With --init: the camera frame's width (px).
-    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_WIDTH, requires = "init")]
+    /// Without --landmarks: the camera frame's width (px).
+    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_WIDTH, conflicts_with = "landmarks")]
     pub width: u32,
-    /// With --init: the camera frame's height (px).
-    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT, requires = "init")]
+    /// Without --landmarks: the camera frame's height (px).
+    #[arg(long, default_value_t = gpmm_host::device::detect::DEFAULT_FRAME_HEIGHT, conflicts_with = "landmarks")]
     pub height: u32,
-    /// With --init: re-centre the initializer's crop on its landmarks this many times (0..=8), less
+    /// Without --landmarks: re-centre the initializer's crop on its landmarks this many times (0..=8), less
     /// one when the finder looked twice at a small face (on the device a second look takes a
     /// pass's place: the instruction bound).
-    #[arg(long, default_value_t = gpmm_core::net::face::DEVICE_REFINE as u32, requires = "init")]
+    #[arg(long, default_value_t = gpmm_core::net::face::DEVICE_REFINE as u32, conflicts_with = "landmarks")]
     pub refine: u32,
-    /// With --init: smallest finder score (0..1) counted as a face (below it: "no face found").
-    #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE, requires = "init")]
+    /// Without --landmarks: smallest finder score (0..1) counted as a face (below it: "no face found").
+    #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE, conflicts_with = "landmarks")]
     pub min_score: f32,
-    /// With --init: side (px) of the working image the device cuts around the face (default and
+    /// Without --landmarks: side (px) of the working image the device cuts around the face (default and
     /// largest: the profile's, 72 on m4f, 128 on m7; its RAM sits next to the fit's stack).
-    #[arg(long, value_name = "PX", requires = "init")]
+    #[arg(long, value_name = "PX", conflicts_with = "landmarks")]
     pub side: Option<u32>,
     /// The .pts file is 1-based (300-W / menpo convention).
     #[arg(long)]
@@ -83,9 +85,9 @@ pub struct DeviceFitArgs {
 pub struct DeviceDetectArgs {
     /// Photo: PNG, JPEG or PPM (scaled to cover the device's frame and cut to it, as a camera would give).
     pub image: PathBuf,
-    /// Init file from `gpmm train-init`.
+    /// Init file from `gpmm train-init` (default: the start gpmm ships).
     #[arg(long, value_name = "INIT")]
-    pub init: PathBuf,
+    pub init: Option<PathBuf>,
     /// Device profile: m4f (Cortex-M4F, 192 KiB RAM) or m7 (Cortex-M7, 512 KiB RAM).
     #[arg(long, default_value = "m4f", value_parser = ["m4f", "m7"])]
     pub profile: String,
@@ -258,7 +260,7 @@ impl DeviceFitArgs {
 /// JSON report (`crate::device_frame` runs it with `--init`).
 pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     let DeviceFitInputs { blob, landmarks: model_landmarks, ranks, profile } = a.inputs()?;
-    let landmarks = a.landmarks.clone().context("--landmarks is required without --init")?;
+    let landmarks = a.landmarks.clone().context("a fit from landmarks needs --landmarks")?;
     let size = profile.image_side;
     let pts = gpmm_host::photo::pts::read_pts(&landmarks, a.pts_one_based)?;
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
@@ -323,12 +325,12 @@ pub fn device_detect(a: DeviceDetectArgs) -> Result<()> {
     use gpmm_host::device::detect::{camera_frame, compare, frame_bytes, host_detect, partition_bytes, run_detection};
     let profile =
         gpmm_core::profile::DeviceProfile::by_name(&a.profile).with_context(|| format!("unknown device profile {}", a.profile))?;
-    let mut init = gpmm_host::detect::Detector::load(&a.init)?;
+    let mut init = gpmm_host::detect::shipped::open(a.init.as_deref())?;
     let needed = init.file().map(|f| f.scratch_bytes()).unwrap_or(0);
     if needed > profile.net_scratch {
         anyhow::bail!(
             "{}: its networks need {needed} bytes per activation buffer; the {} firmware gives them {}",
-            a.init.display(),
+            gpmm_host::detect::shipped::init_name(a.init.as_deref()),
             profile.name,
             profile.net_scratch
         );
@@ -359,13 +361,13 @@ pub fn device_detect(a: DeviceDetectArgs) -> Result<()> {
     Ok(())
 }
 
-/// The help of `device-fit --landmark-steps`: the default fit's chain with landmarks; with --init
+/// The help of `device-fit --landmark-steps`: the default fit's chain with landmarks; without
 /// the start has no shape solve ([`gpmm_host::device::fit::frame_fit_settings`]) and the chain
 /// fits the shape too.
 fn device_landmark_steps_help() -> String {
     let frame = FitSettings::DEFAULT.without_shape_solve();
     format!(
-        "{}. With --init (no room for the shape solve beside the crop): {} % on the pose, then the shape",
+        "{}. Without --landmarks (no room for the shape solve beside the crop): {} % on the pose, then the shape",
         crate::fit::landmark_steps_help(&FitSettings::DEFAULT),
         (frame.landmarks.pose_share * 100.0).round()
     )

@@ -7,23 +7,23 @@ use gpmm_host::device::fit::{frame_fit_settings, run_firmware};
 use gpmm_host::device::frame_fit::{self as ff, check_landmarks, check_side, host_frame_fit, job_bytes, HostFrameFit};
 use gpmm_host::fit::FitFlags;
 
-/// Runs `gpmm device-fit --init`: frame, job and partition, the firmware under QEMU (or the host
+/// Runs `gpmm device-fit` without landmarks: frame, job and partition, the firmware under QEMU (or the host
 /// only), the JSON report; fails with "no face found" when the finder finds none.
 pub fn device_fit_init(a: DeviceFitArgs) -> Result<()> {
     let DeviceFitInputs { blob, landmarks: model_landmarks, ranks, profile } = a.inputs()?;
     let (blob, profile) = (&blob, &profile);
-    let init_path = a.init.as_ref().context("--init is required without --landmarks")?;
-    let init = gpmm_host::detect::Detector::load(init_path)?;
+    let init = gpmm_host::detect::shipped::open(a.init.as_deref())?;
+    let init_name = gpmm_host::detect::shipped::init_name(a.init.as_deref());
     let needed = init.file().map(|f| f.scratch_bytes()).unwrap_or(0);
     if needed > profile.net_scratch {
         anyhow::bail!(
             "{}: its networks need {needed} bytes per activation buffer; the {} firmware gives them {}",
-            init_path.display(),
+            init_name,
             profile.name,
             profile.net_scratch
         );
     }
-    check_landmarks(&init, model_landmarks).with_context(|| format!("{} and {}", init_path.display(), a.blob.display()))?;
+    check_landmarks(&init, model_landmarks).with_context(|| format!("{init_name} and {}", a.blob.display()))?;
     let side = a.side.unwrap_or(profile.frame_fit_side);
     check_side(side, profile)?;
     if a.width == 0 || a.height == 0 || a.width > 1024 || a.height > 1024 {

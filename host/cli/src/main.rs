@@ -12,6 +12,7 @@ mod eval;
 mod eval_reconstruction;
 mod eval_setup;
 mod fit;
+mod fit_faces;
 mod h5;
 mod learn;
 mod progress;

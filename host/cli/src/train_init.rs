@@ -196,11 +196,31 @@ pub fn train_init(a: TrainInitArgs) -> Result<()> {
         Some(b) if !a.no_face_check => a.photos.with_face_check(bytes, b, &bar)?,
         _ => bytes,
     };
+    let bytes = with_provenance(bytes, &a.models, &models, &a.photos.backgrounds)?;
     bar.finish_and_clear();
     std::fs::write(&a.output, &bytes).with_context(|| format!("cannot write {}", a.output.display()))?;
     note(&bar, format!("wrote {} ({} bytes)", a.output.display(), bytes.len()));
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
+}
+
+/// `bytes` (a trained init file) with what it was trained for and on in its metadata: each model
+/// file's SHA-256, kernel and landmark count, and each --backgrounds folder's sources
+/// ([`gpmm_host::detect::provenance`]).
+fn with_provenance(bytes: Vec<u8>, paths: &[PathBuf], models: &[gpmm_host::gp::model::GpModel], folders: &[PathBuf]) -> Result<Vec<u8>> {
+    use gpmm_host::detect::provenance;
+    let trained_for = paths
+        .iter()
+        .zip(models)
+        .map(|(path, m)| provenance::model_entry(path, &m.metadata.kernel, m.landmarks.len()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let sets = folders
+        .iter()
+        .map(|dir| provenance::photo_set_entry(dir, gpmm_host::detect::photos::list_photos(dir).map_or(0, |p| p.len())))
+        .collect::<Result<Vec<_>, _>>()?;
+    let file = gpmm_core::format::init_file::InitFile::parse(&bytes).map_err(|e| anyhow::anyhow!("the trained file: {e}"))?;
+    let metadata = provenance::with_provenance(file.metadata, trained_for, sets)?;
+    gpmm_host::detect::check_fit::with_metadata(&bytes, &metadata).map_err(|e| anyhow::anyhow!("the trained file with its provenance: {e}"))
 }
 
 /// The mesh (the directory's only .ply) and `landmarks_ibug68.json` of a template directory.

@@ -248,9 +248,14 @@ fn fit_without_landmarks_detects_them_first() {
     let iod = f64::from((detected[45][0] - detected[36][0]).hypot(detected[45][1] - detected[36][1]));
     // The fit follows the moved points at least halfway (short chains, σ 0.02 of the side).
     assert!(shift > 0.05 * iod, "the calibrated landmarks must move the fit right: {shift} px, IOD {iod} px");
-    // Neither landmarks nor an init file: clap says what is missing.
-    let err = fails(&gpmm(&["fit", s(&f.model), s(&image), "-o", s(&out)]));
-    assert!(err.contains("--landmarks") && err.contains("--init"), "{err}");
+    // Neither landmarks nor an init file: the shipped start finds the face.
+    let shipped = f.dir.path().join("fit-shipped");
+    ok(&gpmm(&["fit", s(&f.model), s(&image), "-o", s(&shipped), "--landmark-steps", "100", "--image-steps", "5"]));
+    assert!(shipped.join("detected.pts").is_file() && shipped.join("fit.json").is_file());
+    // --faces all and --landmarks do not go together; clap says so.
+    let pts = shipped.join("detected.pts");
+    let err = fails(&gpmm(&["fit", s(&f.model), s(&image), "--landmarks", s(&pts), "--faces", "all", "-o", s(&out)]));
+    assert!(err.contains("--faces"), "{err}");
 }
 
 #[test]

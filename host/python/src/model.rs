@@ -332,7 +332,10 @@ impl Model {
 
     /// Fits the model to a photo as `gpmm fit` does (same settings, defaults and seed: the same numbers).
     ///
-    /// `image`: `H x W x 3` uint8 RGB; `landmarks`: `L x 2` pixel coordinates (0-based, pixel centres at +0.5).
+    /// `image`: `H x W x 3` uint8 RGB; `landmarks`: `L x 2` pixel coordinates (0-based, pixel centres at +0.5),
+    /// or `None`: the face is found and its 68 landmarks read by `init` (an init file; default: the start gpmm
+    /// ships), as `gpmm fit PHOTO` without `--landmarks` does (the largest face, or `face`: its place in
+    /// `gpmm.detect`'s list); the result's `detected` holds that face (box, score, landmarks).
     /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
     /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
     /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient;
@@ -341,15 +344,15 @@ impl Model {
     /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
     /// `image` may also be `H x W x 4` (RGBA: alpha is dropped) or anything `numpy.asarray` makes such an
     /// array of (a PIL image); its values are used as they are (the model's colours are linear RGB).
-    #[pyo3(signature = (image, landmarks, *, seed = None, size = None, landmark_steps = None, image_steps = None,
+    #[pyo3(signature = (image, landmarks = None, *, seed = None, size = None, landmark_steps = None, image_steps = None,
         shape_rank = None, color_rank = None, landmark_sigma = None, contour_sigma = None, set = None,
-        landmark_calibration = None))]
+        landmark_calibration = None, init = None, face = None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
         py: Python<'py>,
         image: &Bound<'py, PyAny>,
-        landmarks: &Bound<'py, PyAny>,
+        landmarks: Option<&Bound<'py, PyAny>>,
         seed: Option<Int>,
         size: Option<Int>,
         landmark_steps: Option<Int>,
@@ -360,12 +363,25 @@ impl Model {
         contour_sigma: Option<f32>,
         set: Option<&Bound<'py, PyAny>>,
         landmark_calibration: Option<PathBuf>,
+        init: Option<PathBuf>,
+        face: Option<usize>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let keywords = FitKeywords { seed, size, landmark_steps, image_steps, shape_rank, color_rank, landmark_sigma, contour_sigma, set };
-        let flags = keywords.flags(Some([self.inner.shape.rank(), self.inner.color.rank()]))?;
-        let opts = flags.resolve().map_err(fit_settings_error)?;
+        let mut flags = keywords.flags(Some([self.inner.shape.rank(), self.inner.color.rank()]))?;
         let photo = numpy_to_rgb(image)?;
-        let mut points = numpy_to_points(py, landmarks)?;
+        let (mut points, detected) = match landmarks {
+            Some(l) => (numpy_to_points(py, l)?, None),
+            None => {
+                if init.is_none() {
+                    gpmm_host::detect::shipped::serves(self.inner.landmarks.len()).map_err(value_error)?;
+                }
+                // The initializer's landmarks get their own σ, as in `gpmm fit`; `set` still wins.
+                flags.initializer_sigma = Some(gpmm_host::detect::INIT_LANDMARK_SIGMA);
+                let det = crate::detect::face_for_fit(py, &photo, init.as_deref(), face)?;
+                (det.landmarks.to_vec(), Some(det))
+            }
+        };
+        let opts = flags.resolve().map_err(fit_settings_error)?;
         let calibration_name = landmark_calibration.as_ref().map(|p| p.display().to_string());
         if let Some(path) = &landmark_calibration {
             let cal = LandmarkCalibration::read(path).map_err(|e| read_error(e, &[path]))?;
@@ -416,6 +432,9 @@ impl Model {
             ] {
                 d.set_item(key, vec_to_numpy(py, v.clone()))?;
             }
+        }
+        if let Some(det) = &detected {
+            dict.set_item("detected", crate::detect::face_dict(py, det)?)?;
         }
         dict.set_item("overlay", rgba_to_numpy(py, &ov)?)?;
         dict.set_item("render", rgba_to_numpy(py, &outcome.render)?)?;

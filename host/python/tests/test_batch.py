@@ -50,8 +50,9 @@ def test_fit_folder_on_dask_equals_sequential(client, small_model_path, photo_fo
 
 
 def test_a_bad_photo_is_recorded_and_the_others_are_fitted(small_model_path, photo_folder):
-    """A photo without landmarks, a malformed .pts and an image that is not one each give a result
-    that says why; every other photo is fitted as in a folder without them."""
+    """A malformed .pts and an image that is not one each give a result that says why, a photo
+    without landmarks is fitted from the face the shipped start finds; every other photo is fitted
+    as in a folder without them."""
     clean = gpmm.batch.fit_folder(small_model_path, photo_folder, **SETTINGS)
     astronaut = (photo_folder / "p0_astronaut.png").read_bytes()
     (photo_folder / "a_no_points.png").write_bytes(astronaut)
@@ -66,8 +67,9 @@ def test_a_bad_photo_is_recorded_and_the_others_are_fitted(small_model_path, pho
             (photo_folder / name).unlink()
     by_name = {r["name"]: r for r in results}
     assert len(results) == len(clean) + 3
-    assert "a_no_points.pts" in by_name["a_no_points.png"]["error"]
-    assert by_name["a_no_points.png"]["landmarks_file"] is None
+    unlabelled = by_name["a_no_points.png"]
+    assert unlabelled["error"] is None and unlabelled["landmarks_file"] is None
+    assert unlabelled["detected"]["landmarks"].shape == (68, 2), "the face the start found"
     assert "b_bad_points.pts" in by_name["b_bad_points.png"]["error"]
     assert "c_not_an_image.png" in by_name["c_not_an_image.png"]["error"]
     for want in clean:
@@ -75,7 +77,7 @@ def test_a_bad_photo_is_recorded_and_the_others_are_fitted(small_model_path, pho
         assert got["error"] is None and want["error"] is None
         same(got, want)
     # The errors are what json.dumps takes too.
-    assert json.loads(json.dumps(gpmm.jsonable(results)))[0]["error"] == by_name["a_no_points.png"]["error"]
+    assert json.loads(json.dumps(gpmm.jsonable(results)))[1]["error"] == by_name["b_bad_points.png"]["error"]
 
 
 def test_each_result_names_its_photo(small_model_path, photo_folder):

@@ -40,12 +40,40 @@ def test_detect_refuses_what_is_not_an_image_or_an_init_file(init_file, tmp_path
 
 
 def test_detect_defaults_are_the_programs(run_cli):
-    """The signature's defaults (written out for Python) are `gpmm detect`'s."""
+    """The signature's defaults (written out for Python) are `gpmm detect`'s: the shipped start
+    and its advised score when none is given."""
     import inspect
     import re
 
     defaults = {k: v.default for k, v in inspect.signature(gpmm.detect).parameters.items()}
     help_text = " ".join(run_cli("detect", "--help").stdout.split())
-    for flag, key in (("--min-score", "min_score"), ("--smallest-face", "smallest_face"), ("--refine", "refine")):
+    for flag, key in (("--smallest-face", "smallest_face"), ("--refine", "refine")):
         shown = re.search(re.escape(flag) + r" .*?\[default: ([0-9.]+)\]", help_text)
         assert shown and float(shown.group(1)) == defaults[key], (flag, defaults[key])
+    assert defaults["init"] is None and defaults["min_score"] is None
+    assert "0.9" in help_text and "shipped start" in help_text
+
+
+def test_without_an_init_file_the_shipped_start_finds_both_faces(run_cli):
+    """gpmm.detect(image) uses the start gpmm ships, as `gpmm detect IMAGE` does: both faces of
+    the shared two-person photo, the same boxes."""
+    path = gpmm.data_dir() / "images" / "two_people.jpg"
+    faces = gpmm.detect(gpmm.load_image(path))
+    listed = json.loads(run_cli("detect", path).stdout)["faces"]
+    assert len(faces) == len(listed) == 2
+    for got, want in zip(faces, listed):
+        assert got["box"] == want["box"] and got["box"]["score"] >= 0.9
+
+
+def test_fit_without_landmarks_fits_the_face_the_start_finds(small_model_path, astronaut):
+    """Model.fit(image) finds the face with the shipped start and fits it; its 'detected' face
+    lies on the photo's own landmarks."""
+    img, pts = astronaut
+    model = gpmm.load(small_model_path)
+    fit = model.fit(gpmm.load_image(img), landmark_steps=300, image_steps=20)
+    truth = gpmm.read_pts(pts)
+    eyes = np.linalg.norm(truth[36:42].mean(0) - truth[42:48].mean(0))
+    error = np.linalg.norm(fit["detected"]["landmarks"] - truth, axis=1).mean() / eyes
+    assert error < 0.15, f"the start's landmarks are {error:.3f} eye distances off"
+    with pytest.raises(gpmm.GpmmValueError, match="face=5"):
+        model.fit(gpmm.load_image(img), face=5, landmark_steps=300, image_steps=20)

@@ -5,8 +5,11 @@
 pub mod check;
 pub mod check_fit;
 pub mod eval;
+pub mod for_fit;
 pub mod photos;
+pub mod provenance;
 pub mod record;
+pub mod shipped;
 
 use check::FaceCheck;
 use gpmm_core::format::init_file::InitFile;
@@ -107,6 +110,17 @@ impl Detector {
     /// The file's face check ([`check`]), if it has one and it is in use.
     pub fn check(&self) -> Option<&FaceCheck> {
         self.check.as_ref()
+    }
+
+    /// The least finder score a command takes as a face with this file by default: a file with a
+    /// face check was trained on real photos (as the shipped start was) and gets
+    /// [`PHOTO_MIN_SCORE`], any other [`DEFAULT_MIN_SCORE`].
+    pub fn advised_min_score(&self) -> f32 {
+        if self.check.is_some() {
+            PHOTO_MIN_SCORE
+        } else {
+            DEFAULT_MIN_SCORE
+        }
     }
 
     /// Uses `check` for photos' faces instead of the file's (`None`: no check).

@@ -2,12 +2,14 @@
 //! `fit.json`, `overlay.png` and `fit.ply`.
 
 use super::error::FitRunError;
-use super::input::load_photo;
+use super::input::{load_photo, Prepared};
 use super::options::FitOptions;
 use super::overlay::overlay;
-use super::pipeline::fit_prepared;
+use super::pipeline::{fit_prepared, Outcome};
 use super::report::{report, FitReport, ReportInputs};
+use crate::gp::model::GpModel;
 use crate::photo::calibration::LandmarkCalibration;
+use std::path::Path;
 use std::time::Instant;
 
 /// Inputs of [`fit_files`] (what `gpmm fit` is given).
@@ -71,12 +73,16 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
         landmark_calibration: calibration_name.as_deref(),
     };
     let rep = report(&model, &inputs, &prepared, &job.settings, &outcome, job.timing.then_some(seconds));
-    let dir = &job.out_dir;
-    let werr =
-        |path: &std::path::Path, e: &dyn std::fmt::Display| FitFilesError::Write { path: path.to_path_buf(), message: e.to_string() };
+    write_fit_files(&model, &prepared, &outcome, &rep, &job.out_dir)?;
+    Ok(rep)
+}
+
+/// Writes a fit's `fit.json` (`rep`), `overlay.png` and `fit.ply` into `dir` (created if needed).
+pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, rep: &FitReport, dir: &Path) -> Result<(), FitFilesError> {
+    let werr = |path: &Path, e: &dyn std::fmt::Display| FitFilesError::Write { path: path.to_path_buf(), message: e.to_string() };
     std::fs::create_dir_all(dir).map_err(|e| werr(dir, &e))?;
     let json_path = dir.join("fit.json");
-    let text = serde_json::to_string_pretty(&rep).map_err(|e| werr(&json_path, &e))?;
+    let text = serde_json::to_string_pretty(rep).map_err(|e| werr(&json_path, &e))?;
     std::fs::write(&json_path, text + "\n").map_err(|e| werr(&json_path, &e))?;
     let ov_path = dir.join("overlay.png");
     let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
@@ -89,5 +95,5 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
     crate::mesh::io::write_ply_with(&ply_path, &mesh, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)
         .map_err(|e| werr(&ply_path, &e))?;
-    Ok(rep)
+    Ok(())
 }

@@ -22,13 +22,15 @@
 //!
 //! One file per job: the error (`error.rs`), the photo read, checked and cropped (`input.rs`), the
 //! fit (`pipeline.rs`: [`fit_prepared`], [`fit_image`]), `fit.json`'s schema (`report.rs`), the
-//! overlay's drawing (`overlay.rs`) and `gpmm fit`'s file job (`job.rs`: [`fit_files`]); beside
+//! overlay's drawing (`overlay.rs`), `gpmm fit`'s file job (`job.rs`: [`fit_files`]) and every face
+//! of a photo fitted and drawn into it (`faces.rs`: [`fit_faces`]); beside
 //! them the coefficient capacity (`params.rs`), the options and `--set` overrides, the chains'
 //! observer and the posterior summary. This file only re-exports them; they import each other one
 //! way and never this file.
 
 mod buffers;
 mod error;
+mod faces;
 mod input;
 mod job;
 mod observe;
@@ -43,9 +45,10 @@ mod report;
 
 pub use buffers::FitBuffers;
 pub use error::FitRunError;
+pub use faces::{draw_fit, fit_faces, FaceFitted, FaceToFit, DRAWN_FIT_SHARE};
 pub use gpmm_core::fit::FitSettings;
 pub use input::{check_landmarks, load_photo, prepare, Prepared};
-pub use job::{fit_files, FitFilesError, FitJob};
+pub use job::{fit_files, write_fit_files, FitFilesError, FitJob};
 pub use observe::{AcceptanceReport, KindCounts};
 pub use options::{FitFlags, FitOptions};
 pub use overlay::{overlay, FITTED_COLOR, OVERLAY_SCALE, TARGET_COLOR};

@@ -135,7 +135,7 @@ class Model:
     def fit(
         self,
         image: npt.ArrayLike,
-        landmarks: npt.ArrayLike,
+        landmarks: Optional[npt.ArrayLike] = None,
         *,
         seed: Optional[int] = None,
         size: Optional[int] = None,
@@ -147,10 +147,14 @@ class Model:
         contour_sigma: Optional[float] = None,
         set: Optional[Sequence[str]] = None,
         landmark_calibration: Optional[Union[str, PathLike[str]]] = None,
+        init: Optional[Union[str, PathLike[str]]] = None,
+        face: Optional[int] = None,
     ) -> dict[str, Any]:
         """Fits the model to a photo (H x W x 3 uint8 RGB, or RGBA: alpha dropped) as `gpmm fit` does;
         fit.json's fields plus 'overlay', 'render', 'working_image' and 'mesh': the fitted face in
-        camera space ('vertices' N x 3 float32 mm, 'triangles' T x 3 uint32, 'colors' N x 3 float32)."""
+        camera space ('vertices' N x 3 float32 mm, 'triangles' T x 3 uint32, 'colors' N x 3 float32).
+        Without landmarks the face is found by `init` (default: the shipped start; the largest face,
+        or `face`), and 'detected' holds it (box, score, landmarks)."""
     def quantize(
         self,
         profile: str = "m4f",
@@ -207,14 +211,15 @@ def read_pts(path: _Path, one_based: bool = False) -> npt.NDArray[np.float32]:
 
 def detect(
     image: npt.ArrayLike,
-    init: _Path,
-    min_score: float = 0.05,
+    init: Optional[_Path] = None,
+    min_score: Optional[float] = None,
     smallest_face: float = 32.0,
     refine: int = 3,
     face_check: bool = True,
 ) -> list[dict[str, Any]]:
-    """Every face the init file finds in an image (H x W x 3 uint8), best first, as `gpmm detect`
-    lists them: 'box' (cx, cy, size, score), 'yaw_deg', 'pitch_deg', 'roll_deg', 'landmarks' (L x 2)."""
+    """Every face the init file (default: the shipped start) finds in an image (H x W x 3 uint8),
+    best first, as `gpmm detect` lists them: 'box' (cx, cy, size, score), 'yaw_deg', 'pitch_deg',
+    'roll_deg', 'landmarks' (L x 2). min_score: default 0.9 for a file trained on real photos, else 0.05."""
 
 def data_dir() -> Path:
     """The data directory: $GPMM_DATA if set, else ../shared/data (FileNotFoundError if absent)."""

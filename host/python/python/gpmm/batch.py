@@ -6,10 +6,11 @@
 ...     results = gpmm.batch.fit_folder("face.gpmm", "photos/", client=client, image_steps=300)
 
 Every image ``NAME.png`` / ``.jpg`` / ``.jpeg`` / ``.ppm`` is fitted with the landmark file
-``NAME.pts`` beside it. Each fit is the same deterministic fit as ``gpmm fit`` with the same
+``NAME.pts`` beside it, or, without one, from the face the start gpmm ships finds (the largest;
+as ``gpmm fit PHOTO``; its result's ``detected`` holds the face). Each fit is the same deterministic fit as ``gpmm fit`` with the same
 settings and seed, so the results equal sequential fits (``client=None``). Each result names its
 photo: ``name`` (the file name), ``path`` and ``image`` (its path), ``landmarks_file``, and
-``error``: ``None``, or, for a photo that could not be fitted (no landmark file beside it, an
+``error``: ``None``, or, for a photo that could not be fitted (no face found in it, an
 unreadable image, a malformed ``.pts``, landmarks the fit refuses), the message saying why; one
 bad photo loses nothing of the others. :func:`gpmm.jsonable` makes the results what
 ``json.dumps`` takes.
@@ -88,17 +89,16 @@ def _summary(name: str, path: Optional[str], landmarks: Optional[str], fit: dict
 def fit_file(model: Union[str, Model], image: str, landmarks: Optional[str], pts_one_based: bool = False,
              keep_images: bool = False, **settings: Any) -> dict[str, Any]:
     """Fits one photo (on whichever process runs it); ``model`` is a path (cached per process) or a
-    Model. A photo that cannot be fitted (no landmarks, a bad image or ``.pts``, refused data)
-    gives a result with its ``error`` instead of raising, so a batch goes on."""
+    Model; ``landmarks`` ``None``: the shipped start finds the face. A photo that cannot be fitted
+    (no face found, a bad image or ``.pts``, refused data) gives a result with its ``error``
+    instead of raising, so a batch goes on."""
     name = os.path.basename(image)
-    if landmarks is None:
-        missing = os.path.splitext(image)[0] + ".pts"
-        return _failed(name, image, None, f"{image}: no landmark file {os.path.basename(missing)} beside it")
     m = worker_model(model) if isinstance(model, str) else model
     try:
-        fit = m.fit(load_image(image), read_pts(landmarks, pts_one_based), **settings)
+        points = None if landmarks is None else read_pts(landmarks, pts_one_based)
+        fit = m.fit(load_image(image), points, **settings)
     except GpmmError as e:
-        return _failed(name, image, landmarks, str(e))
+        return _failed(name, image, landmarks, f"{image}: {e}" if landmarks is None else str(e))
     return _summary(name, image, landmarks, fit, keep_images)
 
 
