@@ -79,7 +79,7 @@ fn learn_help_states_its_own_image_chain() {
 #[test]
 fn device_fit_help_states_the_defaults() {
     let text = help("device-fit");
-    // With landmarks a device fits as the host does; with --init its start has no shape solve,
+    // With landmarks a device fits as the host does; without, its start has no shape solve,
     // and its landmark chain fits the shape too.
     let device = FitSettings::default();
     let frame = device.without_shape_solve();
@@ -90,7 +90,7 @@ fn device_fit_help_states_the_defaults() {
         &text,
         &[
             format!("--landmark-steps <N> Landmark-chain steps, {}", pose_share(&device)),
-            format!("With --init (no room for the shape solve beside the crop): {}", pose_share(&frame)),
+            format!("Without --landmarks (no room for the shape solve beside the crop): {}", pose_share(&frame)),
             format!("[default: {}] --image-steps", device.landmarks.steps),
             format!("--image-steps <N> Image-chain steps [default: {}]", device.image.steps),
             format!("--seed <SEED> Seed of the chains [default: {}]", FitOptions::DEFAULT.seed),

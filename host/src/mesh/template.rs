@@ -65,7 +65,8 @@ pub use crate::mesh::Mesh;
 /// Where a template came from and what was done to it (stored in model metadata).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Provenance {
-    /// The mesh file as given on the command line.
+    /// The mesh file's name, without its folder: a build gives the same bytes wherever the data
+    /// lies (`source_sha256` names the file's contents).
     pub source: String,
     /// SHA-256 of the mesh file's bytes, hex.
     pub source_sha256: String,
@@ -248,7 +249,7 @@ pub fn load_template(mesh_path: &Path, landmarks_path: &Path, opts: &TemplateOpt
         _ => None,
     };
     let provenance = Provenance {
-        source: mesh_path.display().to_string(),
+        source: mesh_path.file_name().map_or_else(|| mesh_path.display().to_string(), |n| n.to_string_lossy().into_owned()),
         source_sha256,
         texture,
         attribution: read_attribution(mesh_path),
