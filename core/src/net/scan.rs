@@ -62,17 +62,22 @@ pub const WINDOW_CANDIDATE_SCORE: f32 = 0.5;
 /// small face): dropped when more than this share of its box lies inside the other's.
 pub const WITHIN_SHARE: f32 = 0.6;
 
-/// A face the scan reads smaller than this share of its `smallest_face` is not listed (a finite
-/// one; an infinite `smallest_face` lists the whole frame's faces at any size). The finder reads a
-/// small face's size within about ±20 %, so a face of the smallest size asked for is kept; the
-/// boxes below it were mostly textures and parts of things: at a minimum score of 0.9 they were 4
-/// of the 13 false boxes on 46 face-free tuning photos, and 1 of 486 faces of 32 px and more of
-/// the unseen photos of people (docs/real-photos.md, "The shipped start").
+/// A face the scan reads smaller than this (px) is not listed: the least of the photo scans'
+/// default smallest face (32 px) that the finder, which reads a small face's size within about
+/// ±20 %, still reads for it. The boxes below it were mostly textures and parts of things: at a
+/// minimum score of 0.9 they were 4 of the 13 false boxes on 46 face-free tuning photos, and 1 of
+/// 486 faces of 32 px and more of the unseen photos of people (docs/real-photos.md, "The shipped
+/// start"). A scan for smaller faces lists down to [`SMALLEST_FACE_SHARE`] of its `smallest_face`;
+/// an infinite `smallest_face` (the whole frame only) lists the frame's faces at any size.
+pub const SMALLEST_LISTED_FACE: f32 = 24.0;
+
+/// With a `smallest_face` below [`SMALLEST_LISTED_FACE`]'s, the share of it a face must be read
+/// at to be listed.
 pub const SMALLEST_FACE_SHARE: f32 = 0.75;
 
-/// Whether a scan for faces down to `smallest_face` px lists `face` ([`SMALLEST_FACE_SHARE`]).
+/// Whether a scan for faces down to `smallest_face` px lists `face` ([`SMALLEST_LISTED_FACE`]).
 pub fn large_enough(face: &FaceBox, smallest_face: f32) -> bool {
-    !smallest_face.is_finite() || face.size >= SMALLEST_FACE_SHARE * smallest_face
+    !smallest_face.is_finite() || face.size >= SMALLEST_LISTED_FACE.min(SMALLEST_FACE_SHARE * smallest_face)
 }
 
 /// Finds the faces at `min_score` or above in an RGB photo (`w × h`), at most `N`: the whole
@@ -88,8 +93,8 @@ pub fn large_enough(face: &FaceBox, smallest_face: f32) -> bool {
 /// [`super::face::SECOND_LOOK_ZOOM`] face sizes wide around it, where the face fills a third of
 /// its view as in the training scenes, and that look's score and box replace the window's
 /// ([`confirmed`]). Textures, hands and parts of faces that score high in a small window mostly do
-/// not in that view (docs/real-photos.md). A face read smaller than [`SMALLEST_FACE_SHARE`] of
-/// `smallest_face` is dropped. Listed best first by the score kept.
+/// not in that view (docs/real-photos.md). A face read smaller than [`SMALLEST_LISTED_FACE`] (or
+/// [`SMALLEST_FACE_SHARE`] of a smaller `smallest_face`) is dropped ([`large_enough`]). Listed best first by the score kept.
 pub fn scan_faces<const A: usize, const N: usize>(
     init: &InitFile<'_>,
     rgb: &[u8],
@@ -201,6 +206,10 @@ mod tests {
         let face = |size| FaceBox { cx: 50.0, cy: 50.0, size, score: 0.99, looks: 2 };
         assert!(large_enough(&face(32.0), 32.0) && large_enough(&face(24.0), 32.0));
         assert!(!large_enough(&face(23.0), 32.0));
+        // A shallower scan (one that looks for large faces only) still lists faces from 24 px.
+        assert!(large_enough(&face(30.0), 96.0) && !large_enough(&face(23.0), 96.0));
+        // A deeper one lists smaller faces.
+        assert!(large_enough(&face(13.0), 16.0) && !large_enough(&face(11.0), 16.0));
         assert!(large_enough(&face(3.0), f32::INFINITY), "the whole frame only: every size");
         assert!(!large_enough(&face(f32::NAN), 32.0), "a size that is not a number is no face");
     }

@@ -60,7 +60,8 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// The main job end to end: build a model from the template scan, render, sample, draw figures, fit a photo.
     Demo(demo::DemoArgs),
-    /// Fit a model to a photo with 68 landmarks: pose, shape, colour and light by MCMC.
+    /// Fit a model to a photo: pose, shape, colour and light by MCMC, from 68 landmarks (a .pts
+    /// file, or read by the start gpmm ships: no file needed; --faces all fits every face).
     ///
     /// The photo is cropped to a square around the landmarks (side 1.8x the landmarks' larger
     /// extent, lifted by 0.1x so the forehead fits; pixels past the image's edge left out of the likelihood) and
