@@ -75,9 +75,20 @@ pub const SMALLEST_LISTED_FACE: f32 = 24.0;
 /// at to be listed.
 pub const SMALLEST_FACE_SHARE: f32 = 0.75;
 
-/// Whether a scan for faces down to `smallest_face` px lists `face` ([`SMALLEST_LISTED_FACE`]).
+/// The smallest face (px) a photo scan for faces down to `smallest_face` px lists
+/// ([`SMALLEST_LISTED_FACE`]; 0, every size, for an infinite one): `scan_faces`'
+/// `smallest_listed` for photos.
+pub fn smallest_listed(smallest_face: f32) -> f32 {
+    if smallest_face.is_finite() {
+        SMALLEST_LISTED_FACE.min(SMALLEST_FACE_SHARE * smallest_face)
+    } else {
+        0.0
+    }
+}
+
+/// Whether a photo scan for faces down to `smallest_face` px lists `face` ([`smallest_listed`]).
 pub fn large_enough(face: &FaceBox, smallest_face: f32) -> bool {
-    !smallest_face.is_finite() || face.size >= SMALLEST_LISTED_FACE.min(SMALLEST_FACE_SHARE * smallest_face)
+    face.size >= smallest_listed(smallest_face)
 }
 
 /// Finds the faces at `min_score` or above in an RGB photo (`w × h`), at most `N`: the whole
@@ -94,14 +105,16 @@ pub fn large_enough(face: &FaceBox, smallest_face: f32) -> bool {
 /// its view as in the training scenes, and that look's score and box replace the window's
 /// ([`confirmed`]). Textures, hands and parts of faces that score high in a small window mostly do
 /// not in that view (docs/real-photos.md). A face read smaller than [`SMALLEST_LISTED_FACE`] (or
-/// [`SMALLEST_FACE_SHARE`] of a smaller `smallest_face`) is dropped ([`large_enough`]). Listed best first by the score kept.
+/// [`SMALLEST_FACE_SHARE`] of a smaller `smallest_face`) is dropped for photos: a face read smaller
+/// than `smallest_listed` px is not listed ([`smallest_listed`] for photos, 0 for every size).
+/// Listed best first by the score kept.
 pub fn scan_faces<const A: usize, const N: usize>(
     init: &InitFile<'_>,
     rgb: &[u8],
     w: usize,
     h: usize,
     min_score: f32,
-    smallest_face: f32,
+    (smallest_face, smallest_listed): (f32, f32),
     scratch: &mut NetScratch<A>,
 ) -> Result<Vec<FaceBox, N>, NetError> {
     let mut candidates: Vec<FaceBox, MAX_CANDIDATES> = Vec::new();
@@ -127,7 +140,7 @@ pub fn scan_faces<const A: usize, const N: usize>(
         }
         s *= 0.5;
     }
-    let large_enough = |f: &FaceBox| large_enough(f, smallest_face);
+    let large_enough = |f: &FaceBox| f.size >= smallest_listed;
     let mut faces: Vec<FaceBox, N> = suppress(candidates, |face| -> Result<Option<FaceBox>, NetError> {
         // The whole frame's faces have had their second look; a window's face gets it here.
         match if face.looks == 1 { second_look(face, w, h, side) } else { None } {

@@ -16,7 +16,7 @@ use gpmm_core::format::init_file::InitFile;
 use gpmm_core::net::agreement::ReadingAgreement;
 use gpmm_core::net::face::{detect, read_landmarks, read_landmarks_measured, Detection, Reading};
 use gpmm_core::net::face_box::FaceBox;
-use gpmm_core::net::scan::scan_faces;
+use gpmm_core::net::scan::{scan_faces, smallest_listed};
 use gpmm_core::net::{NetError, NetScratch};
 use image::RgbImage;
 use std::path::{Path, PathBuf};
@@ -81,6 +81,7 @@ pub struct Detector {
     len: usize,
     scratch: Box<NetScratch<HOST_NET_SCRATCH>>,
     check: Option<FaceCheck>,
+    every_size: bool,
 }
 
 impl Detector {
@@ -97,7 +98,7 @@ impl Detector {
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetError> {
         let mut words = vec![0u32; bytes.len().div_ceil(4)];
         bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-        let mut model = Self { words, len: bytes.len(), scratch: Box::new(NetScratch::new()), check: None };
+        let mut model = Self { words, len: bytes.len(), scratch: Box::new(NetScratch::new()), check: None, every_size: false };
         let file = model.file()?;
         if file.scratch_bytes() > HOST_NET_SCRATCH {
             return Err(NetError::ScratchTooSmall { needed: file.scratch_bytes() });
@@ -121,6 +122,13 @@ impl Detector {
         } else {
             DEFAULT_MIN_SCORE
         }
+    }
+
+    /// Scans list faces of every size (`true`; for a command that picks one face by its own rule,
+    /// as `gpmm learn`), or none read smaller than the photo rule's
+    /// [`gpmm_core::net::scan::smallest_listed`] (the default).
+    pub fn list_every_size(&mut self, every_size: bool) {
+        self.every_size = every_size;
     }
 
     /// Uses `check` for photos' faces instead of the file's (`None`: no check).
@@ -225,10 +233,12 @@ impl Detector {
 
     /// The boxes of [`Detector::scan_all`]'s faces, unread (the finder only); best first.
     pub fn scan_boxes(&mut self, image: &RgbImage, min_score: f32, smallest_face: f32) -> Result<Vec<FaceBox>, DetectError> {
+        let listed = if self.every_size { 0.0 } else { smallest_listed(smallest_face) };
         let (file, scratch) = self.parts()?;
         let (w, h) = (image.width() as usize, image.height() as usize);
-        let faces = scan_faces::<HOST_NET_SCRATCH, PHOTO_MAX_FACES>(&file, image.as_raw(), w, h, min_score, smallest_face, scratch)
-            .map_err(DetectError::Run)?;
+        let faces =
+            scan_faces::<HOST_NET_SCRATCH, PHOTO_MAX_FACES>(&file, image.as_raw(), w, h, min_score, (smallest_face, listed), scratch)
+                .map_err(DetectError::Run)?;
         Ok(faces.into_iter().collect())
     }
 

@@ -283,6 +283,8 @@ pub const LEARN_SMALLEST_FACE: f32 = 96.0;
 /// the initializer's points on it (those beyond the fit's margin moved onto the frame), with its
 /// score.
 pub fn start_points(detector: &mut Detector, photo: &image::RgbImage) -> Result<(Vec<[f32; 2]>, f32), String> {
+    // The loop picks its face by its own rule ([`choose_face`]) among faces of every size.
+    detector.list_every_size(true);
     let faces = detector.scan_for_fit(photo, DEFAULT_MIN_SCORE, LEARN_SMALLEST_FACE, Reading::DEFAULT).map_err(|e| e.to_string())?;
     let Some(det) = choose_face(&faces, None).and_then(|i| faces.get(i)) else { return Err("no face found".into()) };
     let (points, _) = crate::photo::pts::within_margin(&det.landmarks, photo.width(), photo.height());
