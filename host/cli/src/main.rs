@@ -185,7 +185,7 @@ pub enum Command {
     /// (per-channel weight scales) and writes an init file (docs/init-format.md). Prints
     /// the quantized networks' accuracy on held-out renders as JSON. Deterministic for a seed.
     TrainInit(train_init::TrainInitArgs),
-    /// Find the face in an image and read its 68 landmarks, pose and light with an init file.
+    /// Find every face in an image and read its 68 landmarks, pose and light (with the start gpmm ships, or --init).
     ///
     /// The finder sees the whole image letterboxed to 96x96 (and, if the face is small in it, a
     /// second time a square three face sizes wide around it); the initializer a 64x64 crop around
