@@ -204,11 +204,11 @@ pub fn info(a: InfoArgs) -> Result<()> {
     Ok(())
 }
 
-/// Whether the file at `path` starts as an init file does (`GPMI`).
+/// Whether the file at `path` starts as an init file does (its magic).
 fn is_init_file(path: &Path) -> bool {
     use std::io::Read;
     let mut magic = [0u8; 4];
-    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && &magic == b"GPMI"
+    std::fs::File::open(path).and_then(|mut f| f.read_exact(&mut magic)).is_ok() && magic == gpmm_core::format::init_file::INIT_MAGIC
 }
 
 /// An init file's (the shipped start's, for `None`) sizes and metadata as JSON.

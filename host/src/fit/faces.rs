@@ -6,10 +6,11 @@ use super::error::FitRunError;
 use super::input::{check_landmarks, prepare, Prepared};
 use super::job::write_fit_files;
 use super::options::FitOptions;
+use super::overlay::put;
 use super::pipeline::{fit_prepared, Outcome};
 use super::report::{report, FitReport, ReportInputs};
 use crate::gp::model::GpModel;
-use image::{Rgb, RgbImage, RgbaImage};
+use image::{RgbImage, Rgba, RgbaImage};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -89,18 +90,19 @@ pub fn fit_faces(
             out
         })
         .collect();
-    let mut picture = photo.clone();
+    let mut picture = image::DynamicImage::ImageRgb8(photo.clone()).to_rgba8();
     for (i, (_, done)) in results.iter().enumerate() {
         if let Some(d) = done {
             draw_fit(&mut picture, &d.prepared, &d.outcome.render, &i.to_string());
         }
     }
+    let picture = image::DynamicImage::ImageRgba8(picture).to_rgb8();
     Ok((results.into_iter().map(|(f, _)| f).collect(), picture))
 }
 
 /// Draws a fit into the photo it was fitted to: the rendered face blended over the photo where
 /// it covers the crop ([`DRAWN_FIT_SHARE`]), the crop's square outlined, and `label` above it.
-pub fn draw_fit(photo: &mut RgbImage, prepared: &Prepared, render: &RgbaImage, label: &str) {
+pub fn draw_fit(photo: &mut RgbaImage, prepared: &Prepared, render: &RgbaImage, label: &str) {
     let crop = &prepared.crop;
     let size = render.width();
     let (w, h) = (i64::from(photo.width()), i64::from(photo.height()));
@@ -118,12 +120,12 @@ pub fn draw_fit(photo: &mut RgbImage, prepared: &Prepared, render: &RgbaImage, l
                 continue;
             }
             let px = photo.get_pixel_mut(x as u32, y as u32);
-            for (c, fit) in px.0.iter_mut().zip(r) {
+            for (c, fit) in px.0.iter_mut().zip(r).take(3) {
                 *c = (DRAWN_FIT_SHARE * f32::from(fit) + (1.0 - DRAWN_FIT_SHARE) * f32::from(*c)).round() as u8;
             }
         }
     }
-    let ink = Rgb([255, 220, 40]);
+    let ink = Rgba([255, 220, 40, 255]);
     let thick = (crop.side / 200).max(1) as i64;
     for t in 0..thick {
         let (ax, ay, bx, by) = (crop.x + t, crop.y + t, crop.x + i64::from(crop.side) - 1 - t, crop.y + i64::from(crop.side) - 1 - t);
@@ -137,14 +139,6 @@ pub fn draw_fit(photo: &mut RgbImage, prepared: &Prepared, render: &RgbaImage, l
         }
     }
     let scale = (crop.side / 120).clamp(1, 4);
-    let mut rgba = image::DynamicImage::ImageRgb8(photo.clone()).to_rgba8();
     let ty = (crop.y - 9 * i64::from(scale)).max(0) as u32;
-    crate::render::figure::draw_text(&mut rgba, crop.x.max(0) as u32, ty, label, scale, image::Rgba([255, 220, 40, 255]));
-    *photo = image::DynamicImage::ImageRgba8(rgba).to_rgb8();
-}
-
-fn put(img: &mut RgbImage, x: i64, y: i64, c: Rgb<u8>) {
-    if x >= 0 && y >= 0 && x < i64::from(img.width()) && y < i64::from(img.height()) {
-        img.put_pixel(x as u32, y as u32, c);
-    }
+    crate::render::figure::draw_text(photo, crop.x.max(0) as u32, ty, label, scale, ink);
 }

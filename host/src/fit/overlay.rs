@@ -71,7 +71,8 @@ pub fn overlay(crop: &RgbImage, render: &RgbaImage, target: &[[f32; 2]], fitted:
     out
 }
 
-fn put(img: &mut RgbaImage, x: i64, y: i64, c: Rgba<u8>) {
+/// Sets a pixel if it lies in the image.
+pub(super) fn put(img: &mut RgbaImage, x: i64, y: i64, c: Rgba<u8>) {
     if x >= 0 && y >= 0 && x < i64::from(img.width()) && y < i64::from(img.height()) {
         img.put_pixel(x as u32, y as u32, c);
     }
