@@ -62,7 +62,7 @@ pub const M4F: DeviceProfile = DeviceProfile {
     bin: 1536,
     vertex_pool: 3072,
     projected_pool: 1024,
-    frame_cache_pixels: 7168,
+    frame_cache_pixels: 6144,
     net_scratch: 96 * 96 * 3,
     frame_fit_side: 72,
     flash_code_bytes: 512 * 1024,
@@ -98,6 +98,12 @@ pub const M7: DeviceProfile = DeviceProfile {
 pub const ALL: [DeviceProfile; 2] = [M4F, M7];
 
 impl DeviceProfile {
+    /// Words of a mask with one bit per working-image pixel (the frame cache's coverage, the
+    /// occlusion labels).
+    pub const fn pixel_words(&self) -> usize {
+        (self.image_side as usize * self.image_side as usize).div_ceil(32)
+    }
+
     /// The profile called `name` (`m4f`, `m7`; any case).
     pub fn by_name(name: &str) -> Option<Self> {
         ALL.into_iter().find(|p| p.name.eq_ignore_ascii_case(name))

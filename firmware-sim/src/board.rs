@@ -21,9 +21,10 @@ pub(crate) const MAP: MemoryMap = if cfg!(feature = "stm32f405") {
 /// array of `projected_pool` entries (12 and 24 bytes of RAM each). A fit takes three `Vec3`
 /// (positions, albedos, normals) and one projected vertex per model vertex, a render one of each,
 /// so both take meshes of up to `projected_pool` vertices: 1,024 on `m4f` (its blob has at most
-/// 1,000), 3,072 on `m7` (at most 2,000). `m4f`: 36 + 24 KiB of buffers, the renderer's 46 KiB
-/// and the fit's 16 KiB frame cache leave about 70 KiB of the 192 KiB for the stack (the fit's
-/// peak is about 46 KiB: chain states and parameter copies). Nothing guards the stack's end, so
+/// 1,000), 3,072 on `m7` (at most 2,000). `m4f`: 36 + 24 KiB of buffers, the renderer's 46 KiB,
+/// the fit's 14 KiB frame cache (6,144 pixels: a 128 px crop's face covers about 5,500) and its
+/// 2 KiB of occlusion labels leave about 70 KiB of the 192 KiB for the stack (the fit's peak is
+/// about 46 KiB: chain states and parameter copies). Nothing guards the stack's end, so
 /// these margins are checked by the tests (static + peak <= RAM).
 pub(crate) const MAX_VERTICES: usize = PROFILE.vertex_pool;
 /// Entries of the projected-vertex array: the largest mesh a fit or a render takes.
@@ -43,7 +44,10 @@ pub(crate) type Rasterizer = TileRasterizer<TILE, TILE, BIN>;
 /// Covered pixels the fit's compact frame cache holds (2 bytes each).
 pub(crate) const CACHE_PIXELS: usize = PROFILE.frame_cache_pixels;
 /// Words of the frame cache's coverage mask (one bit per image pixel).
-pub(crate) const CACHE_WORDS: usize = (PROFILE.image_side as usize * PROFILE.image_side as usize).div_ceil(32);
+pub(crate) const CACHE_WORDS: usize = PROFILE.pixel_words();
+
+/// Words of the occlusion-aware fit's labels (one bit per image pixel).
+pub(crate) const MASK_WORDS: usize = CACHE_WORDS;
 
 /// Ends the program with failure (QEMU exits with status 1).
 pub(crate) fn fail() -> ! {

@@ -9,11 +9,11 @@
 //! covered pixel) out of two static arrays; the rest (parameters, chain states, background
 //! model) is stack.
 
-use crate::board::{fail, Rasterizer, PROFILE};
+use crate::board::{fail, Rasterizer, MASK_WORDS, PROFILE};
 use crate::clock::instructions_now;
 use crate::{hexlog, stack};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, Stage, StandardFit, TargetImage};
+use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, OcclusionMask, Stage, StandardFit, TargetImage};
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::fit_input::{self, FitInput};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
@@ -53,6 +53,8 @@ pub(crate) struct Buffers<'b> {
     pub raster: &'b mut Rasterizer,
     /// The compact frame cache.
     pub cache: CompactBuffers<'b>,
+    /// The occlusion-aware fit's labels.
+    pub mask: &'b mut OcclusionMask<MASK_WORDS>,
 }
 
 /// The fit to a fit input's image and landmarks (its own frame: the landmark-free path's locals
@@ -111,7 +113,7 @@ pub(crate) fn fit_and_log(
 ) {
     let n = model.vertices();
     let (width, height) = (image.width(), image.height());
-    let Buffers { pool, projected, raster, cache } = bufs;
+    let Buffers { pool, projected, raster, cache, mask } = bufs;
     // Per-vertex buffers: three Vec3 slices from the pool, the projected vertices from the renderer's array.
     let (Some(vec3s), Some(projected)) = (pool.get_mut(..3 * n), projected.get_mut(..n)) else {
         defmt::error!(
@@ -151,6 +153,7 @@ pub(crate) fn fit_and_log(
         settings,
         &mut instance,
         raster,
+        mask,
         &mut rng,
         &mut observer,
     );

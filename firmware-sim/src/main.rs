@@ -32,7 +32,8 @@ mod hexlog;
 mod partition;
 mod stack;
 
-use board::{fail, Rasterizer, CACHE_PIXELS, CACHE_WORDS, MAP, MAX_PROJECTED, MAX_VERTICES, PROFILE};
+use board::{fail, Rasterizer, CACHE_PIXELS, CACHE_WORDS, MAP, MASK_WORDS, MAX_PROJECTED, MAX_VERTICES, PROFILE};
+use gpmm_core::fit::OcclusionMask;
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
 use gpmm_core::checksum::FrameChecksum;
@@ -52,6 +53,7 @@ fn main() -> ! {
     static mut RASTERIZER: Rasterizer = Rasterizer::new();
     static mut CACHE_COVERED: [u32; CACHE_WORDS] = [0; CACHE_WORDS];
     static mut CACHE_TRIANGLES: [u16; CACHE_PIXELS] = [0; CACHE_PIXELS];
+    static mut OCCLUSION: OcclusionMask<MASK_WORDS> = OcclusionMask::new();
 
     let mut core = cortex_m::Peripherals::take().unwrap_or_else(|| fail());
     clock::start(&mut core.SYST);
@@ -82,7 +84,7 @@ fn main() -> ! {
         detect::run(part);
     } else if !device_mesh::is_device_mesh(part) {
         let cache = CompactBuffers { covered: CACHE_COVERED, triangles: CACHE_TRIANGLES };
-        fit_blob(part, fit::Buffers { pool: NORMALS, projected: PROJECTED, raster: RASTERIZER, cache });
+        fit_blob(part, fit::Buffers { pool: NORMALS, projected: PROJECTED, raster: RASTERIZER, cache, mask: OCCLUSION });
     } else {
         let m = match device_mesh::parse(part, MAX_PROJECTED.min(MAX_VERTICES)) {
             Ok(m) => m,

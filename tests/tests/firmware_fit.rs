@@ -16,7 +16,8 @@
 
 use gpmm_core::fit::FitSettings as CoreSettings;
 use gpmm_core::fit::{
-    Drift, DriftSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, ProposalSettings, RankSettings, StartSettings,
+    Drift, DriftSettings, ImageSettings, LandmarkSettings, LightSettings, MixtureShares, OcclusionSettings, ProposalSettings, RankSettings,
+    StartSettings,
 };
 use gpmm_core::format::fit_record;
 use gpmm_core::profile::M4F;
@@ -223,11 +224,12 @@ fn firmware_fit_uses_every_setting() {
             },
         },
         light: LightSettings { solve_stride: 5, ridge_ambient: [0.7; 3], ..defaults.light },
+        occlusion: OcclusionSettings { rounds: 2, threshold: -6.0, smoothing: 1 },
     };
     // Every top-level field and group differs from the default. A new field must be added here;
-    // 97 fields counting the groups' own.
+    // 101 fields counting the groups' own.
     let fields = format!("{settings:?}");
-    assert_eq!(fields.matches(": ").count(), 97, "update this test for the new settings: {fields}");
+    assert_eq!(fields.matches(": ").count(), 101, "update this test for the new settings: {fields}");
     let seed = 99;
     let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;

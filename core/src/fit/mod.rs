@@ -40,6 +40,7 @@ pub use frame::{first_beyond_margin, landmark_margin, CoveredPixels, LANDMARK_MA
 pub use likelihood::contour::{Silhouette, CONTOUR_POOL, MAX_CONTOUR, NO_VERTEX};
 pub use likelihood::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use likelihood::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget};
+pub use likelihood::occlusion::{Labeller, MaskView, OcclusionMask, OcclusionSettings, MASK_WORDS_128};
 pub use likelihood::pixel::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
 pub use likelihood::prior::Prior;
 pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};

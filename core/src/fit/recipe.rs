@@ -34,6 +34,7 @@ use crate::fit::chain::{image_chain, image_log_likelihood, landmark_chain, Chain
 use crate::fit::likelihood::contour::{hide_turned_away_contour, Silhouette};
 use crate::fit::likelihood::image::{BackgroundModel, ImageEval, TargetImage};
 use crate::fit::likelihood::landmarks::{LandmarkEval, LandmarkTarget};
+use crate::fit::likelihood::occlusion::{Labeller, OcclusionMask, OcclusionSettings};
 use crate::fit::likelihood::pixel::GaussianPixel;
 use crate::fit::likelihood::prior::Prior;
 use crate::fit::settings::FitSettings;
@@ -46,7 +47,7 @@ use crate::geometry::TriIndex;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
-use crate::render::TileRasterizer;
+use crate::render::{Cull, TileRasterizer};
 use rand_core::Rng;
 
 /// Landmark count of the iBUG-68 scheme, whose first 17 points are the jaw contour.
@@ -72,7 +73,7 @@ pub enum Stage {
 /// `step`):
 ///
 /// ```
-/// use gpmm_core::fit::{standard_fit, FitObserver, FitSettings, ProposalStep, Stage};
+/// use gpmm_core::fit::{standard_fit, FitObserver, FitSettings, OcclusionMask, ProposalStep, Stage};
 /// # use gpmm_core::fit::{project_landmarks, TargetImage};
 /// # use gpmm_core::model::{Basis, FactoredBasis, FitParams, Instance, InstanceBuffers, MorphableModel};
 /// # use gpmm_core::render::{Pose, ProjectedVertex, ShLight, TileRasterizer};
@@ -116,7 +117,8 @@ pub enum Stage {
 /// // A short fit of a tetrahedron's landmarks and image (set up as in `standard_fit`'s example).
 /// let settings = FitSettings::DEFAULT.with_steps(200, 40).without_shape_solve().with_ranks(1, 0);
 /// let mut log = Log::default();
-/// standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut rng, &mut log)?;
+/// let mut mask = OcclusionMask::<32>::new();
+/// standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut mask, &mut rng, &mut log)?;
 ///
 /// // Both landmark phases report as one chain of 200 steps; each chain ends with done == total.
 /// assert_eq!(log.last, [(Stage::LandmarkChain, 200, 200), (Stage::ImageChain, 40, 40)]);
@@ -161,11 +163,11 @@ impl ChainObserver for PhaseObserver<'_> {
     }
 
     fn proposal(&mut self, step: &ProposalStep) {
-        self.observer.proposal(self.stage, step)
+        self.observer.proposal(self.stage, &ProposalStep { step: self.offset + step.step, ..*step })
     }
 
     fn sample(&mut self, sample: &ChainSample<'_>) {
-        self.observer.sample(self.stage, sample)
+        self.observer.sample(self.stage, &ChainSample { step: self.offset + sample.step, ..*sample })
     }
 }
 
@@ -190,8 +192,31 @@ pub struct StandardFit<const KS: usize, const KC: usize> {
     pub start_image: ImageEval,
     /// The landmark term of `start`.
     pub start_landmarks: LandmarkEval,
-    /// The image chain (its `best` is the fit).
+    /// The image chain (its `best` is the fit; with occlusion rounds, its parts together).
     pub image: FitResult<KS, KC>,
+    /// The last labelling of what the face does not explain (`None` without occlusion rounds).
+    pub occlusion: Option<OcclusionFigures>,
+}
+
+/// The labels of an occlusion-aware fit's last labelling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OcclusionFigures {
+    /// Working pixels labelled occluded.
+    pub occluded: u32,
+    /// Photo pixels the labelled sample's face covered.
+    pub covered: u32,
+}
+
+impl OcclusionFigures {
+    /// The occluded fraction of the face's pixels (0 if it covers none).
+    pub fn fraction(&self) -> f32 {
+        if self.covered == 0 {
+            0.0
+        } else {
+            (self.occluded as f32 / self.covered as f32).min(1.0)
+        }
+    }
 }
 
 impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
@@ -205,7 +230,7 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
 /// per model landmark; `valid` marks the usable ones). `instance` must be built for `model`.
 ///
 /// ```
-/// use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, Stage, TargetImage};
+/// use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, OcclusionMask, Stage, TargetImage};
 /// use gpmm_core::model::{Basis, FactoredBasis, FitParams, Instance, InstanceBuffers, MorphableModel};
 /// use gpmm_core::render::{Pose, ProjectedVertex, ShLight, TileRasterizer};
 /// use rand_core::SeedableRng;
@@ -238,10 +263,12 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
 /// let mut raster = TileRasterizer::<16, 16, 64>::new();
 /// let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(7);
 ///
-/// // A short fit: few steps, no start shape solve.
+/// // A short fit: few steps, no start shape solve; the occlusion labels (one bit per pixel) are
+/// // the caller's too, though these settings infer none.
 /// let settings = FitSettings::DEFAULT.with_steps(400, 40).without_shape_solve().with_ranks(1, 0);
+/// let mut mask = OcclusionMask::<{ 32 * 32 / 32 }>::new();
 /// let mut progress = |_: Stage, _: u32, _: u32| {};
-/// let fit = standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut rng, &mut progress)?;
+/// let fit = standard_fit(&model, image, &points, &[true; 4], &settings, &mut instance, &mut raster, &mut mask, &mut rng, &mut progress)?;
 ///
 /// // The landmarks' pixel error of the start and of the fit.
 /// let error = |p: &FitParams<1, 1>| -> f32 {
@@ -255,7 +282,16 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[allow(clippy::too_many_arguments)]
-pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
+pub fn standard_fit<
+    R: Rng + ?Sized,
+    I: TriIndex,
+    const KS: usize,
+    const KC: usize,
+    const TW: usize,
+    const TH: usize,
+    const BIN: usize,
+    const MW: usize,
+>(
     model: &MorphableModel<'_, I>,
     image: TargetImage<'_>,
     landmarks: &[[f32; 2]],
@@ -263,6 +299,7 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     settings: &FitSettings,
     instance: &mut Instance<'_, KS, KC>,
     raster: &mut TileRasterizer<TW, TH, BIN>,
+    mask: &mut OcclusionMask<MW>,
     rng: &mut R,
     observer: &mut dyn FitObserver,
 ) -> Result<StandardFit<KS, KC>, FitError> {
@@ -290,14 +327,13 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
     // 2. The landmark chain: the pose (contour σ scaled), then the shape with yaw and distance held.
     let (pose_acceptance, landmark) = landmark_phases(model, lm, silhouette.as_ref(), &prior, &init, settings, w, h, rng, observer)?;
 
-    // 3. The least-squares light of its best sample (kept only if the solve succeeds).
+    // 3. The least-squares light of its best sample (kept only if the solve succeeds); with
+    // occlusion rounds, the pixels labelled and the light solved again on the face's.
     let background = BackgroundModel::from_image(&image, settings.image.background_floor)?;
-    let ip = ImageProblem {
-        image,
-        pixel: GaussianPixel::new(settings.image.pixel_sigma)?,
-        background: &background,
-        light_solve: settings.light.solve_config(settings.light.solve_stride),
-    };
+    let pixel = GaussianPixel::new(settings.image.pixel_sigma)?;
+    let occ = settings.occlusion;
+    mask.reset(if occ.enabled() { w } else { 0 }, h)?;
+    let mut labels = Labels { image, pixel, background: &background, settings: occ, figures: None };
     let mut start = landmark.best.clone();
     instance.update(model, &start, w, h)?;
     let every_vertex = settings.light.solve_config(settings.light.start_stride);
@@ -305,6 +341,22 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &start.camera(w, h), &image, &every_vertex)
     {
         start.light = l;
+    }
+    if occ.enabled() {
+        labels.label(model, &start, instance, raster, mask)?;
+        let seen = labels.target(mask)?;
+        if let Ok(l) = solve_light(
+            instance.positions(),
+            instance.normals(),
+            instance.albedos(),
+            &start.pose,
+            &start.camera(w, h),
+            &seen,
+            &every_vertex,
+        ) {
+            start.light = l;
+        }
+        labels.label(model, &start, instance, raster, mask)?;
     }
     // Contour points on the side turned away are left to the pose phase.
     let mut seen = [false; crate::model::MAX_LANDMARKS];
@@ -315,8 +367,12 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         hide_turned_away_contour(model, positions, normals, &start.pose, contour, settings.landmarks.hidden_contour_min_cos, seen);
     }
     let lm = if seen.iter().any(|&v| v) { lm.with_valid(seen)? } else { lm };
-    color_rounds::<I, KS, KC>(model, &image, settings, settings.start.color_rounds, &mut start, instance, w, h)?;
-    shape_rounds::<I, KS, KC>(model, &image, settings.start.shape_landmarks.then_some(&lm), settings, &mut start, instance, w, h)?;
+    color_rounds::<I, KS, KC>(model, &labels.target(mask)?, settings, settings.start.color_rounds, &mut start, instance, w, h)?;
+    if occ.enabled() && settings.start.shape_rounds > 0 {
+        labels.label(model, &start, instance, raster, mask)?;
+    }
+    let shape_lm = settings.start.shape_landmarks.then_some(&lm);
+    shape_rounds::<I, KS, KC>(model, &labels.target(mask)?, shape_lm, settings, &mut start, instance, w, h)?;
 
     // 4. The image chain, its landmark σ scaled.
     let img_mix = Mixture::from_shares(&settings.proposals.image, &settings.proposals.drift, side)?;
@@ -330,14 +386,90 @@ pub fn standard_fit<R: Rng + ?Sized, I: TriIndex, const KS: usize, const KC: usi
         height: h,
         silhouette: silhouette.as_ref(),
     };
-    let start_image = image_log_likelihood(&problem, &ip, &start, instance, raster)?;
+    if occ.enabled() {
+        labels.label(model, &start, instance, raster, mask)?;
+    }
+    let light_solve = settings.light.solve_config(settings.light.solve_stride);
+    let start_image = {
+        let ip = ImageProblem { image: labels.target(mask)?, pixel, background: &background, light_solve };
+        image_log_likelihood(&problem, &ip, &start, instance, raster)?
+    };
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng, NoObserver)?.best_landmarks;
+    // The image chain, in `rounds` parts with occlusion rounds: each from the best sample so far,
+    // its pixels labelled again.
     let img_steps = settings.image.steps;
-    let phase = PhaseObserver { observer, stage: Stage::ImageChain, offset: 0, total: img_steps, steps: img_steps, report_end: true };
-    let mut image = image_chain(&problem, &ip, &start, img_steps, instance, raster, rng, phase)?;
-    polish(&problem, &ip, settings, &mut image, instance, raster)?;
-    Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image })
+    let parts = occ.rounds.clamp(1, img_steps.max(1));
+    let mut image: Option<FitResult<KS, KC>> = None;
+    let mut done = 0;
+    for part in 0..parts {
+        let steps = img_steps * (part + 1) / parts - done;
+        let from = match &image {
+            Some(r) => {
+                labels.label(model, &r.best, instance, raster, mask)?;
+                r.best.clone()
+            }
+            None => start.clone(),
+        };
+        let ip = ImageProblem { image: labels.target(mask)?, pixel, background: &background, light_solve };
+        let last = part + 1 == parts;
+        let phase =
+            PhaseObserver { observer: &mut *observer, stage: Stage::ImageChain, offset: done, total: img_steps, steps, report_end: last };
+        let mut next = image_chain(&problem, &ip, &from, steps, instance, raster, rng, phase)?;
+        if last {
+            polish(&problem, &ip, settings, &mut next, instance, raster)?;
+        }
+        done += steps;
+        image = Some(match image {
+            Some(before) => FitResult { acceptance: before.acceptance.combined(&next.acceptance), steps: done, ..next },
+            None => next,
+        });
+    }
+    let image = image.ok_or(FitError::BadConfig)?;
+    Ok(StandardFit { init, pose_acceptance, landmark, start, start_image, start_landmarks, image, occlusion: labels.figures })
+}
+
+/// The occlusion labels' inputs and the last labelling's figures.
+struct Labels<'a, 'b> {
+    image: TargetImage<'a>,
+    pixel: GaussianPixel,
+    background: &'b BackgroundModel,
+    settings: OcclusionSettings,
+    figures: Option<OcclusionFigures>,
+}
+
+impl<'a> Labels<'a, '_> {
+    /// Labels the pixels `params`' face covers ([`Labeller`]) and smooths the labels.
+    #[inline(never)]
+    fn label<I: TriIndex, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize, const MW: usize>(
+        &mut self,
+        model: &MorphableModel<'_, I>,
+        params: &FitParams<KS, KC>,
+        instance: &mut Instance<'_, KS, KC>,
+        raster: &mut TileRasterizer<TW, TH, BIN>,
+        mask: &mut OcclusionMask<MW>,
+    ) -> Result<(), FitError> {
+        let (w, h) = (self.image.width(), self.image.height());
+        instance.update(model, params, w, h)?;
+        let mut sink = Labeller::new(mask, self.image, self.pixel, self.background, self.settings.threshold)?;
+        raster.render(instance.projected(), model.triangles(), w, h, Cull::Clockwise, &mut sink)?;
+        let covered = sink.covered();
+        mask.smooth(self.settings.smoothing);
+        self.figures = Some(OcclusionFigures { occluded: mask.count(), covered });
+        Ok(())
+    }
+
+    /// The target image, its occluded pixels absent (all observed without occlusion rounds).
+    fn target<'m, const MW: usize>(&self, mask: &'m OcclusionMask<MW>) -> Result<TargetImage<'m>, FitError>
+    where
+        'a: 'm,
+    {
+        if self.settings.enabled() {
+            self.image.with_mask(mask.view())
+        } else {
+            Ok(self.image)
+        }
+    }
 }
 
 /// The image chain's best sample after [`ImageSettings::color_polish_rounds`](crate::fit::settings::ImageSettings)

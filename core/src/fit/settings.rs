@@ -5,6 +5,7 @@
 
 use crate::error::FitError;
 use crate::fit::likelihood::image::DEFAULT_PIXEL_SIGMA;
+use crate::fit::likelihood::occlusion::OcclusionSettings;
 use crate::fit::solve::light::LightSolveConfig;
 use crate::geometry::Vec3;
 use crate::render::ShLight;
@@ -60,6 +61,8 @@ pub struct FitSettings {
     pub proposals: ProposalSettings,
     /// The start light and the least-squares light solves.
     pub light: LightSettings,
+    /// The labels of what the face does not explain (occluders), inferred during the fit.
+    pub occlusion: OcclusionSettings,
 }
 
 /// The landmark chain and the landmark term.
@@ -231,6 +234,7 @@ impl FitSettings {
         start: StartSettings::DEFAULT,
         proposals: ProposalSettings::DEFAULT,
         light: LightSettings::DEFAULT,
+        occlusion: OcclusionSettings::OFF,
     };
 
     /// These settings with other step counts (landmark chain, image chain).
@@ -300,6 +304,7 @@ impl FitSettings {
             && (l.student_t == 0.0 || positive(l.student_t))
         {
             self.proposals.validate()?;
+            self.occlusion.validate()?;
             self.light.validate()
         } else {
             Err(FitError::BadConfig)

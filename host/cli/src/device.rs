@@ -78,6 +78,10 @@ pub struct DeviceFitArgs {
     /// QEMU time limit in seconds.
     #[arg(long, default_value_t = 1800)]
     pub timeout: u32,
+    /// Any other setting of the fit, by its path in fit.json's `settings` (repeatable), as `gpmm
+    /// fit --set` takes them, e.g. `--set occlusion.rounds=3`: the fit input carries every setting.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub overrides: Vec<String>,
 }
 
 /// Arguments of `gpmm device-detect`.
@@ -251,6 +255,7 @@ impl DeviceFitArgs {
             image_steps: Some(self.image_steps),
             shape_rank: Some(ranks[0]),
             color_rank: Some(ranks[1]),
+            overrides: self.overrides.clone(),
             ..FitFlags::default()
         }
     }

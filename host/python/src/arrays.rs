@@ -22,6 +22,14 @@ pub fn rgba_to_numpy<'py>(py: Python<'py>, img: &image::RgbaImage) -> PyResult<B
     Ok(a.into_pyarray(py).into_any())
 }
 
+/// An `H x W` boolean array of a mask image (true where the pixel is set).
+pub fn mask_to_numpy<'py>(py: Python<'py>, img: &image::GrayImage) -> PyResult<Bound<'py, PyAny>> {
+    let (w, h) = img.dimensions();
+    let bits = img.as_raw().iter().map(|v| *v > 127).collect();
+    let a = Array2::from_shape_vec((h as usize, w as usize), bits).map_err(|e| value_error(e.to_string()))?;
+    Ok(a.into_pyarray(py).into_any())
+}
+
 /// An `L x 2` float32 array of points.
 pub fn points_to_numpy<'py>(py: Python<'py>, points: &[[f32; 2]]) -> PyResult<Bound<'py, PyAny>> {
     let a =

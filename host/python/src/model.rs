@@ -339,8 +339,10 @@ impl Model {
     /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
     /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
     /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient;
-    /// docs/fit-json.md) and images: `overlay` (input | fit | blend), `render` (the fit, RGBA) and
-    /// `working_image` (the crop the chains saw). `landmark_calibration`: a detector calibration file
+    /// docs/fit-json.md) and images: `overlay` (input | fit | blend, and the occluded pixels with
+    /// `set=["occlusion.rounds=3"]`), `render` (the fit, RGBA), `working_image` (the crop the chains
+    /// saw) and, for an occlusion-aware fit, `occluded` (H x W booleans of the working image) beside
+    /// `occluded_fraction`. `landmark_calibration`: a detector calibration file
     /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
     /// `image` may also be `H x W x 4` (RGBA: alpha is dropped) or anything `numpy.asarray` makes such an
     /// array of (a PIL image); its values are used as they are (the model's colours are linear RGB).
@@ -407,7 +409,13 @@ impl Model {
                 Ok::<_, gpmm_host::fit::FitRunError>((rep, prepared, outcome))
             })
             .map_err(err)?;
-        let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
+        let ov = overlay(
+            &prepared.image,
+            &outcome.render,
+            outcome.occlusion.as_ref().map(|o| &o.0),
+            &prepared.landmarks,
+            &outcome.fitted_landmarks,
+        );
         let out = json_to_py(py, &rep)?;
         let dict = out.cast::<PyDict>().map_err(|_| value_error("fit report is not a dict"))?;
         dict.set_item("shape", vec_to_numpy(py, rep.shape.clone()))?;
@@ -439,6 +447,9 @@ impl Model {
         dict.set_item("overlay", rgba_to_numpy(py, &ov)?)?;
         dict.set_item("render", rgba_to_numpy(py, &outcome.render)?)?;
         dict.set_item("working_image", rgb_to_numpy(py, &prepared.image)?)?;
+        if let Some((labels, _)) = &outcome.occlusion {
+            dict.set_item("occluded", crate::arrays::mask_to_numpy(py, labels)?)?;
+        }
         Ok(out)
     }
 

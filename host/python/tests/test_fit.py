@@ -109,3 +109,30 @@ def test_a_fit_gives_its_face_as_a_mesh_in_camera_space(small_model_path, py_fit
     assert (mesh["vertices"][:, 2] > 0).all() or (mesh["vertices"][:, 2] < 0).all()
     assert abs(np.linalg.norm(mesh["vertices"].mean(axis=0)) - np.linalg.norm(fit["translation_mm"])) < 0.2 * np.linalg.norm(fit["translation_mm"])
     assert not np.allclose(mesh["vertices"], positions)
+
+
+def test_an_occlusion_aware_fit_labels_a_painted_occluder(small_model_path, astronaut):
+    """With occlusion rounds, a magenta bar painted over the eyes is left to the non-face model:
+    the result's `occluded` labels cover most of it in the working image, and fit.json's
+    `occluded_fraction` says how much of the face that is; without rounds neither is there."""
+    model = gpmm.load(small_model_path)
+    img, pts = astronaut
+    image, points = np.array(gpmm.load_image(img)), gpmm.read_pts(pts)
+    eyes = points[36:48]
+    (x0, y0), (x1, y1) = eyes.min(axis=0), eyes.max(axis=0)
+    pad = 0.15 * (x1 - x0)
+    box = (int(y0 - pad), int(y1 + pad), int(x0 - pad), int(x1 + pad))
+    image[box[0]:box[1], box[2]:box[3]] = [230, 40, 200]
+    plain = model.fit(image, points, landmark_steps=300, image_steps=30, seed=3)
+    assert "occluded" not in plain and "occluded_fraction" not in plain
+    fit = model.fit(image, points, landmark_steps=300, image_steps=30, seed=3, set=["occlusion.rounds=2"])
+    labels = fit["occluded"]
+    side = fit["working_image"].shape[0]
+    assert labels.shape == (side, side) and labels.dtype == bool
+    assert 0.02 < fit["occluded_fraction"] < 0.6, fit["occluded_fraction"]
+    # The bar in working pixels: the crop maps photo pixels to the working image.
+    magenta = np.all(np.abs(fit["working_image"].astype(int) - [230, 40, 200]) < 40, axis=2)
+    assert magenta.sum() > 50
+    assert labels[magenta].mean() > 0.7, labels[magenta].mean()
+    assert labels[~magenta].mean() < 0.2, labels[~magenta].mean()
+    assert fit["overlay"].shape[1] > plain["overlay"].shape[1], "the overlay has a fourth panel"

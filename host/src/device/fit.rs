@@ -11,7 +11,7 @@
 use crate::device::quantize::BlobBuf;
 use crate::fit::{FitBuffers, Prepared};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{project_landmarks, standard_fit, CoveredPixels, FitSettings, RankSettings, StandardFit, TargetImage};
+use gpmm_core::fit::{project_landmarks, standard_fit, CoveredPixels, FitSettings, OcclusionMask, RankSettings, StandardFit, TargetImage};
 use gpmm_core::format::{fit_input, fit_record, FormatError};
 use gpmm_core::profile::{DeviceProfile, M4F};
 use rand::SeedableRng;
@@ -151,7 +151,8 @@ pub fn host_fit_pixels(
     let mut raster: Box<DeviceRasterizer> = Box::new(DeviceRasterizer::new());
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     let valid = vec![true; landmarks.len()];
-    let fit = standard_fit(&model, image, landmarks, &valid, settings, &mut inst, &mut raster, &mut rng, &mut |_, _, _| {})
+    let mut mask: Box<OcclusionMask<{ M4F.pixel_words() }>> = Box::default();
+    let fit = standard_fit(&model, image, landmarks, &valid, settings, &mut inst, &mut raster, &mut mask, &mut rng, &mut |_, _, _| {})
         .map_err(DeviceFitError::Core)?;
     let mut lm = vec![[0.0f32; 2]; model.landmarks().len()];
     let k = project_landmarks(&model, fit.params(), w, h, &mut lm).map_err(DeviceFitError::Core)?;

@@ -85,7 +85,8 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
     let text = serde_json::to_string_pretty(rep).map_err(|e| werr(&json_path, &e))?;
     std::fs::write(&json_path, text + "\n").map_err(|e| werr(&json_path, &e))?;
     let ov_path = dir.join("overlay.png");
-    let ov = overlay(&prepared.image, &outcome.render, &prepared.landmarks, &outcome.fitted_landmarks);
+    let ov =
+        overlay(&prepared.image, &outcome.render, outcome.occlusion.as_ref().map(|o| &o.0), &prepared.landmarks, &outcome.fitted_landmarks);
     crate::render::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
     let ply_path = dir.join("fit.ply");
     let mesh = model

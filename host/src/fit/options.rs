@@ -7,6 +7,12 @@ use gpmm_core::fit::FitSettings;
 use gpmm_core::fit::RankSettings;
 use serde::{Deserialize, Serialize};
 
+/// The largest working image side.
+pub const MAX_SIZE: u32 = 1024;
+
+/// The occlusion labels of a fit of any working size.
+pub type HostMask = gpmm_core::fit::OcclusionMask<{ (MAX_SIZE * MAX_SIZE / 32) as usize }>;
+
 /// A host fit: the working image side and the seed around the core's one [`FitSettings`]
 /// (serialized flat: `size`, `seed` and the settings' fields side by side).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -41,8 +47,8 @@ impl FitOptions {
         if !(f.landmarks.sigma > 0.0 && f.landmarks.sigma <= 0.5) {
             return Err(FitRunError::Settings(format!("landmark sigma {} is invalid: it must be in (0, 0.5]", f.landmarks.sigma)));
         }
-        if !(16..=1024).contains(&self.size) {
-            return Err(FitRunError::Settings(format!("working size {} is invalid: it must be 16 to 1024 pixels", self.size)));
+        if !(16..=MAX_SIZE).contains(&self.size) {
+            return Err(FitRunError::Settings(format!("working size {} is invalid: it must be 16 to {MAX_SIZE} pixels", self.size)));
         }
         f.validate().map_err(|_| {
             FitRunError::Settings("the fit settings are out of range (a σ, share, stride or step size is not positive and finite)".into())

@@ -1,7 +1,8 @@
 //! `overlay.png`: the working image, the rendered fit and their blend side by side, with the
-//! target and fitted landmarks drawn on.
+//! target and fitted landmarks drawn on, and (for an occlusion-aware fit) the pixels it left to
+//! the non-face model.
 
-use image::{RgbImage, Rgba, RgbaImage};
+use image::{GrayImage, RgbImage, Rgba, RgbaImage};
 
 /// Upscaling of the overlay panels (nearest neighbour).
 pub const OVERLAY_SCALE: u32 = 3;
@@ -10,15 +11,21 @@ pub const TARGET_COLOR: Rgba<u8> = Rgba([40, 230, 60, 255]);
 /// Colour of the fitted landmarks in the overlay (red crosses).
 pub const FITTED_COLOR: Rgba<u8> = Rgba([255, 40, 40, 255]);
 
-/// `input crop | rendered fit | 50 % blend`, each upscaled by [`OVERLAY_SCALE`], target landmarks
-/// as green dots and fitted ones as red crosses on the first and last panel, labels on top.
-pub fn overlay(crop: &RgbImage, render: &RgbaImage, target: &[[f32; 2]], fitted: &[[f32; 2]]) -> RgbaImage {
+/// Colour of the occluded pixels in the overlay's fourth panel (magenta).
+pub const OCCLUDED_COLOR: Rgba<u8> = Rgba([230, 40, 200, 255]);
+
+/// `input crop | rendered fit | 50 % blend [| occluded]`, each upscaled by [`OVERLAY_SCALE`], target
+/// landmarks as green dots and fitted ones as red crosses on the first and third panel, labels on
+/// top. With `occluded` (white: labelled occluded), a fourth panel shows the crop dimmed, the
+/// occluded pixels in [`OCCLUDED_COLOR`].
+pub fn overlay(crop: &RgbImage, render: &RgbaImage, occluded: Option<&GrayImage>, target: &[[f32; 2]], fitted: &[[f32; 2]]) -> RgbaImage {
     let (w, h) = crop.dimensions();
     let s = OVERLAY_SCALE;
     let (pw, ph) = (w * s, h * s);
     let (gap, header) = (4u32, 14u32);
     let bg = Rgba([24, 24, 24, 255]);
-    let mut out = RgbaImage::from_pixel(3 * pw + 4 * gap, ph + header + gap, bg);
+    let panels = if occluded.is_some() { 4 } else { 3 };
+    let mut out = RgbaImage::from_pixel(panels * pw + (panels + 1) * gap, ph + header + gap, bg);
     let panel = |i: u32| (gap + i * (pw + gap), header);
     for y in 0..ph {
         for x in 0..pw {
@@ -36,10 +43,16 @@ pub fn overlay(crop: &RgbImage, render: &RgbaImage, target: &[[f32; 2]], fitted:
                 let (ox, oy) = panel(i as u32);
                 out.put_pixel(ox + x, oy + y, px);
             }
+            if let Some(m) = occluded {
+                let labelled = m.get_pixel_checked(x / s, y / s).is_some_and(|v| v.0[0] > 127);
+                let px = if labelled { OCCLUDED_COLOR } else { Rgba([c[0] / 2, c[1] / 2, c[2] / 2, 255]) };
+                let (ox, oy) = panel(3);
+                out.put_pixel(ox + x, oy + y, px);
+            }
         }
     }
     let ink = Rgba([230, 230, 230, 255]);
-    for (i, label) in ["input", "fit", "blend"].iter().enumerate() {
+    for (i, label) in ["input", "fit", "blend", "occluded"].iter().take(panels as usize).enumerate() {
         let (ox, _) = panel(i as u32);
         crate::render::figure::draw_text(&mut out, ox, 3, label, 1, ink);
     }

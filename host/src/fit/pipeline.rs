@@ -5,7 +5,7 @@ use super::buffers::FitBuffers;
 use super::error::FitRunError;
 use super::input::{check_landmarks, prepare, Prepared};
 use super::observe::{AcceptanceReport, HostObserver};
-use super::options::FitOptions;
+use super::options::{FitOptions, HostMask};
 use super::params::{Params, KC, KS};
 use super::posterior::PosteriorSummary;
 use crate::gp::model::GpModel;
@@ -56,6 +56,9 @@ pub struct Outcome {
     pub fitted_landmarks: Vec<[f32; 2]>,
     /// The fit rendered (transparent where the model does not cover).
     pub render: RgbaImage,
+    /// The occlusion labels (white: occluded) and the occluded fraction of the face's pixels
+    /// (`None` without occlusion rounds).
+    pub occlusion: Option<(image::GrayImage, f32)>,
     /// Seconds in the landmark chain.
     pub landmark_seconds: f64,
     /// Seconds in the light solve and the image chain.
@@ -100,8 +103,10 @@ pub fn fit_prepared(
     // One run of the core's standard fit; the observer reports progress, splits the time and
     // counts the proposals by name.
     let mut observer = HostObserver::new(progress, core_settings.image.steps / 2);
-    let result = standard_fit(&mm, target, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut rng, &mut observer)
-        .map_err(core("fit"))?;
+    let mut mask: Box<HostMask> = Box::default();
+    let result =
+        standard_fit(&mm, target, &prepared.landmarks, &valid, &core_settings, &mut inst, &mut raster, &mut mask, &mut rng, &mut observer)
+            .map_err(core("fit"))?;
     let landmark_seconds = observer.landmark_seconds;
     let image_seconds = observer.elapsed() - landmark_seconds;
     let posterior = PosteriorSummary::of(&observer.posterior);
@@ -117,6 +122,10 @@ pub fn fit_prepared(
     let mut sink = ImageSink::new(w, h, Background::Transparent);
     raster.render(inst.projected(), mm.triangles(), w, h, Cull::Clockwise, &mut sink).map_err(|e| core("final render")(e.into()))?;
     let fitted_landmarks = project_landmarks(&mm, &fit, w, h)?;
+    let occlusion = result.occlusion.map(|o| {
+        let labels = image::GrayImage::from_fn(w, h, |x, y| image::Luma([if mask.get(x, y) { 255 } else { 0 }]));
+        (labels, o.fraction())
+    });
 
     Ok(Outcome {
         params: fit,
@@ -134,6 +143,7 @@ pub fn fit_prepared(
         posterior,
         fitted_landmarks,
         render: sink.into_image(),
+        occlusion,
         landmark_seconds,
         image_seconds,
     })

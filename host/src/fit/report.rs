@@ -119,6 +119,10 @@ pub struct FitReport {
     pub pixel_rmse: f32,
     /// Pixels the fit covers in the working image.
     pub covered_pixels: u32,
+    /// Fraction of the face's working pixels labelled occluded (absent without occlusion rounds,
+    /// `occlusion.rounds` 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub occluded_fraction: Option<f32>,
     /// Landmark + image log likelihood of the fit.
     pub log_likelihood: f32,
     /// The log densities separately.
@@ -213,6 +217,7 @@ pub fn report(
         pixel_rmse_after_landmark_chain: o.pixel_rmse_after_landmark_chain,
         pixel_rmse: o.pixel_rmse,
         covered_pixels: o.covered_pixels,
+        occluded_fraction: o.occlusion.as_ref().map(|o| o.1),
         log_likelihood: o.image_log_likelihood + o.landmark_log_likelihood,
         log_densities: LogDensities { posterior: o.log_posterior, image: o.image_log_likelihood, landmarks: o.landmark_log_likelihood },
         acceptance: AcceptanceBoth { landmark_chain: o.landmark_acceptance.clone(), image_chain: o.image_acceptance.clone() },

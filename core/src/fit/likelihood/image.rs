@@ -3,6 +3,7 @@
 //! is in [`crate::fit::likelihood`].
 
 use crate::error::FitError;
+use crate::fit::likelihood::occlusion::MaskView;
 use crate::geometry::CoveredPixels;
 use crate::geometry::Vec3;
 
@@ -15,14 +16,18 @@ const BG_SHIFT: u32 = 5; // 256 / 8 = 32 = 1 << 5
 const BG_TOTAL: usize = BG_BINS * BG_BINS * BG_BINS;
 
 /// A borrowed 8-bit RGB target image, row-major, top row first, linear colours (value / 255),
-/// with the pixels the photo covers: the others (a crop past the photo's edge) read as absent.
+/// with the pixels the photo covers: the others (a crop past the photo's edge) read as absent,
+/// as do the pixels an occlusion mask labels ([`TargetImage::with_mask`]).
 #[derive(Debug, Clone, Copy)]
 pub struct TargetImage<'a> {
     pixels: &'a [[u8; 3]],
     width: u32,
     height: u32,
     covered: CoveredPixels,
+    /// Whether some pixel reads as absent: past the photo's edge, or labelled by `mask` (one test
+    /// per pixel read while neither is).
     partial: bool,
+    mask: Option<MaskView<'a>>,
 }
 
 impl<'a> TargetImage<'a> {
@@ -37,7 +42,7 @@ impl<'a> TargetImage<'a> {
         if width > crate::render::raster::MAX_IMAGE_SIZE || height > crate::render::raster::MAX_IMAGE_SIZE {
             return Err(FitError::BadConfig);
         }
-        Ok(Self { pixels, width, height, covered: CoveredPixels::whole(width, height), partial: false })
+        Ok(Self { pixels, width, height, covered: CoveredPixels::whole(width, height), partial: false, mask: None })
     }
 
     /// The image with only `covered` observed (see [`crate::fit::frame`]); the rectangle must lie
@@ -46,7 +51,32 @@ impl<'a> TargetImage<'a> {
         if !covered.fits(self.width, self.height) {
             return Err(FitError::EmptyImage);
         }
-        Ok(Self { covered, partial: covered != CoveredPixels::whole(self.width, self.height), ..self })
+        let edge = covered != CoveredPixels::whole(self.width, self.height);
+        Ok(Self { covered, partial: edge || self.mask.is_some(), ..self })
+    }
+
+    /// The image with the pixels `mask` labels occluded read as absent (the mask must be this
+    /// image's size): every use of the target (the image term, the light, colour and shape
+    /// solves) then leaves them to the non-face model.
+    pub fn with_mask<'m>(self, mask: MaskView<'m>) -> Result<TargetImage<'m>, FitError>
+    where
+        'a: 'm,
+    {
+        if mask.width() != self.width || mask.height() != self.height {
+            return Err(FitError::LengthMismatch);
+        }
+        Ok(TargetImage { mask: Some(mask), partial: true, ..self })
+    }
+
+    /// The image with every pixel the photo covers observed.
+    pub fn without_mask(self) -> Self {
+        Self { mask: None, partial: self.covered != CoveredPixels::whole(self.width, self.height), ..self }
+    }
+
+    /// The occlusion mask read, if any.
+    #[inline(always)]
+    pub fn mask(&self) -> Option<MaskView<'a>> {
+        self.mask
     }
 
     /// The pixels the photo covers.
@@ -64,9 +94,9 @@ impl<'a> TargetImage<'a> {
         self.height
     }
 
-    /// The pixel at `(x, y)`, if inside and covered.
+    /// The pixel at `(x, y)`, if inside, covered and not masked.
     pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
-        if x >= self.width || y >= self.height || (self.partial && !self.covered.contains(x, y)) {
+        if x >= self.width || y >= self.height || (self.partial && self.absent(x, y)) {
             return None;
         }
         self.pixels.get(y as usize * self.width as usize + x as usize).copied()
@@ -107,17 +137,23 @@ impl<'a> TargetImage<'a> {
         Some(out)
     }
 
-    /// The pixel at row-major index `index`, if inside; `Some(None)` if inside but not covered.
+    /// The pixel at row-major index `index`, if inside; `Some(None)` if inside but not covered or masked.
     #[inline(always)]
     pub fn pixel_at(&self, index: u32) -> Option<Option<[u8; 3]>> {
         let p = self.pixels.get(index as usize).copied()?;
-        if self.partial && !self.covered.contains(index % self.width, index / self.width) {
+        if self.partial && self.absent(index % self.width, index / self.width) {
             return Some(None);
         }
         Some(Some(p))
     }
 
-    /// Row `y` (`width` pixels), covered or not (see [`TargetImage::covered`]).
+    /// Whether pixel `(x, y)` of the image lies past the photo's edge or is labelled occluded.
+    #[inline(always)]
+    fn absent(&self, x: u32, y: u32) -> bool {
+        !self.covered.contains(x, y) || self.mask.is_some_and(|m| m.get(x, y))
+    }
+
+    /// Row `y` (`width` pixels), covered or not (see [`TargetImage::covered`]), masked or not.
     pub fn row(&self, y: u32) -> Option<&'a [[u8; 3]]> {
         let w = self.width as usize;
         let start = (y as usize).checked_mul(w)?;

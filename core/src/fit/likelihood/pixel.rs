@@ -11,6 +11,7 @@
 
 use crate::error::FitError;
 use crate::fit::likelihood::image::{to_linear, BackgroundModel, ImageEval, TargetImage};
+use crate::fit::likelihood::occlusion::MaskView;
 use crate::geometry::Vec3;
 use crate::render::frame_cache::FragmentSink;
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
@@ -184,6 +185,26 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
     for ImageLikelihood<'_, '_, P, B>
 {
     fn consume(&mut self, tile: &Tile<TW, TH>) {
+        // Two copies of the loop, the one with labels out of line: without labels it reads none.
+        match self.image.mask() {
+            None => self.sum_tile(tile, |_, _| false),
+            Some(m) => self.sum_tile_masked(tile, m),
+        }
+    }
+}
+
+impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'_, '_, P, B> {
+    /// [`Self::sum_tile`] leaving out the pixels `mask` labels occluded.
+    #[inline(never)]
+    fn sum_tile_masked<const TW: usize, const TH: usize>(&mut self, tile: &Tile<TW, TH>, mask: MaskView<'_>) {
+        let x0 = tile.origin().0;
+        self.sum_tile(tile, |x, y| mask.get(x0.wrapping_add(x as u32), y))
+    }
+
+    /// Sums a rendered tile's covered pixels, leaving out those `occluded(x, y)` labels (`x`: the
+    /// column in the tile, `y`: the image row).
+    #[inline(always)]
+    fn sum_tile<const TW: usize, const TH: usize>(&mut self, tile: &Tile<TW, TH>, occluded: impl Fn(usize, u32) -> bool) {
         let (x0, y0) = tile.origin();
         let (w, h) = tile.size();
         let (mut sum, mut sq, mut covered) = (0.0f32, 0.0f32, 0u32);
@@ -198,7 +219,7 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
             let Some(target_row) = target_row.get(x0 as usize..) else { continue };
             // Colours and targets are read only where the model covers.
             for (x, t) in tri_row.iter().enumerate().take((w as usize).min(end)).skip(first) {
-                if *t == NO_TRIANGLE {
+                if *t == NO_TRIANGLE || occluded(x, y) {
                     continue;
                 }
                 let (Some(c), Some(p)) = (col_row.get(x), target_row.get(x)) else {
@@ -212,9 +233,7 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
         }
         self.add_tile(sum, sq, covered);
     }
-}
 
-impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'_, '_, P, B> {
     /// One covered pixel's `log p(I | R) − log b(I)` and `|I − R|²` (target `p`, rendered `c`).
     #[inline(always)]
     fn pixel_terms(&self, p: [u8; 3], c: Vec3) -> (f32, f32) {
@@ -242,7 +261,7 @@ impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> FragmentSink for Imag
             self.tile.0 = f32::NAN;
             return;
         };
-        // Past the photo's edge: nothing observed.
+        // Past the photo's edge or labelled occluded: nothing observed.
         let Some(p) = p else { return };
         let (term, d2sum) = self.pixel_terms(p, color);
         self.tile.1 += d2sum;
