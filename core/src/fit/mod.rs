@@ -10,6 +10,7 @@
 //!   its [`Proposal`]s and mixtures, the [`ChainObserver`]s that see every proposal's outcome,
 //!   the posterior's moments and the random samples it draws.
 //! - [`start`]: the chains' starting point from the target landmarks alone.
+//! - [`spread`]: how well the landmarks pin the fitted pose down (a Laplace approximation).
 //! - [`frame`]: the photo's edge: how far outside it landmarks may lie, and the working pixels it covers.
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
 //! - [`settings`]: its one [`FitSettings`] (steps, ranks, σ's, proposal mixtures, light).
@@ -27,6 +28,7 @@ pub mod likelihood;
 pub mod recipe;
 pub mod settings;
 pub mod solve;
+pub mod spread;
 pub mod start;
 
 pub use chain::observer::{Acceptance, ChainObserver, ChainSample, NoObserver, Progress, ProposalStep, StepOutcome};
@@ -39,8 +41,9 @@ pub use chain::{
 pub use frame::{first_beyond_margin, landmark_margin, CoveredPixels, LANDMARK_MARGIN};
 pub use likelihood::contour::{Silhouette, CONTOUR_POOL, MAX_CONTOUR, NO_VERTEX};
 pub use likelihood::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
+pub use likelihood::labeller::Labeller;
 pub use likelihood::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget};
-pub use likelihood::occlusion::{Labeller, MaskView, OcclusionMask, OcclusionSettings, MASK_WORDS_128};
+pub use likelihood::occlusion::{MaskView, OcclusionMask, OcclusionSettings, MASK_WORDS_128};
 pub use likelihood::pixel::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
 pub use likelihood::prior::Prior;
 pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};
@@ -51,4 +54,5 @@ pub use settings::{
 pub use solve::color::{solve_color, ColorScene, ColorSolveConfig};
 pub use solve::light::{solve_light, LightSolveConfig};
 pub use solve::shape::{solve_shape, ShapeSolveConfig, ShapeSolveReport, MAX_SHAPE_SOLVE};
+pub use spread::{pose_spread, PoseSpread};
 pub use start::{initial_guess, landmark_pivot};

@@ -230,6 +230,10 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
         rep.pixel_rmse,
         t0.elapsed().as_secs_f64()
     );
+    if let Some(post) = &rep.posterior {
+        let [y, p, r] = post.angles_interval_90_deg;
+        eprintln!("90 % intervals: yaw {:.1} to {:.1}, pitch {:.1} to {:.1}, roll {:.1} to {:.1} deg", y[0], y[1], p[0], p[1], r[0], r[1]);
+    }
     eprintln!("wrote fit.json, overlay.png and fit.ply to {}", job.out_dir.display());
     Ok(())
 }

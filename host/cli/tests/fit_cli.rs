@@ -121,6 +121,10 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     assert!(post["color_sd"].as_array().unwrap().iter().all(|v| v.as_f64().unwrap() >= 0.0));
     let mean_yaw = post["angles_mean_deg"][0].as_f64().unwrap();
     assert!((mean_yaw - yaw).abs() < 2.0, "posterior mean yaw {mean_yaw}, fit {yaw}");
+    // The calibrated yaw interval holds the mean and is wider than the chain's own spread.
+    let (sd, chain) = (post["angles_sd_deg"][0].as_f64().unwrap(), post["angles_chain_sd_deg"][0].as_f64().unwrap());
+    let [lo, hi] = [0, 1].map(|i| post["angles_interval_90_deg"][0][i].as_f64().unwrap());
+    assert!(sd > chain && lo < mean_yaw && mean_yaw < hi && ((hi - lo) - 2.0 * 1.645 * sd).abs() < 1e-3, "{post}");
     let overlay = image::open(out.path().join("overlay.png")).unwrap();
     assert!(overlay.width() > 3 * 128 && overlay.height() > 128);
     let ply = std::fs::read(out.path().join("fit.ply")).unwrap();
@@ -245,6 +249,11 @@ fn bench_fit_prints_the_statistics() {
     // The chain's own spread of the angles, beside the errors: finite and not negative.
     let sd: Vec<f64> = j["median_posterior_angles_sd_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert!(sd.len() == 3 && sd.iter().all(|v| v.is_finite() && *v >= 0.0), "{j}");
+    // How often the intervals hold the truth: shares between 0 and 1.
+    let cov = &j["interval_coverage"];
+    for key in ["covered_50", "covered_90", "chain_covered_90"] {
+        assert!(cov[key].as_array().unwrap().iter().all(|v| (0.0..=1.0).contains(&v.as_f64().unwrap())), "{cov}");
+    }
     let rows = j["per_yaw"].as_array().unwrap();
     assert_eq!(rows.iter().map(|r| r["images"].as_u64().unwrap()).sum::<u64>(), 2, "{j}");
     // The same errors against the truth in the model's frame: one rotation between the two mean

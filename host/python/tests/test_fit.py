@@ -54,6 +54,15 @@ def test_fit_outputs(py_fit):
     post = py_fit["posterior"]
     assert post["samples"] > 0 and post["color_mean"].shape == py_fit["color"].shape
     assert post["shape_sd"].dtype == np.float32 and (post["shape_sd"] >= 0).all()
+    # The angles' intervals: around the mean, the 90 % one wider than the 50 % one, and wider
+    # than the chain's own spread says (the landmarks' residuals widen them).
+    assert post["landmark_residual_px"] > 0
+    for k in range(3):
+        mean, sd, chain = post["angles_mean_deg"][k], post["angles_sd_deg"][k], post["angles_chain_sd_deg"][k]
+        (lo50, hi50), (lo90, hi90) = post["angles_interval_50_deg"][k], post["angles_interval_90_deg"][k]
+        assert lo90 < lo50 < mean < hi50 < hi90, (k, post)
+        assert abs((hi90 - lo90) - 2 * 1.645 * sd) < 1e-3 * max(1.0, sd)
+        assert sd > chain >= 0
 
 
 def test_fit_settings_and_errors(small_model_path, astronaut, tmp_path):

@@ -29,7 +29,7 @@ use std::path::Path;
 use std::time::Instant;
 
 /// One image's figures.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct BenchImage {
     /// Image file name.
     pub image: String,
@@ -54,10 +54,20 @@ pub struct BenchImage {
     pub pixel_rmse: f32,
     /// Seconds of this fit.
     pub seconds: f64,
-    /// Standard deviations of yaw, pitch and roll over the image chain's second half (degrees;
-    /// fit.json's `posterior`).
+    /// Reported standard deviations of yaw, pitch and roll (degrees; fit.json's `posterior`).
     #[serde(default)]
     pub posterior_angles_sd_deg: [f32; 3],
+    /// The image chain's own standard deviations of yaw, pitch and roll (degrees).
+    #[serde(default)]
+    pub posterior_chain_sd_deg: [f32; 3],
+    /// The occlusion labels against the occluder's true footprint, where the set has one
+    /// (`NAME.occluder.png`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub labels: Option<crate::eval::label_truth::LabelAgreement>,
+    /// The image chain's mean yaw, pitch and roll over its second half, in the photo's camera as
+    /// `fit_deg` (degrees).
+    #[serde(default)]
+    pub posterior_mean_deg: [f32; 3],
 }
 
 /// Median and 90th percentile.
@@ -199,10 +209,17 @@ pub struct BenchSummary {
     pub face_frame: Option<FrameErrors>,
     /// Where the landmarks came from: `exact` (the set's) or the landmark directory.
     pub landmarks: String,
-    /// Median over the images of the image chain's standard deviation of yaw, pitch and roll
-    /// (degrees): the spread the chain reports, to set beside the errors above.
+    /// Median over the images of the reported standard deviation of yaw, pitch and roll
+    /// (degrees), to set beside the errors above.
     #[serde(default)]
     pub median_posterior_angles_sd_deg: [f64; 3],
+    /// How often the reported 50 % and 90 % intervals hold the truth.
+    #[serde(default)]
+    pub interval_coverage: Option<IntervalCoverage>,
+    /// Intersection over union of the occlusion labels and the occluders' true footprints over
+    /// the face's pixels, where the set has them (`NAME.occluder.png`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub label_iou: Option<Stat>,
     /// Seconds per fit (each fit on one thread).
     pub seconds_per_fit: Stat,
     /// Wall-clock seconds of the whole benchmark.
@@ -314,6 +331,15 @@ pub fn bench_one(
         .map(f32::to_degrees)
     };
     let face_frame = crate::eval::model_frame::fit_in_face_frame(model, o.params.shape_coeffs(), [p.yaw, p.pitch, p.roll]);
+    let labels = match crate::eval::label_truth::truth_file(dir, &truth.image) {
+        Some(path) => {
+            let read = |e: image::ImageError| crate::photo::PhotoError::Read { path: path.clone(), message: e.to_string() };
+            let footprint = image::open(&path).map_err(|e| ImageFitError::naming(&truth.image)(read(e).into()))?.to_luma8();
+            let mask = o.occlusion.as_ref().map(|m| &m.0);
+            Some(crate::eval::label_truth::label_agreement(mask, &o.render, &prepared.crop, size, &footprint))
+        }
+        None => None,
+    };
     Ok(BenchImage {
         image: truth.image.clone(),
         truth_deg: [truth.yaw_deg, truth.pitch_deg, truth.roll_deg],
@@ -327,6 +353,9 @@ pub fn bench_one(
         pixel_rmse: o.pixel_rmse,
         seconds,
         posterior_angles_sd_deg: o.posterior.angles_sd_deg,
+        posterior_chain_sd_deg: o.posterior.angles_chain_sd_deg,
+        labels,
+        posterior_mean_deg: in_photo(o.posterior.angles_mean_deg.map(f32::to_radians)),
     })
 }
 
@@ -439,11 +468,68 @@ pub fn bench(
         face_frame: face_frame_summary(&ok),
         landmarks: landmarks.describe(),
         median_posterior_angles_sd_deg: [0, 1, 2].map(|k| stat(&col(&|b| f64::from(b.posterior_angles_sd_deg[k]))).median),
+        interval_coverage: interval_coverage(&ok),
+        label_iou: ok.iter().any(|b| b.labels.is_some()).then(|| stat(&col(&|b| b.labels.map_or(f64::NAN, |l| f64::from(l.iou))))),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
         jobs,
     };
     Ok((summary, ok, errors))
+}
+
+// How often a fit's reported intervals of yaw, pitch and roll hold the truth: the honesty of its
+// posterior, beside the size of its errors.
+
+/// Standard normal quantiles of the central 50 % and 90 % intervals.
+const Z: [f64; 2] = [0.674_49, 1.644_85];
+
+/// The share of images whose 50 % and 90 % intervals (posterior mean ± z · sd) hold the truth,
+/// per angle, after the set's median signed error of the posterior mean is removed (the model's
+/// frontal is not the identities').
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IntervalCoverage {
+    /// The truth compared with: `model frame` (the truth in the model's frame) or `camera`.
+    pub truth: String,
+    /// The median signed error of the posterior mean removed (degrees).
+    pub median_signed_error_deg: [f64; 3],
+    /// Median |error| of the posterior mean after that (degrees).
+    pub median_abs_error_deg: [f64; 3],
+    /// Median reported standard deviation (degrees).
+    pub median_sd_deg: [f64; 3],
+    /// Share of images whose 50 % interval holds the truth (ideal 0.5).
+    pub covered_50: [f64; 3],
+    /// Share of images whose 90 % interval holds the truth (ideal 0.9).
+    pub covered_90: [f64; 3],
+    /// The same for intervals of the image chain's own spread alone (far too narrow).
+    pub chain_covered_90: [f64; 3],
+}
+
+/// The coverage of `images`' intervals (`None` without images or reported spreads).
+pub fn interval_coverage(images: &[BenchImage]) -> Option<IntervalCoverage> {
+    let model_frame = images.iter().all(|b| b.truth_model_frame_deg.is_some());
+    let truth = |b: &BenchImage| if model_frame { b.truth_model_frame_deg.unwrap_or(b.truth_deg) } else { b.truth_deg };
+    let usable: Vec<&BenchImage> = images.iter().filter(|b| b.posterior_angles_sd_deg.iter().all(|s| *s > 0.0)).collect();
+    if usable.is_empty() {
+        return None;
+    }
+    let signed = |b: &BenchImage, k: usize| f64::from(b.posterior_mean_deg[k] - truth(b)[k]);
+    let offset: [f64; 3] = core::array::from_fn(|k| stat(&usable.iter().map(|b| signed(b, k)).collect::<Vec<_>>()).median);
+    let centred = |b: &BenchImage, k: usize| (signed(b, k) - offset[k]).abs();
+    let share_of = |k: usize, z: f64, sd: &dyn Fn(&BenchImage) -> [f32; 3]| {
+        usable.iter().filter(|b| centred(b, k) <= z * f64::from(sd(b)[k])).count() as f64 / usable.len() as f64
+    };
+    let share = |k: usize, z: f64| share_of(k, z, &|b| b.posterior_angles_sd_deg);
+    Some(IntervalCoverage {
+        truth: if model_frame { "model frame" } else { "camera" }.into(),
+        median_signed_error_deg: offset,
+        median_abs_error_deg: core::array::from_fn(|k| stat(&usable.iter().map(|b| centred(b, k)).collect::<Vec<_>>()).median),
+        median_sd_deg: core::array::from_fn(|k| {
+            stat(&usable.iter().map(|b| f64::from(b.posterior_angles_sd_deg[k])).collect::<Vec<_>>()).median
+        }),
+        covered_50: core::array::from_fn(|k| share(k, Z[0])),
+        covered_90: core::array::from_fn(|k| share(k, Z[1])),
+        chain_covered_90: core::array::from_fn(|k| share_of(k, Z[1], &|b| b.posterior_chain_sd_deg)),
+    })
 }
 
 #[cfg(test)]
@@ -465,13 +551,7 @@ mod tests {
             truth_deg: [t, 1.0, 0.0],
             fit_deg: [f, 2.0, 0.5],
             truth_model_frame_deg: None,
-            fit_face_frame_deg: None,
-            landmark_error_iod_pct: 0.0,
-            landmark_error_iod_pct_after_landmark_chain: 0.0,
-            pixel_rmse_after_landmark_chain: 0.0,
-            pixel_rmse: 0.0,
-            seconds: 0.0,
-            posterior_angles_sd_deg: [0.0; 3],
+            ..BenchImage::default()
         };
         // ±45 fitted as ±41: 4° toward frontal on both sides, no plain signed mean.
         let rows = per_yaw(&[img(45.0, 41.0), img(-45.0, -41.0), img(0.0, 0.5), img(15.0, 16.0)]);
@@ -493,13 +573,7 @@ mod tests {
             truth_deg: [t, 0.0, 0.0],
             fit_deg: [t + 1.0, 4.0, 0.0],
             truth_model_frame_deg: Some([t + 1.0, 4.0, 0.0]),
-            fit_face_frame_deg: None,
-            landmark_error_iod_pct: 0.0,
-            landmark_error_iod_pct_after_landmark_chain: 0.0,
-            pixel_rmse_after_landmark_chain: 0.0,
-            pixel_rmse: 0.0,
-            seconds: 0.0,
-            posterior_angles_sd_deg: [0.0; 3],
+            ..BenchImage::default()
         };
         let images = [img(45.0), img(-45.0), img(0.0)];
         let m = model_frame_summary(&images).expect("every image has the model-frame truth");
@@ -516,5 +590,38 @@ mod tests {
         assert_eq!(f.per_yaw.iter().map(|r| r.abs_yaw_deg).collect::<Vec<_>>(), [0, 45]);
         assert!(f.per_yaw.iter().all(|r| r.yaw_error_deg.median.abs() < 1e-6 && (r.pitch_error_deg.median - 2.0).abs() < 1e-6));
         assert!((f.median_signed_error_deg[1] - 2.0).abs() < 1e-6);
+    }
+
+    fn image(mean: f32, sd: f32) -> BenchImage {
+        BenchImage {
+            image: String::new(),
+            truth_deg: [10.0, 0.0, 0.0],
+            fit_deg: [mean, 0.0, 0.0],
+            posterior_angles_sd_deg: [sd, 1.0, 1.0],
+            posterior_chain_sd_deg: [sd / 10.0, 0.1, 0.1],
+            posterior_mean_deg: [mean, 0.0, 0.0],
+            ..BenchImage::default()
+        }
+    }
+
+    #[test]
+    fn coverage_counts_the_intervals_that_hold_the_truth_after_the_median_offset() {
+        // Errors (after the median offset of +2) of 0, ±0.5, ±1, ±3 with sd 1: the 50 % interval
+        // (±0.674) holds 3 of 7, the 90 % (±1.645) 5 of 7.
+        let errs = [0.0f32, 0.5, -0.5, 1.0, -1.0, 3.0, -3.0];
+        let images: Vec<BenchImage> = errs.iter().map(|e| image(12.0 + e, 1.0)).collect();
+        let c = interval_coverage(&images).expect("coverage");
+        assert_eq!(c.truth, "camera");
+        assert!((c.median_signed_error_deg[0] - 2.0).abs() < 1e-6);
+        assert!((c.covered_50[0] - 3.0 / 7.0).abs() < 1e-9 && (c.covered_90[0] - 5.0 / 7.0).abs() < 1e-9, "{c:?}");
+        // Pitch and roll sit on the truth: every interval holds it.
+        assert_eq!((c.covered_50[1], c.covered_90[2]), (1.0, 1.0));
+        // A tenth of the spread holds only the image on the offset.
+        assert!((c.chain_covered_90[0] - 1.0 / 7.0).abs() < 1e-9, "{c:?}");
+        // Twice the spread holds more.
+        let wide: Vec<BenchImage> = errs.iter().map(|e| image(12.0 + e, 2.0)).collect();
+        assert!(interval_coverage(&wide).expect("coverage").covered_90[0] > c.covered_90[0]);
+        // Without spreads there is nothing to say.
+        assert_eq!(interval_coverage(&[image(1.0, 0.0)]), None);
     }
 }

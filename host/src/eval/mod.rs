@@ -10,6 +10,7 @@
 //! on purpose).
 
 pub mod bench_fit;
+pub mod label_truth;
 pub mod model_frame;
 pub mod models;
 pub mod plot;

@@ -12,7 +12,7 @@ use crate::gp::model::GpModel;
 use crate::mesh::Mesh;
 use crate::render::{Background, HostRasterizer, ImageSink};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{standard_fit, TargetImage};
+use gpmm_core::fit::{pose_spread, standard_fit, LandmarkTarget, TargetImage};
 use gpmm_core::model::{MorphableModel, MAX_LANDMARKS};
 use gpmm_core::render::Cull;
 use image::{RgbImage, RgbaImage};
@@ -109,7 +109,10 @@ pub fn fit_prepared(
             .map_err(core("fit"))?;
     let landmark_seconds = observer.landmark_seconds;
     let image_seconds = observer.elapsed() - landmark_seconds;
-    let posterior = PosteriorSummary::of(&observer.posterior);
+    // The pose's spread from what the fit left of the landmarks (none if they do not determine it).
+    let target = LandmarkTarget::new(&prepared.landmarks, &valid, 1.0).map_err(core("landmarks"))?;
+    let spread = pose_spread(&mm, &result.image.best, &target, w, h).ok();
+    let posterior = PosteriorSummary::of(&observer.posterior).with_pose_spread(spread);
     let (landmark_acceptance, image_acceptance) = (observer.landmark, observer.image);
     let best = result.image;
     let start = result.start;

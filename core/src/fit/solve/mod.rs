@@ -2,7 +2,7 @@
 //! [`color`] coefficients and the leading [`shape`] coefficients, each on sampled visible
 //! vertices for a fixed rest of the state.
 
-mod cholesky;
+pub(crate) mod cholesky;
 pub mod color;
 pub mod light;
 mod ring;
