@@ -162,7 +162,8 @@ pub struct BenchFitArgs {
     /// Fit settings.
     #[command(flatten)]
     pub settings: FitSettingsArgs,
-    /// Do not write the per-image results to DIR/bench.json.
+    /// Do not write the per-image results to DIR/bench.json (nor the intervals' reliability
+    /// diagram to DIR/reliability.png).
     #[arg(long)]
     pub no_write: bool,
 }
@@ -279,6 +280,12 @@ pub fn bench_fit(a: BenchFitArgs) -> Result<()> {
         let body = serde_json::json!({ "summary": summary, "images": images, "errors": errors });
         std::fs::write(&path, serde_json::to_string_pretty(&body)? + "\n").with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
+        if let Some(c) = &summary.interval_coverage {
+            let path = a.dir.join("reliability.png");
+            let chart = gpmm_host::eval::bench_fit::reliability_chart(c)?;
+            gpmm_host::render::figure::save_png(&chart, &path).with_context(|| format!("cannot write {}", path.display()))?;
+            eprintln!("wrote {}", path.display());
+        }
     }
     eprintln!("landmarks: {}", summary.landmarks);
     eprintln!("truth in the synthetic identities' face frames:");

@@ -244,6 +244,8 @@ fn bench_fit_prints_the_statistics() {
     assert_eq!(j["images"].as_u64(), Some(2));
     assert!(j["yaw_error_deg"]["median"].as_f64().unwrap() < 10.0, "{j}");
     let per_image = read_json(&f.synth.join("bench.json"));
+    let diagram = image::open(f.synth.join("reliability.png")).expect("the intervals' reliability diagram");
+    assert_eq!((diagram.width(), diagram.height()), (640, 480));
     assert_eq!(per_image["images"].as_array().unwrap().len(), 2);
     assert_eq!(j["landmarks"], "exact");
     // The chain's own spread of the angles, beside the errors: finite and not negative.

@@ -502,6 +502,47 @@ pub struct IntervalCoverage {
     pub covered_90: [f64; 3],
     /// The same for intervals of the image chain's own spread alone (far too narrow).
     pub chain_covered_90: [f64; 3],
+    /// The reliability diagram's points: per nominal level (the share a central interval should
+    /// hold), the shares of yaw, pitch and roll it held: `[level, yaw, pitch, roll]`.
+    #[serde(default)]
+    pub reliability: Vec<[f64; 4]>,
+}
+
+/// Nominal levels of the reliability diagram and their standard normal quantiles
+/// (`Φ⁻¹((1 + level) / 2)`).
+const LEVELS: [(f64, f64); 11] = [
+    (0.1, 0.125_66),
+    (0.2, 0.253_35),
+    (0.3, 0.385_32),
+    (0.4, 0.524_40),
+    (0.5, 0.674_49),
+    (0.6, 0.841_62),
+    (0.7, 1.036_43),
+    (0.8, 1.281_55),
+    (0.9, 1.644_85),
+    (0.95, 1.959_96),
+    (0.99, 2.575_83),
+];
+
+/// The reliability diagram of `c`: the share of images whose interval held the truth against
+/// the share it should hold, per angle, and the diagonal a calibrated fit follows.
+pub fn reliability_chart(c: &IntervalCoverage) -> Result<image::RgbaImage, crate::eval::plot::PlotError> {
+    use crate::eval::plot::{line_chart, Chart, Series};
+    let line = |label: &str, k: usize| Series {
+        label: label.into(),
+        points: c.reliability.iter().map(|r| (100.0 * r[0], 100.0 * r[k])).collect(),
+        intervals: Vec::new(),
+    };
+    let ideal = Series { label: "calibrated".into(), points: vec![(0.0, 0.0), (100.0, 100.0)], intervals: Vec::new() };
+    let chart = Chart {
+        title: format!("Pose intervals: how often they hold the truth ({})", c.truth),
+        x_label: "nominal level of the central interval (%)".into(),
+        y_label: "images whose interval holds the truth (%)".into(),
+        log_x: false,
+        y_range: Some((0.0, 100.0)),
+        series: vec![line("yaw", 1), line("pitch", 2), line("roll", 3), ideal],
+    };
+    line_chart(&chart, 640, 480)
 }
 
 /// The coverage of `images`' intervals (`None` without images or reported spreads).
@@ -529,6 +570,7 @@ pub fn interval_coverage(images: &[BenchImage]) -> Option<IntervalCoverage> {
         covered_50: core::array::from_fn(|k| share(k, Z[0])),
         covered_90: core::array::from_fn(|k| share(k, Z[1])),
         chain_covered_90: core::array::from_fn(|k| share_of(k, Z[1], &|b| b.posterior_chain_sd_deg)),
+        reliability: LEVELS.iter().map(|&(level, z)| [level, share(0, z), share(1, z), share(2, z)]).collect(),
     })
 }
 
@@ -616,6 +658,12 @@ mod tests {
         assert!((c.covered_50[0] - 3.0 / 7.0).abs() < 1e-9 && (c.covered_90[0] - 5.0 / 7.0).abs() < 1e-9, "{c:?}");
         // Pitch and roll sit on the truth: every interval holds it.
         assert_eq!((c.covered_50[1], c.covered_90[2]), (1.0, 1.0));
+        // The reliability diagram's 50 % point is the 50 % coverage; its chart draws.
+        let half = c.reliability.iter().find(|r| r[0] == 0.5).expect("the 50 % level");
+        assert_eq!(half[1], c.covered_50[0]);
+        assert!(c.reliability.windows(2).all(|w| w[0][1] <= w[1][1]), "wider intervals hold more");
+        let chart = reliability_chart(&c).expect("chart");
+        assert_eq!(chart.dimensions(), (640, 480));
         // A tenth of the spread holds only the image on the offset.
         assert!((c.chain_covered_90[0] - 1.0 / 7.0).abs() < 1e-9, "{c:?}");
         // Twice the spread holds more.
