@@ -18,14 +18,9 @@ points must be read again from the occluded images: detect_landmarks.py).
 import argparse, glob, json, os, shutil
 import numpy as np
 from PIL import Image, ImageDraw, ImageFilter
+from detect_landmarks import read_pts  # the same directory
 
 SS = 4  # supersampling of the drawing
-
-
-def read_pts(path):
-    lines = open(path).read().split("{", 1)[1].split("}", 1)[0].split()
-    v = np.array([float(x) for x in lines], dtype=np.float64)
-    return v.reshape(-1, 2)
 
 
 def center(pts, idx):
@@ -111,8 +106,7 @@ def mask(w, h, pts, rng, img):
         y = top + (bottom - top) * k / 4
         shade = tuple(int(v * 0.7) for v in base) + (120,)
         d.line([S((pts[2][0], y)), S((pts[14][0], y))], fill=shade, width=max(1, int(SS * 1.5)))
-    alpha = im.split()[3]
-    return im.filter(ImageFilter.GaussianBlur(SS * 0.3)) if alpha else im
+    return im.filter(ImageFilter.GaussianBlur(SS * 0.3))
 
 
 def hair(w, h, pts, rng, img):
@@ -142,7 +136,7 @@ def patch(w, h, pts, rng, img, photos):
     y = rng.uniform(lo[1], hi[1] - ph * 0.8)
     src = Image.open(photos[int(rng.integers(len(photos)))]).convert("RGB")
     sw, sh = src.size
-    cw, ch = int(min(sw, sh) * rng.uniform(0.2, 0.5)), 0
+    cw = int(min(sw, sh) * rng.uniform(0.2, 0.5))
     ch = int(cw * ph / pw)
     cx, cy = int(rng.integers(0, max(1, sw - cw))), int(rng.integers(0, max(1, sh - ch)))
     piece = src.crop((cx, cy, cx + cw, cy + max(1, ch))).resize((max(1, int(pw * SS)), max(1, int(ph * SS))), Image.BILINEAR)

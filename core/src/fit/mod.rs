@@ -43,7 +43,7 @@ pub use likelihood::contour::{Silhouette, CONTOUR_POOL, MAX_CONTOUR, NO_VERTEX};
 pub use likelihood::image::{BackgroundModel, ImageEval, TargetImage, DEFAULT_PIXEL_SIGMA};
 pub use likelihood::labeller::Labeller;
 pub use likelihood::landmarks::{evaluate_landmarks, LandmarkEval, LandmarkTarget};
-pub use likelihood::occlusion::{MaskView, OcclusionMask, OcclusionSettings, MASK_WORDS_128};
+pub use likelihood::occlusion::{MaskView, OcclusionMask, OcclusionSettings};
 pub use likelihood::pixel::{BackgroundLikelihood, GaussianPixel, ImageLikelihood, PixelLikelihood};
 pub use likelihood::prior::Prior;
 pub use recipe::{project_landmarks, standard_fit, FitObserver, Stage, StandardFit};

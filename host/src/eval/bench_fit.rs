@@ -20,7 +20,7 @@
 
 use crate::eval::model_frame::{ModelFrame, ALIGNED_LANDMARKS};
 use crate::eval::{ImageFitError, LandmarkSource};
-use crate::fit::{fit_prepared, load_photo, FitOptions};
+use crate::fit::{fit_prepared, load_photo, FitOptions, Z50, Z90};
 use crate::gp::model::GpModel;
 use crate::synth::{read_truth, ImageTruth};
 use rayon::prelude::*;
@@ -480,9 +480,6 @@ pub fn bench(
 // How often a fit's reported intervals of yaw, pitch and roll hold the truth: the honesty of its
 // posterior, beside the size of its errors.
 
-/// Standard normal quantiles of the central 50 % and 90 % intervals.
-const Z: [f64; 2] = [0.674_49, 1.644_85];
-
 /// The share of images whose 50 % and 90 % intervals (posterior mean ± z · sd) hold the truth,
 /// per angle, after the set's median signed error of the posterior mean is removed (the model's
 /// frontal is not the identities').
@@ -515,11 +512,11 @@ const LEVELS: [(f64, f64); 11] = [
     (0.2, 0.253_35),
     (0.3, 0.385_32),
     (0.4, 0.524_40),
-    (0.5, 0.674_49),
+    (0.5, Z50 as f64),
     (0.6, 0.841_62),
     (0.7, 1.036_43),
     (0.8, 1.281_55),
-    (0.9, 1.644_85),
+    (0.9, Z90 as f64),
     (0.95, 1.959_96),
     (0.99, 2.575_83),
 ];
@@ -567,9 +564,9 @@ pub fn interval_coverage(images: &[BenchImage]) -> Option<IntervalCoverage> {
         median_sd_deg: core::array::from_fn(|k| {
             stat(&usable.iter().map(|b| f64::from(b.posterior_angles_sd_deg[k])).collect::<Vec<_>>()).median
         }),
-        covered_50: core::array::from_fn(|k| share(k, Z[0])),
-        covered_90: core::array::from_fn(|k| share(k, Z[1])),
-        chain_covered_90: core::array::from_fn(|k| share_of(k, Z[1], &|b| b.posterior_chain_sd_deg)),
+        covered_50: core::array::from_fn(|k| share(k, f64::from(Z50))),
+        covered_90: core::array::from_fn(|k| share(k, f64::from(Z90))),
+        chain_covered_90: core::array::from_fn(|k| share_of(k, f64::from(Z90), &|b| b.posterior_chain_sd_deg)),
         reliability: LEVELS.iter().map(|&(level, z)| [level, share(0, z), share(1, z), share(2, z)]).collect(),
     })
 }

@@ -55,5 +55,5 @@ pub use overlay::{overlay, FITTED_COLOR, OVERLAY_SCALE, TARGET_COLOR};
 pub use overrides::override_settings;
 pub use params::{Params, KC, KS};
 pub use pipeline::{camera_space_mesh, fit_image, fit_prepared, morphable, project_landmarks, project_landmarks_of, rmse, Outcome};
-pub use posterior::PosteriorSummary;
+pub use posterior::{PosteriorSummary, Z50, Z90};
 pub use report::{report, AcceptanceBoth, FitReport, LogDensities, ReportInputs, Timing};

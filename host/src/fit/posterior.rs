@@ -12,9 +12,10 @@ use serde::{Deserialize, Serialize};
 /// (docs/intervals.md).
 pub const POSE_SPREAD_FACTOR: [f32; 3] = [2.0, 3.5, 1.75];
 
-/// Standard normal quantiles of the central 50 % and 90 % intervals.
-const Z50: f32 = 0.674_49;
-const Z90: f32 = 1.644_85;
+/// The standard normal quantile of the central 50 % interval (`Φ⁻¹(0.75)`).
+pub const Z50: f32 = 0.674_49;
+/// The standard normal quantile of the central 90 % interval (`Φ⁻¹(0.95)`).
+pub const Z90: f32 = 1.644_85;
 
 /// The image chain's posterior summary: mean and standard deviation of the coefficients and
 /// the rotation over its samples from half-way on (one sample per step, the state the chain is

@@ -18,9 +18,6 @@
 
 use crate::error::FitError;
 
-/// Words of a mask for a 128 × 128 working image (the default fit's).
-pub const MASK_WORDS_128: usize = 128 * 128 / 32;
-
 /// The occlusion-aware fit's settings: how often the labels are inferred, and how.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -199,22 +196,6 @@ impl MaskView<'_> {
         self.bits.get((y * self.stride + x / 32) as usize).is_some_and(|w| (w >> (x % 32)) & 1 == 1)
     }
 
-    /// The labels of the 32 pixels from `(x, y)` on as bits (bit `i`: pixel `x + i`; 0 outside).
-    #[inline(always)]
-    pub fn run(&self, x: u32, y: u32) -> u32 {
-        if x >= self.width || y >= self.height {
-            return 0;
-        }
-        let (row, word, shift) = ((y * self.stride) as usize, x / 32, x % 32);
-        let at = |k: u32| if k < self.stride { self.bits.get(row + k as usize).copied().unwrap_or(0) } else { 0 };
-        let low = at(word) >> shift;
-        if shift == 0 {
-            low
-        } else {
-            low | (at(word + 1) << (32 - shift))
-        }
-    }
-
     /// Width in pixels.
     pub fn width(&self) -> u32 {
         self.width
@@ -244,12 +225,6 @@ mod tests {
         m.set(0, 0, false);
         assert_eq!(m.count(), 1);
         assert!(m.view().get(32, 1));
-        // Runs of 32 labels from any column, within the row.
-        m.set(5, 1, true);
-        assert_eq!(m.view().run(0, 1), 1 << 5);
-        assert_eq!(m.view().run(3, 1), (1 << 2) | (1 << 29));
-        assert_eq!(m.view().run(32, 1), 1);
-        assert_eq!((m.view().run(33, 1), m.view().run(0, 2)), (0, 0));
     }
 
     #[test]
