@@ -527,3 +527,56 @@ fn contiguous_landmark_fields_give_the_same_landmarks_and_wrong_ones_are_refused
     assert_eq!(model.with_landmark_fields(&fields[1..]).err(), Some(FitError::LengthMismatch));
     assert!(model.landmark_fields(&mut fields[1..]).is_none());
 }
+
+/// The standard fit with its image chain at half resolution first: the same pose as the
+/// full-resolution chain's within a degree, its focal length back at full resolution, its image
+/// term the full-resolution one, and every step counted and reported.
+#[test]
+fn an_image_chain_at_half_resolution_first_fits_as_the_full_one() {
+    use gpmm_core::fit::{standard_fit, FitSettings, OcclusionMask, Stage};
+    let scene = Scene::new();
+    let model = scene.synth.model();
+    let fit = |coarse: u32| {
+        let mut settings = FitSettings::DEFAULT.with_steps(800, 300).without_shape_solve().with_ranks(KS, KC);
+        settings.image.coarse_steps = coarse;
+        let mut bufs = Buffers::new(scene.synth.vertices());
+        let mut instance = bufs.instance();
+        let mut raster = Raster::new();
+        let mut mask = OcclusionMask::<{ (W * H / 32) as usize }>::new();
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(3);
+        let mut last = (0, 0);
+        let mut progress = |stage: Stage, done: u32, total: u32| {
+            if stage == Stage::ImageChain {
+                assert!(done >= last.0, "image progress went back: {done} after {}", last.0);
+                last = (done, total);
+            }
+        };
+        let f = standard_fit(
+            &model,
+            scene.image(),
+            &scene.points,
+            &scene.valid,
+            &settings,
+            &mut instance,
+            &mut raster,
+            &mut mask,
+            &mut rng,
+            &mut progress,
+        )
+        .unwrap();
+        assert_eq!(last, (300, 300), "the image chain reports its steps, coarse ones too");
+        assert_eq!(f.image.steps, 300);
+        assert_eq!(f.image.acceptance.proposed.iter().sum::<u32>(), 300);
+        f
+    };
+    let (full, half) = (fit(0), fit(250));
+    let (a, b) = (full.params(), half.params());
+    let deg = |x: f32| x.to_degrees();
+    assert!((deg(a.pose.yaw) - deg(b.pose.yaw)).abs() < 1.0, "yaw {} vs {}", deg(a.pose.yaw), deg(b.pose.yaw));
+    let err = |p: &FitParams<KS, KC>| (deg(p.pose.yaw) - deg(scene.truth.pose.yaw)).abs();
+    assert!(err(b) < err(a) + 0.5, "yaw error {} vs the full chain's {}", err(b), err(a));
+    assert!((b.focal / a.focal - 1.0).abs() < 0.1, "focal {} vs {}", b.focal, a.focal);
+    // The best sample's image term is the full-resolution one (about as many pixels covered).
+    let (ca, cb) = (full.image.best_image.unwrap().covered, half.image.best_image.unwrap().covered);
+    assert!((cb as f32 / ca as f32 - 1.0).abs() < 0.1, "covered {cb} vs {ca}");
+}

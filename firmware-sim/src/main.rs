@@ -33,10 +33,10 @@ mod partition;
 mod stack;
 
 use board::{fail, Rasterizer, CACHE_PIXELS, CACHE_WORDS, MAP, MASK_WORDS, MAX_PROJECTED, MAX_VERTICES, PROFILE};
-use gpmm_core::fit::OcclusionMask;
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 use defmt_semihosting as _; // the global defmt logger: frames go to the host's stdout
 use gpmm_core::checksum::FrameChecksum;
+use gpmm_core::fit::OcclusionMask;
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::device_mesh::{self, DeviceMeshView};
 use gpmm_core::format::frame_fit as sections;

@@ -86,9 +86,11 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     let (q, blob) = models();
     let face = &faces(1, 11)[1];
     let prep = prepared(face);
-    // The device's settings (device_settings: the ranks capped), with the start's shape solve.
-    let fit = device_settings(&CoreSettings::DEFAULT.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
+    // The device's default fit (device_settings: the ranks capped), with the start's shape solve
+    // and its image chain at half resolution.
+    let fit = device_settings(&CoreSettings::DEVICE.with_ranks(q.shape.rank(), q.color.rank()), &M4F);
     assert!(fit.start.shape_rounds > 0, "the device's default fit runs the shape solve");
+    assert!(fit.image.coarse_steps > 0, "the device's default fit starts its image chain at half resolution");
     let settings = FitOptions { fit, ..FitOptions::DEFAULT };
 
     let device = device_settings(&settings.core(), &M4F);
@@ -121,6 +123,8 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     assert_eq!(dev.ram_budget_bytes, 192 * 1024);
     assert!(dev.ram_total_bytes <= dev.ram_budget_bytes, "RAM {} > {}", dev.ram_total_bytes, dev.ram_budget_bytes);
     assert!(dev.instructions_total > 100_000_000, "implausibly few instructions: {}", dev.instructions_total);
+    // A third of the host's default fit: at most 0.4 × 10⁹ instructions (2.4 s at 168 MHz).
+    assert!(dev.instructions_total <= 400_000_000, "the m4f default fit took {} instructions", dev.instructions_total);
     assert!(dev.instructions_landmark_chain + dev.instructions_image_chain < dev.instructions_total, "the stages are part of the total");
     println!(
         "m4f default fit: {} instructions ({:.1} s at 168 MHz, 1 instruction per cycle); {} per image step; flash {} + blob {} B; RAM {} + stack {} B",
@@ -195,7 +199,14 @@ fn firmware_fit_uses_every_setting() {
             silhouette: true,
             hidden_contour_min_cos: -0.3,
         },
-        image: ImageSettings { steps: 40, pixel_sigma: 0.05, background_floor: 0.02, color_polish_rounds: 1, landmark_sigma_factor: 2.0 },
+        image: ImageSettings {
+            steps: 40,
+            coarse_steps: 15,
+            pixel_sigma: 0.05,
+            background_floor: 0.02,
+            color_polish_rounds: 1,
+            landmark_sigma_factor: 2.0,
+        },
         ranks: RankSettings { shape: 30, color: 20 },
         start: StartSettings {
             nominal_distance_mm: 600.0,
@@ -227,9 +238,9 @@ fn firmware_fit_uses_every_setting() {
         occlusion: OcclusionSettings { rounds: 2, threshold: -6.0, smoothing: 1 },
     };
     // Every top-level field and group differs from the default. A new field must be added here;
-    // 101 fields counting the groups' own.
+    // 102 fields counting the groups' own.
     let fields = format!("{settings:?}");
-    assert_eq!(fields.matches(": ").count(), 101, "update this test for the new settings: {fields}");
+    assert_eq!(fields.matches(": ").count(), 102, "update this test for the new settings: {fields}");
     let seed = 99;
     let (host, host_lm) = host_fit(blob, &prep, &settings, seed).expect("host fit");
     let host_ll = host.image.best_image.expect("image term").log_likelihood;

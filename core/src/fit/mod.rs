@@ -12,6 +12,7 @@
 //! - [`start`]: the chains' starting point from the target landmarks alone.
 //! - [`spread`]: how well the landmarks pin the fitted pose down (a Laplace approximation).
 //! - [`frame`]: the photo's edge: how far outside it landmarks may lie, and the working pixels it covers.
+//! - [`coarse`]: the image chain's first steps at half resolution.
 //! - [`recipe`]: the standard fit end to end ([`standard_fit`]), shared by the host and the firmware.
 //! - [`settings`]: its one [`FitSettings`] (steps, ranks, σ's, proposal mixtures, light).
 //!
@@ -23,6 +24,7 @@
 //! chain only ever uses differences. Nothing allocates; every buffer is borrowed or fixed-size.
 
 pub mod chain;
+pub mod coarse;
 pub mod frame;
 pub mod likelihood;
 pub mod recipe;

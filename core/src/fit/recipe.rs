@@ -31,6 +31,7 @@ use crate::error::FitError;
 use crate::fit::chain::observer::{Acceptance, ChainObserver, ChainSample, NoObserver, ProposalStep};
 use crate::fit::chain::proposal::{Mixture, StandardProposal};
 use crate::fit::chain::{image_chain, image_log_likelihood, landmark_chain, ChainState, FitResult, ImageProblem, Problem};
+use crate::fit::coarse::half_resolution_chain;
 use crate::fit::likelihood::contour::{hide_turned_away_contour, Silhouette};
 use crate::fit::likelihood::image::{BackgroundModel, ImageEval, TargetImage};
 use crate::fit::likelihood::labeller::Labeller;
@@ -397,17 +398,33 @@ pub fn standard_fit<
     };
     // Zero steps draw nothing from the generator: this only evaluates the landmark term.
     let start_landmarks = landmark_chain(&problem, &start, 0, rng, NoObserver)?.best_landmarks;
-    // The image chain, in `rounds` parts with occlusion rounds: each from the best sample so far,
-    // its pixels labelled again.
+    // The image chain: its first `coarse_steps` at half resolution, then the rest in `rounds`
+    // parts with occlusion rounds: each from the best sample so far, its pixels labelled again.
     let img_steps = settings.image.steps;
-    let parts = occ.rounds.clamp(1, img_steps.max(1));
+    let coarse = settings.image.coarse_steps.min(img_steps);
     let mut image: Option<FitResult<KS, KC>> = None;
-    let mut done = 0;
+    if coarse > 0 {
+        let ip = ImageProblem { image: labels.target(mask)?, pixel, background: &background, light_solve };
+        let phase = PhaseObserver {
+            observer: &mut *observer,
+            stage: Stage::ImageChain,
+            offset: 0,
+            total: img_steps,
+            steps: coarse,
+            report_end: false,
+        };
+        image = Some(half_resolution_chain(&problem, &ip, &settings.proposals, &mut start, coarse, instance, raster, rng, phase)?);
+    }
+    let fine = img_steps - coarse;
+    let parts = occ.rounds.clamp(1, fine.max(1));
+    let mut done = coarse;
     for part in 0..parts {
-        let steps = img_steps * (part + 1) / parts - done;
+        let steps = coarse + fine * (part + 1) / parts - done;
         let from = match &image {
             Some(r) => {
-                labels.label(model, &r.best, instance, raster, mask)?;
+                if occ.enabled() {
+                    labels.label(model, &r.best, instance, raster, mask)?;
+                }
                 r.best.clone()
             }
             None => start.clone(),

@@ -118,6 +118,10 @@ impl LandmarkSettings {
 pub struct ImageSettings {
     /// Image-chain steps (each renders the model at most once).
     pub steps: u32,
+    /// How many of [`Self::steps`] come first at half the working resolution (the target's 2 × 2
+    /// block means, a quarter of the pixels to render and compare); the rest at full resolution
+    /// from the best sample of those (0: none).
+    pub coarse_steps: u32,
     /// Foreground σ of the image likelihood on [0, 1] colours.
     pub pixel_sigma: f32,
     /// Uniform floor mixed into the background colour histogram.
@@ -225,6 +229,7 @@ impl FitSettings {
         },
         image: ImageSettings {
             steps: 600,
+            coarse_steps: 0,
             pixel_sigma: DEFAULT_PIXEL_SIGMA,
             background_floor: 0.01,
             color_polish_rounds: 0,
@@ -236,6 +241,32 @@ impl FitSettings {
         light: LightSettings::DEFAULT,
         occlusion: OcclusionSettings::OFF,
     };
+
+    /// A device's default fit (`gpmm device-fit`): [`Self::DEFAULT`] in under a third of the
+    /// instructions (0.36 × 10⁹ against 1.2 × 10⁹ on the m4f, the astronaut and a 16-bit blob):
+    /// 1000 landmark steps (past 1000 the image chain's pose did not improve), one shape-solve
+    /// round of two iterations on every fourth vertex, and 330 image steps all at half resolution
+    /// ([`ImageSettings::coarse_steps`]: a quarter of the pixels, the same yaw error), the pose's
+    /// steps mostly fine (rotation weights 0.02 / 0.18 / 0.8, translation 0.05 / 0.25 / 0.7:
+    /// most coarse pose steps fail the landmark stage). Chosen on the Mitsuba development set
+    /// (docs/evaluation.md, "Instructions and memory").
+    pub const DEVICE: Self = {
+        let mut s = Self::DEFAULT.with_steps(1000, 330);
+        s.image.coarse_steps = 330;
+        s.start.shape_rounds = 1;
+        s.start.shape_iterations = 2;
+        s.start.shape_stride = 4;
+        s.proposals.drift.rotation.weights = [0.02, 0.18, 0.8];
+        s.proposals.drift.translation.weights = [0.05, 0.25, 0.7];
+        s
+    };
+
+    /// A device's default landmark-free fit (`gpmm device-fit --init`): [`Self::DEVICE`] without
+    /// the start's shape solve ([`Self::without_shape_solve`]: it does not fit beside the m4f's
+    /// crop), with 2000 landmark steps, as its chain fits the shape too (development set, the
+    /// device's landmark-free fit: median |yaw error| 2.30° with 1000, 2.12° with 2000; 2.20° with
+    /// the host's schedule).
+    pub const DEVICE_FRAME: Self = Self::DEVICE.without_shape_solve().with_steps(2000, Self::DEVICE.image.steps);
 
     /// These settings with other step counts (landmark chain, image chain).
     pub const fn with_steps(self, landmark_steps: u32, image_steps: u32) -> Self {

@@ -28,7 +28,7 @@ use serde::{de::DeserializeOwned, Serialize};
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFI";
 /// The layout version written and read.
-pub const VERSION: u32 = 10;
+pub const VERSION: u32 = 11;
 /// Bytes before the settings payload.
 pub const HEADER_BYTES: usize = 48;
 /// Largest settings payload.

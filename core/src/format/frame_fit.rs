@@ -28,7 +28,7 @@ use serde::{de::DeserializeOwned, Serialize};
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFF";
 /// The layout version written and read.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 /// Bytes before the settings payload.
 pub const HEADER_BYTES: usize = 24;
 /// Smallest working side.

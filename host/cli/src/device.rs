@@ -60,11 +60,11 @@ pub struct DeviceFitArgs {
     /// Seed of the chains.
     #[arg(long, default_value_t = FitOptions::DEFAULT.seed)]
     pub seed: u64,
-    #[arg(long, default_value_t = FitSettings::DEFAULT.landmarks.steps, value_name = "N",
-        help = device_landmark_steps_help())]
-    pub landmark_steps: u32,
-    /// Image-chain steps.
-    #[arg(long, default_value_t = FitSettings::DEFAULT.image.steps, value_name = "N")]
+    #[arg(long, value_name = "N", help = device_landmark_steps_help())]
+    pub landmark_steps: Option<u32>,
+    /// Image-chain steps (by default all at half the working resolution: `image.coarse_steps`;
+    /// the device's default fit is about a third of `gpmm fit`'s work).
+    #[arg(long, default_value_t = FitSettings::DEVICE.image.steps, value_name = "N")]
     pub image_steps: u32,
     /// Also run the same fit on the host (the core on the same blob) and report the differences.
     #[arg(long)]
@@ -251,7 +251,7 @@ impl DeviceFitArgs {
         FitFlags {
             size: Some(size),
             seed: Some(self.seed),
-            landmark_steps: Some(self.landmark_steps),
+            landmark_steps: self.landmark_steps,
             image_steps: Some(self.image_steps),
             shape_rank: Some(ranks[0]),
             color_rank: Some(ranks[1]),
@@ -259,6 +259,12 @@ impl DeviceFitArgs {
             ..FitFlags::default()
         }
     }
+}
+
+/// `flags` resolved from a device's default fit `base` ([`FitSettings::DEVICE`] with landmarks,
+/// [`FitSettings::DEVICE_FRAME`] without).
+pub fn device_options(flags: &FitFlags, base: FitSettings) -> Result<FitOptions> {
+    Ok(flags.resolve_from(FitOptions { fit: base, ..FitOptions::DEFAULT })?)
 }
 
 /// Runs `gpmm device-fit --landmarks`: prepares the partition, runs the firmware, prints the
@@ -271,7 +277,7 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
     pts.check(&landmarks, model_landmarks, "ibug68", photo.width(), photo.height(), a.pts_one_based)?;
     let prepared = gpmm_host::fit::prepare(&photo, &pts.points, size)?;
-    let settings = a.flags(ranks, size).resolve()?;
+    let settings = device_options(&a.flags(ranks, size), FitSettings::DEVICE)?;
     settings.validate()?;
     let device = device_settings(&settings.core(), &profile);
     if a.host_only {
@@ -366,14 +372,16 @@ pub fn device_detect(a: DeviceDetectArgs) -> Result<()> {
     Ok(())
 }
 
-/// The help of `device-fit --landmark-steps`: the default fit's chain with landmarks; without
-/// the start has no shape solve ([`gpmm_host::device::fit::frame_fit_settings`]) and the chain
-/// fits the shape too.
+/// The help of `device-fit --landmark-steps`: the device's default fit's chain with landmarks;
+/// without, the start has no shape solve ([`FitSettings::DEVICE_FRAME`]) and the chain fits the
+/// shape too.
 fn device_landmark_steps_help() -> String {
-    let frame = FitSettings::DEFAULT.without_shape_solve();
+    let (with, frame) = (FitSettings::DEVICE, FitSettings::DEVICE_FRAME);
     format!(
-        "{}. Without --landmarks (no room for the shape solve beside the crop): {} % on the pose, then the shape",
-        crate::fit::landmark_steps_help(&FitSettings::DEFAULT),
-        (frame.landmarks.pose_share * 100.0).round()
+        "{} (default: {}). Without --landmarks (no room for the shape solve beside the crop): {} % on the pose, then the shape (default: {})",
+        crate::fit::landmark_steps_help(&with),
+        with.landmarks.steps,
+        (frame.landmarks.pose_share * 100.0).round(),
+        frame.landmarks.steps
     )
 }

@@ -31,7 +31,8 @@ pub fn device_fit_init(a: DeviceFitArgs) -> Result<()> {
     }
     let photo = gpmm_host::photo::load_rgb(&a.image)?;
     let (frame, mapping) = camera_frame(&photo, a.width, a.height);
-    let options = FitFlags { initializer_sigma: Some(a.init_landmark_sigma), ..a.flags(ranks, side) }.resolve()?;
+    let flags = FitFlags { initializer_sigma: Some(a.init_landmark_sigma), ..a.flags(ranks, side) };
+    let options = crate::device::device_options(&flags, gpmm_host::fit::FitSettings::DEVICE_FRAME)?;
     options.validate()?;
     let settings = frame_fit_settings(&options.core(), profile);
     let host = |()| -> Result<HostFrameFit> { Ok(host_frame_fit(blob, &init, &frame, a.min_score, a.refine, side, &settings, a.seed)?) };

@@ -79,20 +79,25 @@ fn learn_help_states_its_own_image_chain() {
 #[test]
 fn device_fit_help_states_the_defaults() {
     let text = help("device-fit");
-    // With landmarks a device fits as the host does; without, its start has no shape solve,
-    // and its landmark chain fits the shape too.
-    let device = FitSettings::default();
-    let frame = device.without_shape_solve();
-    assert!(frame.landmarks.pose_share < 1.0);
+    // A device's default fit; without landmarks its start has no shape solve, and its landmark
+    // chain fits the shape too.
+    let device = FitSettings::DEVICE;
+    let frame = FitSettings::DEVICE_FRAME;
+    assert!(frame.landmarks.pose_share < 1.0 && frame.start.shape_rounds == 0);
     let side = |n: u32| format!("{n}x{n}");
     states(
         "device-fit",
         &text,
         &[
             format!("--landmark-steps <N> Landmark-chain steps, {}", pose_share(&device)),
-            format!("Without --landmarks (no room for the shape solve beside the crop): {}", pose_share(&frame)),
-            format!("[default: {}] --image-steps", device.landmarks.steps),
-            format!("--image-steps <N> Image-chain steps [default: {}]", device.image.steps),
+            format!("(default: {}). Without --landmarks (no room for the shape solve beside the crop)", device.landmarks.steps),
+            format!(
+                "Without --landmarks (no room for the shape solve beside the crop): {} (default: {})",
+                pose_share(&frame),
+                frame.landmarks.steps
+            ),
+            "--image-steps <N> Image-chain steps (by default all at half the working resolution".to_string(),
+            format!("[default: {}] --compare-host", device.image.steps),
             format!("--seed <SEED> Seed of the chains [default: {}]", FitOptions::DEFAULT.seed),
             format!("[default: {INIT_LANDMARK_SIGMA}]"),
             format!("m4f: {}, m7: {}", side(M4F.image_side), side(M7.image_side)),

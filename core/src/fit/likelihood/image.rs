@@ -17,7 +17,8 @@ const BG_TOTAL: usize = BG_BINS * BG_BINS * BG_BINS;
 
 /// A borrowed 8-bit RGB target image, row-major, top row first, linear colours (value / 255),
 /// with the pixels the photo covers: the others (a crop past the photo's edge) read as absent,
-/// as do the pixels an occlusion mask labels ([`TargetImage::with_mask`]).
+/// as do the pixels an occlusion mask labels ([`TargetImage::with_mask`]). It may be a view at
+/// half the resolution of its pixels ([`TargetImage::half`]).
 #[derive(Debug, Clone, Copy)]
 pub struct TargetImage<'a> {
     pixels: &'a [[u8; 3]],
@@ -25,9 +26,12 @@ pub struct TargetImage<'a> {
     height: u32,
     covered: CoveredPixels,
     /// Whether some pixel reads as absent: past the photo's edge, or labelled by `mask` (one test
-    /// per pixel read while neither is).
+    /// per pixel read while neither is), or the image is a half-resolution view.
     partial: bool,
     mask: Option<MaskView<'a>>,
+    /// Whether each pixel is the mean of a 2 × 2 block of `pixels` (whose rows are `2 · width`
+    /// long), the mask then being the full-resolution one.
+    half: bool,
 }
 
 impl<'a> TargetImage<'a> {
@@ -42,7 +46,27 @@ impl<'a> TargetImage<'a> {
         if width > crate::render::raster::MAX_IMAGE_SIZE || height > crate::render::raster::MAX_IMAGE_SIZE {
             return Err(FitError::BadConfig);
         }
-        Ok(Self { pixels, width, height, covered: CoveredPixels::whole(width, height), partial: false, mask: None })
+        Ok(Self { pixels, width, height, covered: CoveredPixels::whole(width, height), partial: false, mask: None, half: false })
+    }
+
+    /// The image at half the resolution (`⌊width / 2⌋ × ⌊height / 2⌋`, each pixel the rounded mean
+    /// of a 2 × 2 block), without copying: a coarse target for the first steps of a chain. A
+    /// pixel reads as absent unless its whole block is covered and unlabelled. `BadConfig` for an
+    /// image already halved or smaller than 2 × 2.
+    pub fn half(&self) -> Result<Self, FitError> {
+        let (width, height) = (self.width / 2, self.height / 2);
+        if self.half || width == 0 || height == 0 {
+            return Err(FitError::BadConfig);
+        }
+        let c = self.covered;
+        let covered = CoveredPixels { x0: c.x0.div_ceil(2), y0: c.y0.div_ceil(2), x1: c.x1 / 2, y1: c.y1 / 2 };
+        let covered = if covered.fits(width, height) { covered } else { CoveredPixels { x0: 0, y0: 0, x1: 0, y1: 0 } };
+        Ok(Self { width, height, covered, partial: true, half: true, ..*self })
+    }
+
+    /// Whether this is a half-resolution view ([`Self::half`]).
+    pub fn is_half(&self) -> bool {
+        self.half
     }
 
     /// The image with only `covered` observed (see [`crate::fit::frame`]); the rectangle must lie
@@ -52,7 +76,7 @@ impl<'a> TargetImage<'a> {
             return Err(FitError::EmptyImage);
         }
         let edge = covered != CoveredPixels::whole(self.width, self.height);
-        Ok(Self { covered, partial: edge || self.mask.is_some(), ..self })
+        Ok(Self { covered, partial: edge || self.mask.is_some() || self.half, ..self })
     }
 
     /// The image with the pixels `mask` labels occluded read as absent (the mask must be this
@@ -62,7 +86,8 @@ impl<'a> TargetImage<'a> {
     where
         'a: 'm,
     {
-        if mask.width() != self.width || mask.height() != self.height {
+        let scale = if self.half { 2 } else { 1 };
+        if mask.width() != self.width * scale || mask.height() != self.height * scale {
             return Err(FitError::LengthMismatch);
         }
         Ok(TargetImage { mask: Some(mask), partial: true, ..self })
@@ -70,7 +95,7 @@ impl<'a> TargetImage<'a> {
 
     /// The image with every pixel the photo covers observed.
     pub fn without_mask(self) -> Self {
-        Self { mask: None, partial: self.covered != CoveredPixels::whole(self.width, self.height), ..self }
+        Self { mask: None, partial: self.half || self.covered != CoveredPixels::whole(self.width, self.height), ..self }
     }
 
     /// The occlusion mask read, if any.
@@ -96,10 +121,30 @@ impl<'a> TargetImage<'a> {
 
     /// The pixel at `(x, y)`, if inside, covered and not masked.
     pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
-        if x >= self.width || y >= self.height || (self.partial && self.absent(x, y)) {
+        if x >= self.width || y >= self.height {
             return None;
         }
+        if self.partial {
+            if self.absent(x, y) {
+                return None;
+            }
+            if self.half {
+                return self.block_mean(x, y);
+            }
+        }
         self.pixels.get(y as usize * self.width as usize + x as usize).copied()
+    }
+
+    /// A half-resolution view's pixel `(x, y)`: the rounded mean of its 2 × 2 block.
+    #[inline(always)]
+    fn block_mean(&self, x: u32, y: u32) -> Option<[u8; 3]> {
+        let stride = 2 * self.width as usize;
+        let at = 2 * (y as usize * stride + x as usize);
+        let (&[a, b], &[c, d]) = (self.pixels.get(at..at + 2)?, self.pixels.get(at + stride..at + stride + 2)?) else {
+            return None;
+        };
+        let mean = |a: u8, b: u8, c: u8, d: u8| ((u16::from(a) + u16::from(b) + u16::from(c) + u16::from(d) + 2) >> 2) as u8;
+        Some([mean(a[0], b[0], c[0], d[0]), mean(a[1], b[1], c[1], d[1]), mean(a[2], b[2], c[2], d[2])])
     }
 
     /// The linear colour in [0, 1] nearest to the continuous pixel position `(x, y)` (pixel centres at +0.5).
@@ -140,21 +185,45 @@ impl<'a> TargetImage<'a> {
     /// The pixel at row-major index `index`, if inside; `Some(None)` if inside but not covered or masked.
     #[inline(always)]
     pub fn pixel_at(&self, index: u32) -> Option<Option<[u8; 3]>> {
-        let p = self.pixels.get(index as usize).copied()?;
-        if self.partial && self.absent(index % self.width, index / self.width) {
-            return Some(None);
+        if self.partial {
+            return self.partial_pixel_at(index);
         }
-        Some(Some(p))
+        self.pixels.get(index as usize).copied().map(Some)
+    }
+
+    /// [`Self::pixel_at`] of an image with absent pixels (or a half-resolution view).
+    #[inline(always)]
+    fn partial_pixel_at(&self, index: u32) -> Option<Option<[u8; 3]>> {
+        let (x, y) = (index % self.width, index / self.width);
+        if self.half {
+            return (y < self.height).then(|| self.pixel(x, y));
+        }
+        let p = self.pixels.get(index as usize).copied()?;
+        Some((!self.absent(x, y)).then_some(p))
     }
 
     /// Whether pixel `(x, y)` of the image lies past the photo's edge or is labelled occluded.
     #[inline(always)]
     fn absent(&self, x: u32, y: u32) -> bool {
-        !self.covered.contains(x, y) || self.mask.is_some_and(|m| m.get(x, y))
+        if !self.covered.contains(x, y) {
+            return true;
+        }
+        match self.mask {
+            None => false,
+            Some(m) if self.half => {
+                let (u, v) = (2 * x, 2 * y);
+                m.get(u, v) || m.get(u + 1, v) || m.get(u, v + 1) || m.get(u + 1, v + 1)
+            }
+            Some(m) => m.get(x, y),
+        }
     }
 
-    /// Row `y` (`width` pixels), covered or not (see [`TargetImage::covered`]), masked or not.
+    /// Row `y` (`width` pixels), covered or not (see [`TargetImage::covered`]), masked or not;
+    /// `None` for a half-resolution view (its pixels are not stored: [`Self::pixel`]).
     pub fn row(&self, y: u32) -> Option<&'a [[u8; 3]]> {
+        if self.half {
+            return None;
+        }
         let w = self.width as usize;
         let start = (y as usize).checked_mul(w)?;
         self.pixels.get(start..start.checked_add(w)?)
@@ -186,12 +255,16 @@ impl BackgroundModel {
         }
         let mut counts = [0u32; BG_TOTAL];
         let cov = image.covered;
+        let mut count = |p: [u8; 3]| {
+            if let Some(c) = counts.get_mut(bin(p)) {
+                *c = c.saturating_add(1);
+            }
+        };
         for y in cov.y0..cov.y1 {
-            let Some(row) = image.row(y) else { continue };
-            for p in row.get(cov.x0 as usize..cov.x1 as usize).unwrap_or(&[]) {
-                if let Some(c) = counts.get_mut(bin(*p)) {
-                    *c = c.saturating_add(1);
-                }
+            match image.row(y) {
+                Some(row) => row.get(cov.x0 as usize..cov.x1 as usize).unwrap_or(&[]).iter().for_each(|p| count(*p)),
+                // A half-resolution view: its block means, masked or not.
+                None => (cov.x0..cov.x1).filter_map(|x| image.without_mask().pixel(x, y)).for_each(&mut count),
             }
         }
         let n = cov.count().max(1) as f32;
@@ -241,6 +314,40 @@ impl ImageEval {
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_half_view_reads_the_block_means_of_whole_blocks() {
+        let px: [[u8; 3]; 16] = core::array::from_fn(|i| [(i * 10) as u8, (255 - i) as u8, (i % 2) as u8]);
+        let full = TargetImage::new(&px, 4, 4).unwrap();
+        let half = full.half().unwrap();
+        assert!(half.is_half() && !full.is_half());
+        assert_eq!((half.width(), half.height()), (2, 2));
+        // Pixels 0, 1, 4, 5: rounded means.
+        assert_eq!(half.pixel(0, 0), Some([25, 253, 1]));
+        assert_eq!(half.pixel_at(3), Some(half.pixel(1, 1)));
+        assert_eq!(half.pixel(1, 1), Some([125, 243, 1]));
+        assert_eq!((half.pixel_at(4), half.pixel(2, 0), half.row(0)), (None, None, None));
+        // A block partly past the photo's edge is absent.
+        let edge = full.with_covered(CoveredPixels { x0: 1, y0: 0, x1: 4, y1: 4 }).unwrap().half().unwrap();
+        assert_eq!((edge.pixel(0, 0), edge.pixel_at(0), edge.pixel(1, 0)), (None, Some(None), half.pixel(1, 0)));
+        // So is a block with a labelled pixel (the labels are the full image's).
+        let mut mask = crate::fit::OcclusionMask::<4>::new();
+        mask.reset(4, 4).unwrap();
+        mask.set(3, 3, true);
+        let masked = half.with_mask(mask.view()).unwrap();
+        assert_eq!((masked.pixel(1, 1), masked.pixel(0, 1)), (None, half.pixel(0, 1)));
+        assert_eq!(masked.without_mask().pixel(1, 1), half.pixel(1, 1));
+        let mut small = crate::fit::OcclusionMask::<4>::new();
+        small.reset(2, 2).unwrap();
+        assert_eq!(half.with_mask(small.view()).err(), Some(FitError::LengthMismatch));
+        // The background of a half view counts its block means.
+        let bg = BackgroundModel::from_image(&half, 0.5).unwrap();
+        assert!(bg.log_density([25, 253, 1]) > bg.log_density([128, 0, 128]));
+        // Halved once only, and not below a pixel.
+        assert_eq!(half.half().err(), Some(FitError::BadConfig));
+        let one = [[0u8; 3]; 2];
+        assert_eq!(TargetImage::new(&one, 2, 1).unwrap().half().err(), Some(FitError::BadConfig));
+    }
 
     #[test]
     fn bad_images_are_errors() {

@@ -66,6 +66,23 @@ impl<'a> LandmarkTarget<'a> {
         Ok(Self { valid, ..self })
     }
 
+    /// The same target with its points and σ scaled by `factor` (> 0 and finite: the target of
+    /// an image resampled by it), the points written into `buffer` (at least one per point).
+    pub fn scaled<'b>(&self, factor: f32, buffer: &'b mut [[f32; 2]]) -> Result<LandmarkTarget<'b>, FitError>
+    where
+        'a: 'b,
+    {
+        if !(factor > 0.0 && factor.is_finite()) {
+            return Err(FitError::BadConfig);
+        }
+        let points = buffer.get_mut(..self.points.len()).ok_or(FitError::LengthMismatch)?;
+        for (q, p) in points.iter_mut().zip(self.points) {
+            *q = [p[0] * factor, p[1] * factor];
+        }
+        check_mask(points, self.valid)?;
+        Ok(LandmarkTarget { points, sigma: self.sigma * factor, ..*self })
+    }
+
     /// The same target with another σ (pixels, > 0 and finite).
     pub fn with_sigma(self, sigma: f32) -> Result<Self, FitError> {
         if !(sigma > 0.0 && sigma.is_finite()) {
@@ -231,6 +248,20 @@ pub fn evaluate_landmarks_rotated(
 #[allow(clippy::unwrap_used, clippy::indexing_slicing)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_scaled_target_is_the_same_target_in_a_resampled_image() {
+        let points = [[10.0f32, 20.0], [30.0, f32::NAN]];
+        let valid = [true, false];
+        let factors = [1.0f32, 3.0];
+        let t = LandmarkTarget::new(&points, &valid, 2.0).unwrap().with_sigma_factors(&factors).unwrap();
+        let mut buffer = [[0.0f32; 2]; 4];
+        let half = t.scaled(0.5, &mut buffer).unwrap();
+        assert_eq!(half.points()[0], [5.0, 10.0]);
+        assert_eq!((half.sigma(), half.sigma_factor(1), half.valid()), (1.0, 3.0, &valid[..]));
+        assert_eq!(t.scaled(0.0, &mut [[0.0; 2]; 4]).err(), Some(FitError::BadConfig));
+        assert_eq!(t.scaled(0.5, &mut [[0.0; 2]; 1]).err(), Some(FitError::LengthMismatch));
+    }
 
     #[test]
     fn another_sigma_keeps_the_rest_and_refuses_bad_values() {

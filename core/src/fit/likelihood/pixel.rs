@@ -186,6 +186,11 @@ impl<const TW: usize, const TH: usize, P: PixelLikelihood, B: BackgroundLikeliho
 {
     fn consume(&mut self, tile: &Tile<TW, TH>) {
         // Two copies of the loop, the one with labels out of line: without labels it reads none.
+        // A half-resolution target stores no rows: its pixels are read one by one.
+        if self.image.is_half() {
+            self.sum_tile_by_pixel(tile);
+            return;
+        }
         match self.image.mask() {
             None => self.sum_tile(tile, |_, _| false),
             Some(m) => self.sum_tile_masked(tile, m),
@@ -199,6 +204,27 @@ impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'_, '
     fn sum_tile_masked<const TW: usize, const TH: usize>(&mut self, tile: &Tile<TW, TH>, mask: MaskView<'_>) {
         let x0 = tile.origin().0;
         self.sum_tile(tile, |x, y| mask.get(x0.wrapping_add(x as u32), y))
+    }
+
+    /// [`Self::sum_tile`] reading the target pixel by pixel ([`TargetImage::pixel`]: covered,
+    /// unlabelled pixels only), for targets without rows.
+    #[inline(never)]
+    fn sum_tile_by_pixel<const TW: usize, const TH: usize>(&mut self, tile: &Tile<TW, TH>) {
+        let (x0, y0) = tile.origin();
+        let (mut sum, mut sq, mut covered) = (0.0f32, 0.0f32, 0u32);
+        for ((tri_row, col_row), y) in tile.triangles().iter().zip(tile.colors()).zip(y0..y0 + tile.size().1) {
+            for ((t, c), x) in tri_row.iter().zip(col_row).zip(x0..x0 + tile.size().0) {
+                if *t == NO_TRIANGLE {
+                    continue;
+                }
+                let Some(p) = self.image.pixel(x, y) else { continue };
+                let (term, d2sum) = self.pixel_terms(p, *c);
+                sq += d2sum;
+                sum += term;
+                covered += 1;
+            }
+        }
+        self.add_tile(sum, sq, covered);
     }
 
     /// Sums a rendered tile's covered pixels, leaving out those `occluded(x, y)` labels (`x`: the
