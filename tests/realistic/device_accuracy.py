@@ -13,7 +13,7 @@ vector (50 shape + 50 colour coefficients).
 
     python3 tests/realistic/device_accuracy.py --gpmm target/release/gpmm --model M.gpmm \
         --blob m4f.blob --set $REALISTIC_DATA/set [--landmarks-dir $REALISTIC_DATA/set/detector] \
-        [--host-only] [--identities N] [--yaws 0,30] [--jobs 2] -o OUT
+        [--host-only] [--identities N] [--yaws 0,30] [--jobs 2] [--seed S] [--device-arg=ARG ...] -o OUT
 
 Fits are cached in OUT (a rerun only fits what is missing); the table goes to OUT/accuracy.md.
 Standard library only.
@@ -41,7 +41,8 @@ def run(cmd, out_path):
 def host_fit(args, image, pts, out_dir):
     fit = os.path.join(out_dir, "fit.json")
     if not os.path.exists(fit):
-        res = subprocess.run([args.gpmm, "fit", args.model, image, "--landmarks", pts, "-o", out_dir], capture_output=True, text=True)
+        cmd = [args.gpmm, "fit", args.model, image, "--landmarks", pts, "-o", out_dir, "--seed", str(args.seed)]
+        res = subprocess.run(cmd, capture_output=True, text=True)
         if res.returncode != 0:
             raise RuntimeError(f"gpmm fit {image}: {res.stderr.strip()[-600:]}")
     with open(fit) as f:
@@ -51,7 +52,7 @@ def host_fit(args, image, pts, out_dir):
 
 def device_fit(args, image, pts, out_json):
     if not os.path.exists(out_json):
-        cmd = [args.gpmm, "device-fit", args.blob, image, "--landmarks", pts]
+        cmd = [args.gpmm, "device-fit", args.blob, image, "--landmarks", pts, "--seed", str(args.seed)] + args.device_arg
         if args.host_only:
             cmd.append("--host-only")
         run(cmd, out_json)
@@ -98,6 +99,9 @@ def main():
     ap.add_argument("--identities", type=int, help="only the first N identities")
     ap.add_argument("--yaws", help="only these yaws (degrees, comma-separated; 0 is the gallery)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0, help="seed of both sides' chains")
+    ap.add_argument("--device-arg", action="append", default=[], metavar="ARG",
+                    help="one more argument of `gpmm device-fit` (repeatable; e.g. --device-arg=--image-steps=600)")
     ap.add_argument("--components", type=int, default=50, help="shape and colour components of the joint vector")
     ap.add_argument("-o", "--output", required=True)
     args = ap.parse_args()
