@@ -62,10 +62,11 @@ pub struct DeviceFitArgs {
     pub seed: u64,
     #[arg(long, value_name = "N", help = device_landmark_steps_help())]
     pub landmark_steps: Option<u32>,
-    /// Image-chain steps (by default all at half the working resolution: `image.coarse_steps`;
-    /// the device's default fit is about a third of `gpmm fit`'s work).
-    #[arg(long, default_value_t = FitSettings::DEVICE.image.steps, value_name = "N")]
-    pub image_steps: u32,
+    #[arg(long, value_name = "N", help = format!(
+        "Image-chain steps (default: {}; without --landmarks {}), by default all at half the working \
+         resolution (`image.coarse_steps`): the device's default fit is about a third of `gpmm fit`'s work",
+        FitSettings::DEVICE.image.steps, FitSettings::DEVICE_FRAME.image.steps))]
+    pub image_steps: Option<u32>,
     /// Also run the same fit on the host (the core on the same blob) and report the differences.
     #[arg(long)]
     pub compare_host: bool,
@@ -252,7 +253,7 @@ impl DeviceFitArgs {
             size: Some(size),
             seed: Some(self.seed),
             landmark_steps: self.landmark_steps,
-            image_steps: Some(self.image_steps),
+            image_steps: self.image_steps,
             shape_rank: Some(ranks[0]),
             color_rank: Some(ranks[1]),
             overrides: self.overrides.clone(),

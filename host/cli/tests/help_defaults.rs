@@ -96,8 +96,7 @@ fn device_fit_help_states_the_defaults() {
                 pose_share(&frame),
                 frame.landmarks.steps
             ),
-            "--image-steps <N> Image-chain steps (by default all at half the working resolution".to_string(),
-            format!("[default: {}] --compare-host", device.image.steps),
+            format!("--image-steps <N> Image-chain steps (default: {}; without --landmarks {})", device.image.steps, frame.image.steps),
             format!("--seed <SEED> Seed of the chains [default: {}]", FitOptions::DEFAULT.seed),
             format!("[default: {INIT_LANDMARK_SIGMA}]"),
             format!("m4f: {}, m7: {}", side(M4F.image_side), side(M7.image_side)),

@@ -120,26 +120,35 @@ impl<'a> TargetImage<'a> {
     }
 
     /// The pixel at `(x, y)`, if inside, covered and not masked.
+    #[inline]
     pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
         if x >= self.width || y >= self.height {
             return None;
         }
         if self.partial {
+            if self.half {
+                return self.half_pixel(x, y);
+            }
             if self.absent(x, y) {
                 return None;
-            }
-            if self.half {
-                return self.block_mean(x, y);
             }
         }
         self.pixels.get(y as usize * self.width as usize + x as usize).copied()
     }
 
-    /// A half-resolution view's pixel `(x, y)`: the rounded mean of its 2 × 2 block.
-    #[inline(always)]
-    fn block_mean(&self, x: u32, y: u32) -> Option<[u8; 3]> {
+    /// A half-resolution view's pixel `(x, y)` (inside): the rounded mean of its 2 × 2 block, if
+    /// the block is covered and no pixel of it labelled.
+    #[inline(never)]
+    fn half_pixel(&self, x: u32, y: u32) -> Option<[u8; 3]> {
+        if !self.covered.contains(x, y) {
+            return None;
+        }
+        let (u, v) = (2 * x, 2 * y);
+        if self.mask.is_some_and(|m| m.get(u, v) || m.get(u + 1, v) || m.get(u, v + 1) || m.get(u + 1, v + 1)) {
+            return None;
+        }
         let stride = 2 * self.width as usize;
-        let at = 2 * (y as usize * stride + x as usize);
+        let at = v as usize * stride + u as usize;
         let (&[a, b], &[c, d]) = (self.pixels.get(at..at + 2)?, self.pixels.get(at + stride..at + stride + 2)?) else {
             return None;
         };
@@ -185,37 +194,23 @@ impl<'a> TargetImage<'a> {
     /// The pixel at row-major index `index`, if inside; `Some(None)` if inside but not covered or masked.
     #[inline(always)]
     pub fn pixel_at(&self, index: u32) -> Option<Option<[u8; 3]>> {
-        if self.partial {
-            return self.partial_pixel_at(index);
-        }
-        self.pixels.get(index as usize).copied().map(Some)
-    }
-
-    /// [`Self::pixel_at`] of an image with absent pixels (or a half-resolution view).
-    #[inline(always)]
-    fn partial_pixel_at(&self, index: u32) -> Option<Option<[u8; 3]>> {
-        let (x, y) = (index % self.width, index / self.width);
-        if self.half {
-            return (y < self.height).then(|| self.pixel(x, y));
-        }
         let p = self.pixels.get(index as usize).copied()?;
-        Some((!self.absent(x, y)).then_some(p))
+        if self.partial {
+            let (x, y) = (index % self.width, index / self.width);
+            if self.half {
+                return (y < self.height).then(|| self.half_pixel(x, y));
+            }
+            if self.absent(x, y) {
+                return Some(None);
+            }
+        }
+        Some(Some(p))
     }
 
     /// Whether pixel `(x, y)` of the image lies past the photo's edge or is labelled occluded.
     #[inline(always)]
     fn absent(&self, x: u32, y: u32) -> bool {
-        if !self.covered.contains(x, y) {
-            return true;
-        }
-        match self.mask {
-            None => false,
-            Some(m) if self.half => {
-                let (u, v) = (2 * x, 2 * y);
-                m.get(u, v) || m.get(u + 1, v) || m.get(u, v + 1) || m.get(u + 1, v + 1)
-            }
-            Some(m) => m.get(x, y),
-        }
+        !self.covered.contains(x, y) || self.mask.is_some_and(|m| m.get(x, y))
     }
 
     /// Row `y` (`width` pixels), covered or not (see [`TargetImage::covered`]), masked or not;
