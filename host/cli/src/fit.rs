@@ -235,7 +235,12 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
         let [y, p, r] = post.angles_interval_90_deg;
         eprintln!("90 % intervals: yaw {:.1} to {:.1}, pitch {:.1} to {:.1}, roll {:.1} to {:.1} deg", y[0], y[1], p[0], p[1], r[0], r[1]);
     }
-    eprintln!("wrote fit.json, overlay.png and fit.ply to {}", job.out_dir.display());
+    let files = if rep.occluded_fraction.is_some() {
+        "fit.json, overlay.png, fit.ply and occlusion.png (the occluded pixels on the photo)"
+    } else {
+        "fit.json, overlay.png and fit.ply"
+    };
+    eprintln!("wrote {files} to {}", job.out_dir.display());
     Ok(())
 }
 

@@ -129,6 +129,24 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     assert!(overlay.width() > 3 * 128 && overlay.height() > 128);
     let ply = std::fs::read(out.path().join("fit.ply")).unwrap();
     assert!(ply.starts_with(b"ply"));
+    assert!(!out.path().join("occlusion.png").exists(), "occlusion labels without an occlusion-aware fit");
+}
+
+#[test]
+fn an_occlusion_aware_fit_writes_its_labels_on_the_photo() {
+    let Some(f) = fixture() else { return };
+    let out = tempfile::tempdir().unwrap();
+    let image = f.synth.join("0000_yaw30.png");
+    ok(&fit(f, &image, &f.synth.join("0000_yaw30.pts"), out.path(), &["--set", "occlusion.rounds=2", "--set", "occlusion.threshold=-2"]));
+    let j = read_json(&out.path().join("fit.json"));
+    let fraction = j["occluded_fraction"].as_f64().unwrap();
+    let labels = image::open(out.path().join("occlusion.png")).unwrap().to_luma8();
+    let photo = image::open(&image).unwrap();
+    assert_eq!(labels.dimensions(), (photo.width(), photo.height()));
+    assert!(labels.pixels().all(|p| p.0[0] == 0 || p.0[0] == 255), "labels are white on black");
+    // Some of the face is labelled at this threshold, and no more than the face's share of the photo.
+    let white = labels.pixels().filter(|p| p.0[0] == 255).count() as f64 / (labels.width() * labels.height()) as f64;
+    assert!(fraction > 0.0 && white > 0.0 && white <= fraction, "{white} of the photo, {fraction} of the face");
 }
 
 #[test]

@@ -341,7 +341,8 @@ impl Model {
     /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient;
     /// docs/fit-json.md) and images: `overlay` (input | fit | blend, and the occluded pixels with
     /// `set=["occlusion.rounds=3"]`), `render` (the fit, RGBA), `working_image` (the crop the chains
-    /// saw) and, for an occlusion-aware fit, `occluded` (H x W booleans of the working image) beside
+    /// saw) and, for an occlusion-aware fit, `occluded` (H x W booleans of the working image) and
+    /// `occluded_photo` (the same labels on the photo, its H x W) beside
     /// `occluded_fraction`. `landmark_calibration`: a detector calibration file
     /// (`gpmm calibrate-landmarks`) whose offsets are removed from the landmarks first.
     /// `image` may also be `H x W x 4` (RGBA: alpha is dropped) or anything `numpy.asarray` makes such an
@@ -449,6 +450,8 @@ impl Model {
         dict.set_item("working_image", rgb_to_numpy(py, &prepared.image)?)?;
         if let Some((labels, _)) = &outcome.occlusion {
             dict.set_item("occluded", crate::arrays::mask_to_numpy(py, labels)?)?;
+            let photo = gpmm_host::fit::labels_in_photo(labels, &prepared.crop, prepared.original_size);
+            dict.set_item("occluded_photo", crate::arrays::mask_to_numpy(py, &photo)?)?;
         }
         Ok(out)
     }

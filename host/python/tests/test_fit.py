@@ -144,4 +144,11 @@ def test_an_occlusion_aware_fit_labels_a_painted_occluder(small_model_path, astr
     assert magenta.sum() > 50
     assert labels[magenta].mean() > 0.7, labels[magenta].mean()
     assert labels[~magenta].mean() < 0.2, labels[~magenta].mean()
+    # The same labels on the photo: the painted bar itself, in the photo's pixels.
+    photo = fit["occluded_photo"]
+    assert photo.shape == image.shape[:2] and photo.dtype == bool
+    bar = np.zeros(image.shape[:2], dtype=bool)
+    bar[box[0]:box[1], box[2]:box[3]] = True
+    assert photo[bar].mean() > 0.7, photo[bar].mean()
+    assert photo[~bar].mean() < 0.05, photo[~bar].mean()
     assert fit["overlay"].shape[1] > plain["overlay"].shape[1], "the overlay has a fourth panel"

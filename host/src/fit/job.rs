@@ -77,7 +77,8 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     Ok(rep)
 }
 
-/// Writes a fit's `fit.json` (`rep`), `overlay.png` and `fit.ply` into `dir` (created if needed).
+/// Writes a fit's `fit.json` (`rep`), `overlay.png` and `fit.ply` into `dir` (created if needed),
+/// and for an occlusion-aware fit `occlusion.png` (its labels on the photo, white: occluded).
 pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, rep: &FitReport, dir: &Path) -> Result<(), FitFilesError> {
     let werr = |path: &Path, e: &dyn std::fmt::Display| FitFilesError::Write { path: path.to_path_buf(), message: e.to_string() };
     std::fs::create_dir_all(dir).map_err(|e| werr(dir, &e))?;
@@ -88,6 +89,11 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
     let ov =
         overlay(&prepared.image, &outcome.render, outcome.occlusion.as_ref().map(|o| &o.0), &prepared.landmarks, &outcome.fitted_landmarks);
     crate::render::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
+    if let Some((labels, _)) = &outcome.occlusion {
+        let occ_path = dir.join("occlusion.png");
+        let photo = super::overlay::labels_in_photo(labels, &prepared.crop, prepared.original_size);
+        photo.save(&occ_path).map_err(|e| werr(&occ_path, &e))?;
+    }
     let ply_path = dir.join("fit.ply");
     let mesh = model
         .instance(outcome.params.shape_coeffs(), outcome.params.color_coeffs())

@@ -51,7 +51,7 @@ pub use input::{check_landmarks, load_photo, prepare, Prepared};
 pub use job::{fit_files, write_fit_files, FitFilesError, FitJob};
 pub use observe::{AcceptanceReport, KindCounts};
 pub use options::{FitFlags, FitOptions};
-pub use overlay::{overlay, FITTED_COLOR, OVERLAY_SCALE, TARGET_COLOR};
+pub use overlay::{labels_in_photo, overlay, FITTED_COLOR, OVERLAY_SCALE, TARGET_COLOR};
 pub use overrides::override_settings;
 pub use params::{Params, KC, KS};
 pub use pipeline::{camera_space_mesh, fit_image, fit_prepared, morphable, project_landmarks, project_landmarks_of, rmse, Outcome};

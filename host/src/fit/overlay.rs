@@ -90,3 +90,57 @@ pub(super) fn put(img: &mut RgbaImage, x: i64, y: i64, c: Rgba<u8>) {
         img.put_pixel(x as u32, y as u32, c);
     }
 }
+
+/// The working image's occlusion labels `labels` (white: occluded; `size × size`, cut from the
+/// photo at `crop`) on a `photo_size` photo: each photo pixel takes the label of the working pixel
+/// its centre falls in, photo pixels outside the crop are not labelled (`occlusion.png`, Python's
+/// `occluded_photo`).
+pub fn labels_in_photo(labels: &GrayImage, crop: &crate::photo::CropBox, photo_size: [u32; 2]) -> GrayImage {
+    let size = labels.width();
+    let mut out = GrayImage::new(photo_size[0], photo_size[1]);
+    if size == 0 || crop.side == 0 {
+        return out;
+    }
+    let step = size as f64 / f64::from(crop.side);
+    // The photo rows and columns the crop spans.
+    let span = |start: i64, extent: u32| {
+        (start.clamp(0, i64::from(extent)) as u32, (start + i64::from(crop.side)).clamp(0, i64::from(extent)) as u32)
+    };
+    let ((x0, x1), (y0, y1)) = (span(crop.x, photo_size[0]), span(crop.y, photo_size[1]));
+    let working = |p: u32, start: i64| ((f64::from(p) + 0.5 - start as f64) * step).floor();
+    for y in y0..y1 {
+        let v = working(y, crop.y);
+        for x in x0..x1 {
+            let u = working(x, crop.x);
+            if (0.0..f64::from(size)).contains(&u) && (0.0..f64::from(labels.height())).contains(&v) {
+                out.put_pixel(x, y, *labels.get_pixel(u as u32, v as u32));
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photo::CropBox;
+
+    #[test]
+    fn labels_land_on_the_photo_pixels_their_working_pixel_covers() {
+        // A 64 px crop at (10, -6) of a 100 x 50 photo, worked at 32 px: two photo pixels a working one.
+        let mut labels = GrayImage::new(32, 32);
+        labels.put_pixel(3, 4, image::Luma([255]));
+        labels.put_pixel(31, 31, image::Luma([255]));
+        let photo = labels_in_photo(&labels, &CropBox { x: 10, y: -6, side: 64 }, [100, 50]);
+        assert_eq!(photo.dimensions(), (100, 50));
+        let on: Vec<(u32, u32)> = photo.enumerate_pixels().filter(|(_, _, p)| p.0[0] == 255).map(|(x, y, _)| (x, y)).collect();
+        // Working (3, 4) covers photo x 16..18, y 2..4; (31, 31) lies below the photo.
+        assert_eq!(on, vec![(16, 2), (17, 2), (16, 3), (17, 3)]);
+        // Outside the crop nothing is labelled, whatever the labels say.
+        let all = GrayImage::from_pixel(32, 32, image::Luma([255]));
+        let photo = labels_in_photo(&all, &CropBox { x: 10, y: -6, side: 64 }, [100, 50]);
+        assert_eq!(photo.get_pixel(9, 10).0[0], 0);
+        assert_eq!(photo.get_pixel(74, 10).0[0], 0);
+        assert_eq!((photo.get_pixel(10, 0).0[0], photo.get_pixel(73, 49).0[0]), (255, 255));
+    }
+}
