@@ -634,6 +634,27 @@ mod tests {
     }
 
     #[test]
+    fn a_devices_defaults_are_the_hosts_recipe_on_a_shorter_schedule() {
+        let (host, device, frame) = (FitSettings::DEFAULT, FitSettings::DEVICE, FitSettings::DEVICE_FRAME);
+        for s in [device, frame] {
+            assert_eq!(s.validate(), Ok(()));
+            // Every image step at half resolution, fewer steps than the host's.
+            assert!(s.image.coarse_steps == s.image.steps && s.image.steps < host.image.steps);
+            assert!(s.landmarks.steps < host.landmarks.steps);
+            // The likelihood, ranks and light are the host's.
+            assert_eq!(
+                (s.image.pixel_sigma, s.ranks, s.light, s.occlusion),
+                (host.image.pixel_sigma, host.ranks, host.light, host.occlusion)
+            );
+        }
+        assert_eq!(host.image.coarse_steps, 0, "the host's default fit keeps full resolution");
+        assert!(device.start.shape_rounds > 0 && device.start.shape_rounds < host.start.shape_rounds);
+        // Without landmarks the chains fit the shape: no solve, a longer landmark chain.
+        assert_eq!(frame.start.shape_rounds, 0);
+        assert!(frame.landmarks.pose_share < 1.0 && frame.landmarks.steps > device.landmarks.steps);
+    }
+
+    #[test]
     fn the_image_chain_can_fit_the_shape_too() {
         let d = FitSettings::DEFAULT;
         let s = d.with_image_shape(10_000);
