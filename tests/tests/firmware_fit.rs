@@ -4,9 +4,10 @@
 //! components), quantized for the `m4f` profile into a blob, and fitted to synthetic ICT faces
 //! (`gpmm_host::synth`, known truth):
 //! 1. the same blob, image, landmarks and seed on the host core and in the Cortex-M4F firmware
-//!    under QEMU (the default fit: 5000 landmark + 600 image steps): fitted landmarks within
+//!    under QEMU (a device's default fit, `FitSettings::DEVICE`): fitted landmarks within
 //!    0.5 px, best image log-likelihood within 1 %; the firmware's flash, RAM and instruction
-//!    figures are printed and checked against the m4f budget;
+//!    figures are printed and checked against the m4f budget; the firmware's profile by function
+//!    (`firmware-sim/profile.sh`) counts its instructions;
 //! 2. the float model and the quantized blob on the host, on several synthetic faces: fitted
 //!    landmarks within 1 px;
 //! 3. a corrupted blob makes the firmware fail with the core's error, not a fault.
@@ -389,4 +390,48 @@ fn a_learned_dense_model_fits_on_the_firmware_bit_for_bit() {
     let ratio = dev.instructions_total as f64 / template.instructions_total as f64;
     assert!(ratio <= 1.1, "the learned model's fit costs {ratio:.3} times the template model's");
     assert!(dev.ram_total_bytes <= dev.ram_budget_bytes && dev.flash_total_bytes <= dev.flash_budget_bytes, "{dev:?}");
+}
+
+/// The profile of a short fit by function (`firmware-sim/profile.sh`, how docs/evaluation.md
+/// breaks a step down) counts at least the instructions the firmware counts itself, and names
+/// the image chain's and the shape solve's functions.
+#[test]
+fn the_firmware_profile_counts_its_instructions_by_function() {
+    let (q, blob) = models();
+    let face = &faces(1, 11)[1];
+    let prep = prepared(face);
+    let fit = device_settings(&CoreSettings::DEVICE.with_ranks(q.shape.rank(), q.color.rank()).with_steps(200, 20), &M4F);
+    let part = partition_bytes(blob.bytes(), &fit_input_bytes(&prep, &fit, 0).expect("fit input"));
+    let file = Path::new(env!("CARGO_TARGET_TMPDIR")).join("profile-m4f.partition");
+    std::fs::write(&file, &part).expect("write partition");
+    let log = run_firmware("m4f", &file, 600).unwrap_or_else(|e| panic!("firmware run: {e}"));
+    let dev = parse_report("m4f", &log).unwrap_or_else(|e| panic!("{e}\n{log}"));
+
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware-sim/profile.sh");
+    let out = std::process::Command::new("bash")
+        .arg(&script)
+        .arg("--data")
+        .arg(&file)
+        .args(["--json", "--top", "40"])
+        .output()
+        .expect("run profile.sh");
+    assert!(out.status.success(), "profile.sh failed: {}", String::from_utf8_lossy(&out.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("profile JSON");
+    assert_eq!((j["format"].as_str(), j["version"].as_u64()), (Some("gpmm-qemu-profile"), Some(1)));
+    let total = j["instructions"].as_u64().expect("total");
+    // The whole run: the firmware's counted stages, its start-up and its exit.
+    assert!(
+        total >= dev.instructions_total && total <= dev.instructions_total + dev.instructions_total / 10 + 10_000_000,
+        "profile {total} against the firmware's {}",
+        dev.instructions_total
+    );
+    let rows = j["functions"].as_array().expect("functions");
+    let names: Vec<&str> = rows.iter().filter_map(|r| r["function"].as_str()).collect();
+    for f in ["fit::chain::render_eval", "fit::solve::shape::iterate", "basis::blocks::in_blocks_of_four"] {
+        assert!(names.iter().any(|n| n.contains(f)), "{f} not among {names:?}");
+    }
+    let counts: Vec<u64> = rows.iter().filter_map(|r| r["instructions"].as_u64()).collect();
+    assert!(counts.windows(2).all(|w| w[0] >= w[1]), "not sorted: {counts:?}");
+    assert!(counts.iter().sum::<u64>() <= total);
+    println!("profile of a short fit: {total} instructions (firmware {}); top: {:?}", dev.instructions_total, &names[..5.min(names.len())]);
 }
