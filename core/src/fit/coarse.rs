@@ -21,11 +21,11 @@ use crate::render::TileRasterizer;
 use rand_core::Rng;
 
 /// Runs `steps` image-chain steps of `problem` and `image` (full resolution) at half resolution
-/// from `from` (borrowed to halve its focal length, then restored), with the mixture of `proposals` for the half-size image. The result's samples
-/// are full-resolution parameters (their focal length doubled back); its log posteriors are the
-/// half-resolution chain's. `BadConfig` for an image smaller than 2 × 2. (Inlined: its locals
-/// then share the caller's stack with those of the full-resolution steps, which a device's
-/// landmark-free fit needs.)
+/// from `from` (borrowed to halve its focal length, then restored), with the mixture of
+/// `proposals` for the half-size image. The result's samples are full-resolution parameters
+/// (their focal length doubled back); its log posteriors are the half-resolution chain's.
+/// `BadConfig` for an image smaller than 2 × 2. (Inlined: its locals then share the caller's
+/// stack with those of the full-resolution steps, which a device's landmark-free fit needs.)
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn half_resolution_chain<R, I, O, const KS: usize, const KC: usize, const TW: usize, const TH: usize, const BIN: usize>(
