@@ -129,13 +129,13 @@ fn run() -> Result<(), String> {
     let share = |c: u64| 100.0 * c as f64 / total.max(1) as f64;
     let w = |e: std::io::Error| format!("writing: {e}");
     if o.json {
-        let list: Vec<String> = rows
+        let functions: Vec<serde_json::Value> = rows
             .iter()
             .take(o.top)
-            .map(|(name, c)| format!("{{\"function\":{},\"instructions\":{c},\"share\":{:.4}}}", quoted(name), share(*c) / 100.0))
+            .map(|(name, c)| serde_json::json!({ "function": name, "instructions": c, "share": share(*c) / 100.0 }))
             .collect();
-        writeln!(out, "{{\"format\":\"gpmm-qemu-profile\",\"version\":1,\"instructions\":{total},\"functions\":[{}]}}", list.join(","))
-            .map_err(w)?;
+        let doc = serde_json::json!({ "format": "gpmm-qemu-profile", "version": 1, "instructions": total, "functions": functions });
+        writeln!(out, "{doc}").map_err(w)?;
     } else {
         writeln!(out, "{total} instructions ({} executed blocks never seen translated)", unsized_blocks).map_err(w)?;
         for (name, c) in rows.iter().take(o.top) {
@@ -143,21 +143,6 @@ fn run() -> Result<(), String> {
         }
     }
     Ok(())
-}
-
-/// `s` as a JSON string.
-fn quoted(s: &str) -> String {
-    let mut q = String::from("\"");
-    for c in s.chars() {
-        match c {
-            '"' => q.push_str("\\\""),
-            '\\' => q.push_str("\\\\"),
-            c if (c as u32) < 0x20 => q.push_str(&format!("\\u{:04x}", c as u32)),
-            c => q.push(c),
-        }
-    }
-    q.push('"');
-    q
 }
 
 fn main() -> ExitCode {
