@@ -41,7 +41,7 @@ use crate::fit::likelihood::pixel::GaussianPixel;
 use crate::fit::likelihood::prior::Prior;
 use crate::fit::settings::FitSettings;
 use crate::fit::solve::color::{solve_color, ColorScene, ColorSolveConfig};
-use crate::fit::solve::light::solve_light;
+use crate::fit::solve::light::{solve_light, LightSolveConfig};
 use crate::fit::solve::shape::{solve_shape, ShapeSolveConfig};
 use crate::fit::start::{initial_guess, landmark_pivot};
 use crate::format::fit_record::FitFigures;
@@ -49,7 +49,7 @@ use crate::geometry::TriIndex;
 use crate::model::instance::Instance;
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
-use crate::render::{Cull, TileRasterizer};
+use crate::render::{Cull, ShLight, TileRasterizer};
 use rand_core::Rng;
 
 /// Landmark count of the iBUG-68 scheme, whose first 17 points are the jaw contour.
@@ -339,23 +339,12 @@ pub fn standard_fit<
     let mut start = landmark.best.clone();
     instance.update(model, &start, w, h)?;
     let every_vertex = settings.light.solve_config(settings.light.start_stride);
-    if let Ok(l) =
-        solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &start.camera(w, h), &image, &every_vertex)
-    {
+    if let Some(l) = light_of(instance, &start, w, h, &image, &every_vertex) {
         start.light = l;
     }
     if occ.enabled() {
         labels.label(model, &start, instance, raster, mask)?;
-        let seen = labels.target(mask)?;
-        if let Ok(l) = solve_light(
-            instance.positions(),
-            instance.normals(),
-            instance.albedos(),
-            &start.pose,
-            &start.camera(w, h),
-            &seen,
-            &every_vertex,
-        ) {
+        if let Some(l) = light_of(instance, &start, w, h, &labels.target(mask)?, &every_vertex) {
             start.light = l;
         }
         labels.label(model, &start, instance, raster, mask)?;
@@ -565,12 +554,25 @@ fn color_rounds<I: TriIndex, const KS: usize, const KC: usize>(
         }
         start.color_coeffs_mut().copy_from_slice(c);
         instance.update(model, start, w, h)?;
-        match solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &camera, image, &every_vertex) {
-            Ok(l) => start.light = l,
-            Err(_) => break,
+        match light_of(instance, start, w, h, image, &every_vertex) {
+            Some(l) => start.light = l,
+            None => break,
         }
     }
     Ok(())
+}
+
+/// The least-squares light of `params` on `target` over `instance` (which holds `params`'
+/// instance) with `config`, if the solve succeeds.
+fn light_of<const KS: usize, const KC: usize>(
+    instance: &Instance<'_, KS, KC>,
+    params: &FitParams<KS, KC>,
+    w: u32,
+    h: u32,
+    target: &TargetImage<'_>,
+    config: &LightSolveConfig,
+) -> Option<ShLight> {
+    solve_light(instance.positions(), instance.normals(), instance.albedos(), &params.pose, &params.camera(w, h), target, config).ok()
 }
 
 /// [`StartSettings::shape_rounds`](crate::fit::settings::StartSettings) shape-and-light rounds on
@@ -607,10 +609,9 @@ fn shape_rounds<I: TriIndex, const KS: usize, const KC: usize>(
         if solve_shape(model, instance, start, image, landmarks, &config).is_err() {
             break;
         }
-        let camera = start.camera(w, h);
-        match solve_light(instance.positions(), instance.normals(), instance.albedos(), &start.pose, &camera, image, &every_vertex) {
-            Ok(l) => start.light = l,
-            Err(_) => break,
+        match light_of(instance, start, w, h, image, &every_vertex) {
+            Some(l) => start.light = l,
+            None => break,
         }
         color_rounds::<I, KS, KC>(model, image, settings, u32::from(s.color_rounds > 0), start, instance, w, h)?;
     }

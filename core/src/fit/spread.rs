@@ -15,6 +15,7 @@
 use crate::error::FitError;
 use crate::fit::likelihood::landmarks::LandmarkTarget;
 use crate::fit::solve::cholesky;
+use crate::fit::solve::shape::pose_moved_by;
 use crate::geometry::{TriIndex, Vec3};
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
@@ -38,22 +39,6 @@ pub struct PoseSpread {
     pub residual_sigma_px: f32,
     /// Landmarks used.
     pub landmarks: u32,
-}
-
-/// `pose` with parameter `k` moved by `d`.
-fn moved(pose: &Pose, k: usize, d: f32) -> Pose {
-    let mut p = *pose;
-    match k {
-        0 => p.yaw += d,
-        1 => p.pitch += d,
-        2 => p.roll += d,
-        _ => {
-            if let Some(t) = p.translation.get_mut(k - 3) {
-                *t += d;
-            }
-        }
-    }
-    p
 }
 
 /// The spread of `params`' pose given the `target` landmarks (its valid ones) in a `width ×
@@ -85,7 +70,7 @@ pub fn pose_spread<I: TriIndex, const KS: usize, const KC: usize>(
         m += 1;
         let mut row = [[0.0f32; 2]; POSE_PARAMS];
         for (k, (r, h)) in row.iter_mut().zip(STEPS).enumerate() {
-            let (a, b) = (project(&moved(&params.pose, k, h), *p)?, project(&moved(&params.pose, k, -h), *p)?);
+            let (a, b) = (project(&pose_moved_by(&params.pose, k, h), *p)?, project(&pose_moved_by(&params.pose, k, -h), *p)?);
             *r = [(a[0] - b[0]) / (2.0 * h), (a[1] - b[1]) / (2.0 * h)];
         }
         for (i, ri) in row.iter().enumerate() {

@@ -101,19 +101,19 @@ pub fn labels_in_photo(labels: &GrayImage, crop: &crate::photo::CropBox, photo_s
     if size == 0 || crop.side == 0 {
         return out;
     }
-    let step = size as f64 / f64::from(crop.side);
     // The photo rows and columns the crop spans.
     let span = |start: i64, extent: u32| {
         (start.clamp(0, i64::from(extent)) as u32, (start + i64::from(crop.side)).clamp(0, i64::from(extent)) as u32)
     };
     let ((x0, x1), (y0, y1)) = (span(crop.x, photo_size[0]), span(crop.y, photo_size[1]));
-    let working = |p: u32, start: i64| ((f64::from(p) + 0.5 - start as f64) * step).floor();
     for y in y0..y1 {
-        let v = working(y, crop.y);
         for x in x0..x1 {
-            let u = working(x, crop.x);
-            if (0.0..f64::from(size)).contains(&u) && (0.0..f64::from(labels.height())).contains(&v) {
-                out.put_pixel(x, y, *labels.get_pixel(u as u32, v as u32));
+            // The working pixel of the photo pixel's centre.
+            let [u, v] = crop.to_working([x as f32 + 0.5, y as f32 + 0.5], size).map(f32::floor);
+            if u >= 0.0 && v >= 0.0 {
+                if let Some(p) = labels.get_pixel_checked(u as u32, v as u32) {
+                    out.put_pixel(x, y, *p);
+                }
             }
         }
     }

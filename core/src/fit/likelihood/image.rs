@@ -49,6 +49,12 @@ impl<'a> TargetImage<'a> {
         Ok(Self { pixels, width, height, covered: CoveredPixels::whole(width, height), partial: false, mask: None, half: false })
     }
 
+    /// The image with `partial` as its other fields say: some pixel reads as absent.
+    fn with_partial(self) -> Self {
+        let partial = self.half || self.mask.is_some() || self.covered != CoveredPixels::whole(self.width, self.height);
+        Self { partial, ..self }
+    }
+
     /// The image at half the resolution (`⌊width / 2⌋ × ⌊height / 2⌋`, each pixel the rounded mean
     /// of a 2 × 2 block), without copying: a coarse target for the first steps of a chain. A
     /// pixel reads as absent unless its whole block is covered and unlabelled. `BadConfig` for an
@@ -61,7 +67,7 @@ impl<'a> TargetImage<'a> {
         let c = self.covered;
         let covered = CoveredPixels { x0: c.x0.div_ceil(2), y0: c.y0.div_ceil(2), x1: c.x1 / 2, y1: c.y1 / 2 };
         let covered = if covered.fits(width, height) { covered } else { CoveredPixels { x0: 0, y0: 0, x1: 0, y1: 0 } };
-        Ok(Self { width, height, covered, partial: true, half: true, ..*self })
+        Ok(Self { width, height, covered, half: true, ..*self }.with_partial())
     }
 
     /// Whether this is a half-resolution view ([`Self::half`]).
@@ -75,8 +81,7 @@ impl<'a> TargetImage<'a> {
         if !covered.fits(self.width, self.height) {
             return Err(FitError::EmptyImage);
         }
-        let edge = covered != CoveredPixels::whole(self.width, self.height);
-        Ok(Self { covered, partial: edge || self.mask.is_some() || self.half, ..self })
+        Ok(Self { covered, ..self }.with_partial())
     }
 
     /// The image with the pixels `mask` labels occluded read as absent (the mask must be this
@@ -90,12 +95,12 @@ impl<'a> TargetImage<'a> {
         if mask.width() != self.width * scale || mask.height() != self.height * scale {
             return Err(FitError::LengthMismatch);
         }
-        Ok(TargetImage { mask: Some(mask), partial: true, ..self })
+        Ok(TargetImage { mask: Some(mask), ..self }.with_partial())
     }
 
     /// The image with every pixel the photo covers observed.
     pub fn without_mask(self) -> Self {
-        Self { mask: None, partial: self.half || self.covered != CoveredPixels::whole(self.width, self.height), ..self }
+        Self { mask: None, ..self }.with_partial()
     }
 
     /// The occlusion mask read, if any.
@@ -250,6 +255,7 @@ impl BackgroundModel {
         }
         let mut counts = [0u32; BG_TOTAL];
         let cov = image.covered;
+        let unmasked = image.without_mask();
         let mut count = |p: [u8; 3]| {
             if let Some(c) = counts.get_mut(bin(p)) {
                 *c = c.saturating_add(1);
@@ -259,7 +265,7 @@ impl BackgroundModel {
             match image.row(y) {
                 Some(row) => row.get(cov.x0 as usize..cov.x1 as usize).unwrap_or(&[]).iter().for_each(|p| count(*p)),
                 // A half-resolution view: its block means, masked or not.
-                None => (cov.x0..cov.x1).filter_map(|x| image.without_mask().pixel(x, y)).for_each(&mut count),
+                None => (cov.x0..cov.x1).filter_map(|x| unmasked.pixel(x, y)).for_each(&mut count),
             }
         }
         let n = cov.count().max(1) as f32;

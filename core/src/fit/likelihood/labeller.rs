@@ -2,9 +2,9 @@
 //! that judges every pixel a rendered frame covers.
 
 use crate::error::FitError;
-use crate::fit::likelihood::image::{to_linear, TargetImage};
+use crate::fit::likelihood::image::TargetImage;
 use crate::fit::likelihood::occlusion::OcclusionMask;
-use crate::fit::likelihood::pixel::{BackgroundLikelihood, PixelLikelihood};
+use crate::fit::likelihood::pixel::{pixel_terms, BackgroundLikelihood, PixelLikelihood};
 use crate::render::tile::{Tile, TileSink, NO_TRIANGLE};
 
 /// A [`TileSink`] that labels the covered pixels of a rendered frame: occluded where the pixel
@@ -50,9 +50,7 @@ impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized, const WORDS: usize, c
                     continue;
                 }
                 let Some(p) = self.image.pixel(x, y) else { continue };
-                let i = to_linear(p);
-                let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
-                let term = self.pixel.log_likelihood(i, *c, d0 * d0 + d1 * d1 + d2 * d2) - self.background.log_density(p);
+                let (term, _) = pixel_terms(&self.pixel, self.background, p, *c);
                 self.mask.set(x, y, term < self.threshold);
                 self.covered += 1;
             }

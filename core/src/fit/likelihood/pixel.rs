@@ -105,6 +105,16 @@ pub trait BackgroundLikelihood {
     fn log_density(&self, target: [u8; 3]) -> f32;
 }
 
+/// One covered pixel's `log p(I | R) − log b(I)` under `pixel` and `background`, and `|I − R|²`
+/// (target `p`, rendered `c`): what the image term sums and the occlusion labels threshold.
+#[inline(always)]
+pub fn pixel_terms<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized>(pixel: &P, background: &B, p: [u8; 3], c: Vec3) -> (f32, f32) {
+    let i = to_linear(p);
+    let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
+    let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
+    (pixel.log_likelihood(i, c, d2sum) - background.log_density(p), d2sum)
+}
+
 impl BackgroundLikelihood for BackgroundModel {
     #[inline]
     fn log_density(&self, target: [u8; 3]) -> f32 {
@@ -260,13 +270,10 @@ impl<P: PixelLikelihood, B: BackgroundLikelihood + ?Sized> ImageLikelihood<'_, '
         self.add_tile(sum, sq, covered);
     }
 
-    /// One covered pixel's `log p(I | R) − log b(I)` and `|I − R|²` (target `p`, rendered `c`).
+    /// One covered pixel's terms ([`pixel_terms`]).
     #[inline(always)]
     fn pixel_terms(&self, p: [u8; 3], c: Vec3) -> (f32, f32) {
-        let i = to_linear(p);
-        let (d0, d1, d2) = (i[0] - c[0], i[1] - c[1], i[2] - c[2]);
-        let d2sum = d0 * d0 + d1 * d1 + d2 * d2;
-        (self.pixel.log_likelihood(i, c, d2sum) - self.background.log_density(p), d2sum)
+        pixel_terms(&self.pixel, self.background, p, c)
     }
 
     /// Adds one tile's sums (accumulated in `f32` within the tile, in `f64` across tiles).

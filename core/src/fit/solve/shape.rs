@@ -288,9 +288,14 @@ fn moved_pose(pose: &Pose, delta: &[f32]) -> Pose {
 
 /// The pose with parameter `i` moved by its difference step.
 fn nudged_pose(pose: &Pose, i: usize) -> Pose {
+    pose_moved_by(pose, i, POSE_STEPS.get(i).copied().unwrap_or(0.0))
+}
+
+/// `pose` with parameter `i` (yaw, pitch, roll, translation x, y, z) moved by `step`.
+pub(crate) fn pose_moved_by(pose: &Pose, i: usize, step: f32) -> Pose {
     let mut delta = [0.0f32; POSE_PARAMS];
-    if let (Some(d), Some(s)) = (delta.get_mut(i), POSE_STEPS.get(i)) {
-        *d = *s;
+    if let Some(d) = delta.get_mut(i) {
+        *d = step;
     }
     moved_pose(pose, &delta)
 }
