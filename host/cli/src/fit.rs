@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use gpmm_host::fit::{FitFlags, FitJob, FitSettings};
+use gpmm_host::fit::{FitFlags, FitJob, FitSettings, Z90};
 use gpmm_host::gp::model_io;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -234,6 +234,14 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
     if let Some(post) = &rep.posterior {
         let [y, p, r] = post.angles_interval_90_deg;
         eprintln!("90 % intervals: yaw {:.1} to {:.1}, pitch {:.1} to {:.1}, roll {:.1} to {:.1} deg", y[0], y[1], p[0], p[1], r[0], r[1]);
+        let v = post.vertex_sd_mm;
+        if v.median > 0.0 {
+            eprintln!(
+                "surface: ±{:.1} mm along the normal at a typical vertex (90 %), ±{:.1} mm at the least sure tenth (per vertex in fit.ply's quality)",
+                Z90 * v.median,
+                Z90 * v.p90
+            );
+        }
     }
     let files = if rep.occluded_fraction.is_some() {
         "fit.json, overlay.png, fit.ply and occlusion.png (the occluded pixels on the photo)"

@@ -127,8 +127,18 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     assert!(sd > chain && lo < mean_yaw && mean_yaw < hi && ((hi - lo) - 2.0 * 1.645 * sd).abs() < 1e-3, "{post}");
     let overlay = image::open(out.path().join("overlay.png")).unwrap();
     assert!(overlay.width() > 3 * 128 && overlay.height() > 128);
+    // The shape's spread comes from the landmarks where the chain does not move the shape: every
+    // coefficient within its prior, and the vertices' spread summarised and written per vertex.
+    let (shape_sd, chain_sd) = (post["shape_sd"].as_array().unwrap(), post["shape_chain_sd"].as_array().unwrap());
+    assert_eq!(shape_sd.len(), chain_sd.len());
+    assert!(shape_sd.iter().zip(chain_sd).all(|(s, c)| s.as_f64().unwrap() >= c.as_f64().unwrap()), "{post}");
+    assert!(shape_sd.iter().any(|s| s.as_f64().unwrap() > 0.0) && shape_sd.iter().all(|s| s.as_f64().unwrap() <= 1.0 + 1e-6));
+    let (median, p90) = (post["vertex_sd_mm"]["median"].as_f64().unwrap(), post["vertex_sd_mm"]["p90"].as_f64().unwrap());
+    assert!(median > 0.1 && median <= p90 && p90 < 50.0, "{post}");
     let ply = std::fs::read(out.path().join("fit.ply")).unwrap();
     assert!(ply.starts_with(b"ply"));
+    let header = String::from_utf8_lossy(&ply[..ply.windows(10).position(|w| w == b"end_header").unwrap()]).to_string();
+    assert!(header.contains("property float quality"), "{header}");
     assert!(!out.path().join("occlusion.png").exists(), "occlusion labels without an occlusion-aware fit");
 }
 

@@ -339,7 +339,8 @@ impl Model {
     /// Returns a dict with fit.json's fields (pose in degrees, `translation_mm`, `focal_px`, `light` 9 x 3,
     /// `shape` / `color` coefficients, `fitted_landmarks` in the photo, `log_likelihood`, `log_densities`,
     /// `acceptance`, RMSEs, `crop`, `posterior`: the image chain's mean and spread per coefficient;
-    /// docs/fit-json.md) and images: `overlay` (input | fit | blend, and the occluded pixels with
+    /// docs/fit-json.md), `mesh` (camera-space `vertices`, `triangles`, `colors` and `vertex_sd_mm`,
+    /// each vertex's standard deviation along its normal) and images: `overlay` (input | fit | blend, and the occluded pixels with
     /// `set=["occlusion.rounds=3"]`), `render` (the fit, RGBA), `working_image` (the crop the chains
     /// saw) and, for an occlusion-aware fit, `occluded` (H x W booleans of the working image) and
     /// `occluded_photo` (the same labels on the photo, its H x W) beside
@@ -430,6 +431,9 @@ impl Model {
         mesh_dict.set_item("vertices", vec3_to_numpy(py, &f32s(&mesh.positions))?)?;
         mesh_dict.set_item("triangles", vec3_to_numpy(py, &mesh.triangles)?)?;
         mesh_dict.set_item("colors", vec3_to_numpy(py, &f32s(&mesh.colors))?)?;
+        if outcome.vertex_sd_mm.len() == mesh.positions.len() {
+            mesh_dict.set_item("vertex_sd_mm", vec_to_numpy(py, outcome.vertex_sd_mm.clone()))?;
+        }
         dict.set_item("mesh", mesh_dict)?;
         if let (Some(post), Ok(Some(d))) = (&rep.posterior, dict.get_item("posterior")) {
             let d = d.cast::<PyDict>().map_err(|_| value_error("posterior summary is not a dict"))?;

@@ -54,6 +54,12 @@ def test_fit_outputs(py_fit):
     post = py_fit["posterior"]
     assert post["samples"] > 0 and post["color_mean"].shape == py_fit["color"].shape
     assert post["shape_sd"].dtype == np.float32 and (post["shape_sd"] >= 0).all()
+    # The shape's spread from the landmarks, per coefficient and per vertex along its normal.
+    assert (post["shape_sd"] > 0).any() and (post["shape_sd"] <= 1 + 1e-6).all()
+    mesh = py_fit["mesh"]
+    sd = mesh["vertex_sd_mm"]
+    assert sd.shape == (mesh["vertices"].shape[0],) and sd.dtype == np.float32
+    assert (sd >= 0).all() and np.isclose(np.median(sd), post["vertex_sd_mm"]["median"], rtol=0.01)
     # The angles' intervals: around the mean, the 90 % one wider than the 50 % one, and wider
     # than the chain's own spread says (the landmarks' residuals widen them).
     assert post["landmark_residual_px"] > 0

@@ -100,7 +100,9 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
         .map_err(|e| FitRunError::Model(format!("instance: {e}")))?;
     let attribution = model.metadata.template.attribution.clone().unwrap_or_default();
     let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
-    crate::mesh::io::write_ply_with(&ply_path, &mesh, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)
+    // Each vertex's spread along its normal rides along as its quality.
+    let quality = (outcome.vertex_sd_mm.len() == mesh.positions.len()).then_some(outcome.vertex_sd_mm.as_slice());
+    crate::mesh::io::write_ply_with_quality(&ply_path, &mesh, quality, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)
         .map_err(|e| werr(&ply_path, &e))?;
     Ok(())
 }

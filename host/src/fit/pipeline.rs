@@ -8,6 +8,7 @@ use super::observe::{AcceptanceReport, HostObserver};
 use super::options::{FitOptions, HostMask};
 use super::params::{Params, KC, KS};
 use super::posterior::PosteriorSummary;
+use super::shape_spread::ShapeSpread;
 use crate::gp::model::GpModel;
 use crate::mesh::Mesh;
 use crate::render::{Background, HostRasterizer, ImageSink};
@@ -59,6 +60,11 @@ pub struct Outcome {
     /// The occlusion labels (white: occluded) and the occluded fraction of the face's pixels
     /// (`None` without occlusion rounds).
     pub occlusion: Option<(image::GrayImage, f32)>,
+    /// The shape's posterior from the landmarks (`None` when they do not determine the pose).
+    pub shape_spread: Option<ShapeSpread>,
+    /// Per vertex of the fitted shape, the standard deviation of its position along its normal
+    /// (mm; [`ShapeSpread::vertex_sd_mm`]); empty without a shape spread.
+    pub vertex_sd_mm: Vec<f32>,
     /// Seconds in the landmark chain.
     pub landmark_seconds: f64,
     /// Seconds in the light solve and the image chain.
@@ -112,7 +118,17 @@ pub fn fit_prepared(
     // The pose's spread from what the fit left of the landmarks (none if they do not determine it).
     let target = LandmarkTarget::new(&prepared.landmarks, &valid, 1.0).map_err(core("landmarks"))?;
     let spread = pose_spread(&mm, &result.image.best, &target, w, h).ok();
-    let posterior = PosteriorSummary::of(&observer.posterior).with_pose_spread(spread);
+    // The shape's spread from the same residual and the coefficients' prior.
+    let shape_spread =
+        spread.and_then(|p| ShapeSpread::of(model, &mm, &result.image.best, &prepared.landmarks, w, h, p.residual_sigma_px).ok());
+    let vertex_sd_mm = match &shape_spread {
+        Some(s) => s.vertex_sd_mm(model, &result.image.best)?,
+        None => Vec::new(),
+    };
+    let posterior = PosteriorSummary::of(&observer.posterior)
+        .with_pose_spread(spread)
+        .with_shape_spread(shape_spread.as_ref())
+        .with_vertex_spread(&vertex_sd_mm);
     let (landmark_acceptance, image_acceptance) = (observer.landmark, observer.image);
     let best = result.image;
     let start = result.start;
@@ -125,6 +141,7 @@ pub fn fit_prepared(
     let mut sink = ImageSink::new(w, h, Background::Transparent);
     raster.render(inst.projected(), mm.triangles(), w, h, Cull::Clockwise, &mut sink).map_err(|e| core("final render")(e.into()))?;
     let fitted_landmarks = project_landmarks(&mm, &fit, w, h)?;
+
     let occlusion = result.occlusion.map(|o| {
         let labels = image::GrayImage::from_fn(w, h, |x, y| image::Luma([if mask.get(x, y) { 255 } else { 0 }]));
         (labels, o.fraction())
@@ -147,6 +164,8 @@ pub fn fit_prepared(
         fitted_landmarks,
         render: sink.into_image(),
         occlusion,
+        shape_spread,
+        vertex_sd_mm,
         landmark_seconds,
         image_seconds,
     })

@@ -1,6 +1,7 @@
 //! The image chain's posterior summary as fit.json and the evaluation read it.
 
 use super::params::{Params, KC, KS};
+use super::shape_spread::ShapeSpread;
 use gpmm_core::fit::{PoseSpread, PosteriorMoments};
 use serde::{Deserialize, Serialize};
 
@@ -28,8 +29,13 @@ pub struct PosteriorSummary {
     pub samples: u32,
     /// Mean shape coefficients.
     pub shape_mean: Vec<f32>,
-    /// Their standard deviations.
+    /// Their standard deviations: the chain's own spread and the landmarks' Laplace spread
+    /// ([`crate::fit::ShapeSpread`]) together (the chain's alone in older files, zero where the
+    /// chain does not move the shape).
     pub shape_sd: Vec<f32>,
+    /// The chain's own standard deviations of the shape coefficients.
+    #[serde(default)]
+    pub shape_chain_sd: Vec<f32>,
     /// Mean colour coefficients.
     pub color_mean: Vec<f32>,
     /// Their standard deviations.
@@ -52,6 +58,32 @@ pub struct PosteriorSummary {
     /// The central 90 % interval of yaw, pitch and roll (degrees): mean ± 1.645 sd.
     #[serde(default)]
     pub angles_interval_90_deg: [[f32; 2]; 3],
+    /// The vertices' standard deviations along their normals (mm; per vertex in fit.ply's
+    /// `quality`): median and 90th percentile over the vertices (zero when not measured).
+    #[serde(default)]
+    pub vertex_sd_mm: VertexSpread,
+}
+
+/// Summary of the vertices' standard deviations along their normals (mm).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct VertexSpread {
+    /// Median over the vertices.
+    pub median: f32,
+    /// 90th percentile over the vertices.
+    pub p90: f32,
+}
+
+impl VertexSpread {
+    /// The summary of per-vertex standard deviations `sd` (zero for none).
+    pub fn of(sd: &[f32]) -> Self {
+        let mut s: Vec<f32> = sd.iter().copied().filter(|x| x.is_finite()).collect();
+        if s.is_empty() {
+            return Self::default();
+        }
+        s.sort_by(f32::total_cmp);
+        let at = |q: f32| s[((s.len() - 1) as f32 * q).round() as usize];
+        Self { median: at(0.5), p90: at(0.9) }
+    }
 }
 
 impl PosteriorSummary {
@@ -63,6 +95,7 @@ impl PosteriorSummary {
             samples: m.samples(),
             shape_mean: m.shape_mean().collect(),
             shape_sd: m.shape_sd().collect(),
+            shape_chain_sd: m.shape_sd().collect(),
             color_mean: m.color_mean().collect(),
             color_sd: m.color_sd().collect(),
             angles_mean_deg: m.angles_mean().map(f32::to_degrees),
@@ -71,6 +104,7 @@ impl PosteriorSummary {
             landmark_residual_px: 0.0,
             angles_interval_50_deg: [[0.0; 2]; 3],
             angles_interval_90_deg: [[0.0; 2]; 3],
+            vertex_sd_mm: VertexSpread::default(),
         };
         summary.with_pose_spread(None)
     }
@@ -88,6 +122,24 @@ impl PosteriorSummary {
         };
         self.angles_interval_50_deg = interval(Z50);
         self.angles_interval_90_deg = interval(Z90);
+        self
+    }
+
+    /// The summary with the landmarks' spread of the shape (`None`: the chain's alone) in the
+    /// shape coefficients' standard deviations.
+    pub fn with_shape_spread(mut self, spread: Option<&ShapeSpread>) -> Self {
+        self.shape_sd = self
+            .shape_chain_sd
+            .iter()
+            .enumerate()
+            .map(|(j, c)| c.hypot(spread.and_then(|s| s.coeff_sd.get(j)).copied().unwrap_or(0.0)))
+            .collect();
+        self
+    }
+
+    /// The summary with the per-vertex spread `sd` (mm) summarised.
+    pub fn with_vertex_spread(mut self, sd: &[f32]) -> Self {
+        self.vertex_sd_mm = VertexSpread::of(sd);
         self
     }
 

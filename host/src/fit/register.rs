@@ -276,12 +276,16 @@ pub struct Registration {
 /// The first `k` components of a part as a dense `3N × k` matrix (scaled by √eigenvalue).
 pub fn basis_matrix(part: &ModelPart, k: usize) -> Mat<f64> {
     let n = part.mean.len();
-    let k = k.min(part.rank());
+    Mat::from_fn(3 * n, k.min(part.rank()), |r, j| basis_entry(part, r, j))
+}
+
+/// Row `r` (vertex `r / 3`, coordinate `r % 3`) of component `j` of a part's basis (scaled by
+/// √eigenvalue): the entry of [`basis_matrix`] without building it.
+pub fn basis_entry(part: &ModelPart, r: usize, j: usize) -> f64 {
+    let n = part.mean.len();
     match &part.basis {
-        PartBasis::Factored { directions, fields } => {
-            Mat::from_fn(3 * n, k, |r, j| f64::from(fields[j * n + r / 3]) * f64::from(directions[j][r % 3]))
-        }
-        PartBasis::Dense { values } => Mat::from_fn(3 * n, k, |r, j| f64::from(values[j * n * 3 + r])),
+        PartBasis::Factored { directions, fields } => f64::from(fields[j * n + r / 3]) * f64::from(directions[j][r % 3]),
+        PartBasis::Dense { values } => f64::from(values[j * n * 3 + r]),
     }
 }
 

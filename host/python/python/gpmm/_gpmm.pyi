@@ -152,7 +152,8 @@ class Model:
     ) -> dict[str, Any]:
         """Fits the model to a photo (H x W x 3 uint8 RGB, or RGBA: alpha dropped) as `gpmm fit` does;
         fit.json's fields plus 'overlay', 'render', 'working_image' and 'mesh': the fitted face in
-        camera space ('vertices' N x 3 float32 mm, 'triangles' T x 3 uint32, 'colors' N x 3 float32).
+        camera space ('vertices' N x 3 float32 mm, 'triangles' T x 3 uint32, 'colors' N x 3 float32,
+        'vertex_sd_mm' N float32: each vertex's standard deviation along its normal, docs/intervals.md).
         Without landmarks the face is found by `init` (default: the shipped start; the largest face,
         or `face`), and 'detected' holds it (box, score, landmarks)."""
     def quantize(

@@ -159,7 +159,16 @@ mod tests {
     use super::*;
 
     fn fit(image: &str, identity: usize, yaw_deg: f32, shape: &[f32], color: &[f32]) -> ImageFit {
-        ImageFit { image: image.into(), identity, yaw_deg, shape: shape.to_vec(), color: color.to_vec(), pixel_rmse: 0.0, seconds: 0.0 }
+        ImageFit {
+            image: image.into(),
+            identity,
+            yaw_deg,
+            shape: shape.to_vec(),
+            color: color.to_vec(),
+            pixel_rmse: 0.0,
+            seconds: 0.0,
+            vertex_sd_mm: Vec::new(),
+        }
     }
 
     fn fit_set(fits: Vec<ImageFit>) -> FitSet {

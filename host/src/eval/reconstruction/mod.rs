@@ -31,6 +31,7 @@ use crate::eval::models::scans::{EvalWorld, Scan};
 use crate::eval::recognition::fits::ImageFit;
 use crate::eval::EvalError;
 use crate::fit::register::{basis_instance, basis_matrix, PreparedTarget};
+use crate::fit::{Z50, Z90};
 use crate::gp::model::GpModel;
 use crate::mesh::align::Similarity;
 use crate::mesh::geometry::dist2;
@@ -77,6 +78,12 @@ pub struct ScanToMesh {
     pub border_fraction: f64,
     /// Scale of the final alignment (fitted mesh to true face).
     pub scale: f64,
+    /// Per true vertex, the fitted mesh's spread along the normal at its closest point (mm, in the
+    /// true face's scale), interpolated from the vertices' spreads given as the fitted mesh's
+    /// colour (its first channel); meaningless for a mesh without them.
+    pub spread_mm: Vec<f64>,
+    /// Per true vertex, whether its closest fitted point's nearest vertex lies on the border.
+    pub on_border: Vec<bool>,
 }
 
 /// Aligns `fitted` (with its iBUG-68 landmark vertices `landmarks`) to the true face `truth` and
@@ -124,19 +131,24 @@ pub fn scan_to_mesh(fitted: &Mesh, landmarks: &[u32], truth: &Scan) -> Result<Sc
     }
     moved.positions = fitted.positions.iter().map(|p| align.apply(*p)).collect();
     let target = PreparedTarget::new(moved, None)?;
-    let mut border = 0usize;
-    let distances: Vec<f64> = truth
+    let hits: Vec<(f64, f64, bool)> = truth
         .mesh
         .positions
         .iter()
         .map(|q| {
-            let (p, _, on_border) = target.closest(*q);
-            border += usize::from(on_border);
-            dist2(p, *q).sqrt()
+            let (p, spread, on_border) = target.closest(*q);
+            (dist2(p, *q).sqrt(), spread[0] * align.scale, on_border)
         })
         .collect();
-    let border_fraction = border as f64 / distances.len().max(1) as f64;
-    Ok(ScanToMesh { distances, border_fraction, scale: align.scale })
+    let border = hits.iter().filter(|h| h.2).count();
+    let border_fraction = border as f64 / hits.len().max(1) as f64;
+    Ok(ScanToMesh {
+        distances: hits.iter().map(|h| h.0).collect(),
+        border_fraction,
+        scale: align.scale,
+        spread_mm: hits.iter().map(|h| h.1).collect(),
+        on_border: hits.iter().map(|h| h.2).collect(),
+    })
 }
 
 /// `p` mapped back through the similarity `s` (its inverse: `Rᵀ (p − t) / s`).
@@ -162,6 +174,52 @@ pub struct ImageReconstruction {
     pub border_fraction: f64,
     /// Scale of the fit's alignment.
     pub scale: f64,
+    /// How often the fit's reported vertex spread holds the true surface (`None` when the fit
+    /// reported none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<SurfaceCoverage>,
+}
+
+/// How often a fit's per-vertex intervals along the normal (± z · sd) hold the true surface:
+/// the share of the true vertices (their closest fitted point off the border) within
+/// [`Z50`] and [`Z90`] standard deviations of the fitted surface.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceCoverage {
+    /// Share within the 50 % interval (ideal 0.5).
+    pub covered_50: f64,
+    /// Share within the 90 % interval (ideal 0.9).
+    pub covered_90: f64,
+    /// Median reported standard deviation at the true vertices' closest points (mm).
+    pub median_sd_mm: f64,
+    /// True vertices counted.
+    pub count: usize,
+}
+
+impl SurfaceCoverage {
+    /// The coverage of `m`'s distances by its spreads (`None` without vertices off the border).
+    pub fn of(m: &ScanToMesh) -> Option<Self> {
+        let kept: Vec<(f64, f64)> =
+            m.distances.iter().zip(&m.spread_mm).zip(&m.on_border).filter(|(_, b)| !**b).map(|((d, s), _)| (*d, *s)).collect();
+        if kept.is_empty() {
+            return None;
+        }
+        let share = |z: f32| kept.iter().filter(|(d, s)| *d <= f64::from(z) * s).count() as f64 / kept.len() as f64;
+        let sds: Vec<f64> = kept.iter().map(|k| k.1).collect();
+        Some(Self { covered_50: share(Z50), covered_90: share(Z90), median_sd_mm: Distances::of(&sds).median_mm, count: kept.len() })
+    }
+
+    /// The count-weighted mean of several images' coverage (`None` without any).
+    pub fn pooled<'a>(parts: impl Iterator<Item = &'a SurfaceCoverage>) -> Option<Self> {
+        let parts: Vec<&SurfaceCoverage> = parts.collect();
+        let n: usize = parts.iter().map(|c| c.count).sum();
+        if n == 0 {
+            return None;
+        }
+        let mean = |f: &dyn Fn(&SurfaceCoverage) -> f64| parts.iter().map(|c| f(c) * c.count as f64).sum::<f64>() / n as f64;
+        let mut sds: Vec<f64> = parts.iter().map(|c| c.median_sd_mm).collect();
+        sds.sort_by(f64::total_cmp);
+        Some(Self { covered_50: mean(&|c| c.covered_50), covered_90: mean(&|c| c.covered_90), median_sd_mm: sds[sds.len() / 2], count: n })
+    }
 }
 
 /// Pooled figures of a group of images (a |yaw|, or the whole set).
@@ -175,6 +233,9 @@ pub struct PooledReconstruction {
     pub fit: Distances,
     /// The mean shape's distances, pooled.
     pub mean_shape: Distances,
+    /// How often the fits' vertex intervals held the true surface, pooled (`None` without spreads).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<SurfaceCoverage>,
 }
 
 /// Measures every fit of `fits` (shape coefficients of `model`) against its true face in `world`;
@@ -187,19 +248,20 @@ pub fn measure_fits(
 ) -> Result<Vec<ImageReconstruction>, EvalError> {
     let ranks = fits.iter().map(|f| f.shape.len()).max().unwrap_or(0);
     let basis = basis_matrix(&model.shape, ranks);
-    let mesh_of = |coeffs: &[f64]| Mesh {
+    // The fitted spreads ride along as the mesh's colour, which the closest points interpolate.
+    let mesh_of = |coeffs: &[f64], spread: &[f32]| Mesh {
         positions: basis_instance(&basis, &model.shape.mean, coeffs),
-        colors: vec![[0.5; 3]; model.vertices()],
+        colors: (0..model.vertices()).map(|v| [f64::from(spread.get(v).copied().unwrap_or(0.0)); 3]).collect(),
         triangles: model.triangles.clone(),
     };
-    let mean = mesh_of(&vec![0.0; basis.ncols()]);
+    let mean = mesh_of(&vec![0.0; basis.ncols()], &[]);
     let done = std::sync::atomic::AtomicUsize::new(0);
     fits.par_iter()
         .map(|f| {
             let truth = world.cropped_scan(f.identity)?;
             let mut coeffs: Vec<f64> = f.shape.iter().map(|&c| f64::from(c)).collect();
             coeffs.resize(basis.ncols(), 0.0);
-            let fitted = scan_to_mesh(&mesh_of(&coeffs), &model.landmarks, &truth)?;
+            let fitted = scan_to_mesh(&mesh_of(&coeffs, &f.vertex_sd_mm), &model.landmarks, &truth)?;
             let reference = scan_to_mesh(&mean, &model.landmarks, &truth)?;
             progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, fits.len());
             Ok(ImageReconstruction {
@@ -210,6 +272,7 @@ pub fn measure_fits(
                 mean_shape: Distances::of(&reference.distances),
                 border_fraction: fitted.border_fraction,
                 scale: fitted.scale,
+                coverage: if f.vertex_sd_mm.len() == model.vertices() { SurfaceCoverage::of(&fitted) } else { None },
             })
         })
         .collect()
@@ -231,6 +294,7 @@ pub fn pool(images: &[ImageReconstruction]) -> Vec<PooledReconstruction> {
             images: sel.len(),
             fit: combine(sel.iter().map(|i| i.fit)),
             mean_shape: combine(sel.iter().map(|i| i.mean_shape)),
+            coverage: SurfaceCoverage::pooled(sel.iter().filter_map(|i| i.coverage.as_ref())),
         }
     };
     yaws.into_iter().map(|y| group(Some(y))).chain(std::iter::once(group(None))).collect()
@@ -316,6 +380,25 @@ mod tests {
     }
 
     #[test]
+    fn a_fits_vertex_intervals_hold_the_truth_as_wide_as_they_are() {
+        let (truth_mesh, landmarks) = patch(20, 6.0);
+        let truth = Scan { id: 1, mesh: truth_mesh, landmarks: landmarks.clone() };
+        let measured = |sd: f64| {
+            let (mut flat, _) = patch(20, 0.0);
+            flat.colors = vec![[sd; 3]; flat.positions.len()];
+            scan_to_mesh(&flat, &landmarks, &truth).unwrap()
+        };
+        let coverage = |sd: f64| SurfaceCoverage::of(&measured(sd)).unwrap();
+        let (narrow, wide) = (coverage(0.01), coverage(100.0));
+        assert!(narrow.covered_90 < 0.2 && narrow.covered_50 <= narrow.covered_90, "{narrow:?}");
+        assert!(wide.covered_50 > 0.99 && wide.covered_90 > 0.99, "{wide:?}");
+        // The spread is reported in the true face's scale.
+        assert!((wide.median_sd_mm - 100.0 * measured(100.0).scale).abs() < 1e-6, "{wide:?}");
+        let pooled = SurfaceCoverage::pooled([narrow, wide].iter()).unwrap();
+        assert!((pooled.covered_90 - 0.5 * (narrow.covered_90 + wide.covered_90)).abs() < 1e-9 && pooled.count == 2 * narrow.count);
+    }
+
+    #[test]
     fn missing_landmarks_are_refused_with_the_identity() {
         let (mesh, landmarks) = patch(10, 1.0);
         let truth = Scan { id: 7, mesh: mesh.clone(), landmarks: landmarks[..60].to_vec() };
@@ -340,6 +423,7 @@ mod tests {
             mean_shape: d,
             border_fraction: 0.0,
             scale: 1.0,
+            coverage: None,
         };
         let rows = pool(&[img(-30.0, a), img(30.0, b), img(0.0, a)]);
         assert_eq!(rows.iter().map(|r| r.abs_yaw_deg).collect::<Vec<_>>(), vec![Some(0), Some(30), None]);

@@ -150,6 +150,32 @@ posterior mean.\n\n| model |",
             s.push_str(&format!(" {}{failed} |\n", r.fits));
         }
     }
+    // How often the fits' per-vertex intervals along the normal held the true surface.
+    if report.rows.iter().any(|r| r.pooled.iter().any(|p| p.coverage.is_some())) {
+        s.push_str(
+            "\nThe fits' vertex intervals (± 0.674 and ± 1.645 reported sd along the normal): the share of true \
+vertices within them (ideal 50 % and 90 %), and the median sd (mm).\n\n| model |",
+        );
+        for y in &yaws {
+            s.push_str(&match y {
+                Some(y) => format!(" \\|yaw\\| {y}° |"),
+                None => " all |".into(),
+            });
+        }
+        s.push_str("\n|---|");
+        s.push_str(&"---|".repeat(yaws.len()));
+        s.push('\n');
+        for r in &report.rows {
+            s.push_str(&format!("| {} |", r.label));
+            for p in &r.pooled {
+                s.push_str(&match p.coverage {
+                    Some(c) => format!(" {:.0} % / {:.0} %, {:.2} |", 100.0 * c.covered_50, 100.0 * c.covered_90, c.median_sd_mm),
+                    None => " – |".into(),
+                });
+            }
+            s.push('\n');
+        }
+    }
     s
 }
 

@@ -319,6 +319,21 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<(), MeshIoError> {
 
 /// Writes a coloured mesh as PLY in the given encoding, with header comment lines (e.g. attribution).
 pub fn write_ply_with(path: &Path, mesh: &Mesh, encoding: PlyEncoding, comments: &[&str]) -> Result<(), MeshIoError> {
+    write_ply_with_quality(path, mesh, None, encoding, comments)
+}
+
+/// [`write_ply_with`] with a per-vertex scalar `quality` (a float property of that name, which
+/// MeshLab and Open3D read as the vertex quality and can colour by) when given.
+pub fn write_ply_with_quality(
+    path: &Path,
+    mesh: &Mesh,
+    quality: Option<&[f32]>,
+    encoding: PlyEncoding,
+    comments: &[&str],
+) -> Result<(), MeshIoError> {
+    if let Some(q) = quality.filter(|q| q.len() != mesh.positions.len()) {
+        return Err(MeshIoError::invalid(path, format!("cannot write {} vertex qualities for {} vertices", q.len(), mesh.positions.len())));
+    }
     if mesh.colors.len() != mesh.positions.len() {
         return Err(MeshIoError::invalid(
             path,
@@ -327,14 +342,20 @@ pub fn write_ply_with(path: &Path, mesh: &Mesh, encoding: PlyEncoding, comments:
     }
     let file = File::create(path).map_err(|e| MeshIoError::write(path, e))?;
     let mut w = BufWriter::new(file);
-    write_ply_to(&mut w, mesh, encoding, comments).and_then(|_| w.flush()).map_err(|e| MeshIoError::write(path, e))
+    write_ply_to(&mut w, mesh, quality, encoding, comments).and_then(|_| w.flush()).map_err(|e| MeshIoError::write(path, e))
 }
 
 fn to_u8(c: f64) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
-fn write_ply_to<W: Write>(w: &mut W, mesh: &Mesh, encoding: PlyEncoding, comments: &[&str]) -> std::io::Result<()> {
+fn write_ply_to<W: Write>(
+    w: &mut W,
+    mesh: &Mesh,
+    quality: Option<&[f32]>,
+    encoding: PlyEncoding,
+    comments: &[&str],
+) -> std::io::Result<()> {
     let format = match encoding {
         PlyEncoding::BinaryLittleEndian => "binary_little_endian",
         PlyEncoding::Ascii => "ascii",
@@ -347,15 +368,21 @@ fn write_ply_to<W: Write>(w: &mut W, mesh: &Mesh, encoding: PlyEncoding, comment
     writeln!(w, "element vertex {}", mesh.positions.len())?;
     writeln!(w, "property float x\nproperty float y\nproperty float z")?;
     writeln!(w, "property uchar red\nproperty uchar green\nproperty uchar blue")?;
+    if quality.is_some() {
+        writeln!(w, "property float quality")?;
+    }
     writeln!(w, "element face {}", mesh.triangles.len())?;
     writeln!(w, "property list uchar int vertex_indices\nend_header")?;
     match encoding {
         PlyEncoding::BinaryLittleEndian => {
-            for (p, c) in mesh.positions.iter().zip(&mesh.colors) {
+            for (i, (p, c)) in mesh.positions.iter().zip(&mesh.colors).enumerate() {
                 for v in p {
                     w.write_all(&(*v as f32).to_le_bytes())?;
                 }
                 w.write_all(&c.map(to_u8))?;
+                if let Some(q) = quality.and_then(|q| q.get(i)) {
+                    w.write_all(&q.to_le_bytes())?;
+                }
             }
             for t in &mesh.triangles {
                 w.write_all(&[3u8])?;
@@ -368,9 +395,13 @@ fn write_ply_to<W: Write>(w: &mut W, mesh: &Mesh, encoding: PlyEncoding, comment
             }
         }
         PlyEncoding::Ascii => {
-            for (p, c) in mesh.positions.iter().zip(&mesh.colors) {
+            for (i, (p, c)) in mesh.positions.iter().zip(&mesh.colors).enumerate() {
                 let c = c.map(to_u8);
-                writeln!(w, "{} {} {} {} {} {}", p[0] as f32, p[1] as f32, p[2] as f32, c[0], c[1], c[2])?;
+                write!(w, "{} {} {} {} {} {}", p[0] as f32, p[1] as f32, p[2] as f32, c[0], c[1], c[2])?;
+                match quality.and_then(|q| q.get(i)) {
+                    Some(q) => writeln!(w, " {q}")?,
+                    None => writeln!(w)?,
+                }
             }
             for t in &mesh.triangles {
                 writeln!(w, "3 {} {} {}", t[0], t[1], t[2])?;
