@@ -27,7 +27,7 @@ pub struct FitArgs {
     #[arg(long, value_name = "INIT")]
     pub init: Option<PathBuf>,
     /// Which faces to fit without --landmarks: `one` (the largest, or --face) or `all`: every
-    /// face found, each into OUTDIR/face-NN/ (fit.json, overlay.png, fit.ply, detected.pts), with
+    /// face found, each into OUTDIR/face-NN/ (fit.json, overlay.png, spread.png, fit.ply, detected.pts), with
     /// OUTDIR/faces.json listing them and OUTDIR/faces.png showing every fit drawn into the photo.
     #[arg(long, value_enum, default_value_t = WhichFaces::One)]
     pub faces: WhichFaces,
@@ -244,9 +244,9 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
         }
     }
     let files = if rep.occluded_fraction.is_some() {
-        "fit.json, overlay.png, fit.ply and occlusion.png (the occluded pixels on the photo)"
+        "fit.json, overlay.png, spread.png, fit.ply and occlusion.png (the occluded pixels on the photo)"
     } else {
-        "fit.json, overlay.png and fit.ply"
+        "fit.json, overlay.png, spread.png and fit.ply"
     };
     eprintln!("wrote {files} to {}", job.out_dir.display());
     Ok(())

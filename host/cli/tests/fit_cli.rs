@@ -135,6 +135,9 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     assert!(shape_sd.iter().any(|s| s.as_f64().unwrap() > 0.0) && shape_sd.iter().all(|s| s.as_f64().unwrap() <= 1.0 + 1e-6));
     let (median, p90) = (post["vertex_sd_mm"]["median"].as_f64().unwrap(), post["vertex_sd_mm"]["p90"].as_f64().unwrap());
     assert!(median > 0.1 && median <= p90 && p90 < 50.0, "{post}");
+    // The same spread drawn over the working image, with its colour bar.
+    let spread = image::open(out.path().join("spread.png")).unwrap();
+    assert!(spread.width() > 3 * 128 && spread.height() > 3 * 128, "{:?}", (spread.width(), spread.height()));
     let ply = std::fs::read(out.path().join("fit.ply")).unwrap();
     assert!(ply.starts_with(b"ply"));
     let header = String::from_utf8_lossy(&ply[..ply.windows(10).position(|w| w == b"end_header").unwrap()]).to_string();

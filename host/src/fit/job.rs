@@ -77,8 +77,9 @@ pub fn fit_files(job: &FitJob, progress: &mut dyn FnMut(&str, u64, u64)) -> Resu
     Ok(rep)
 }
 
-/// Writes a fit's `fit.json` (`rep`), `overlay.png` and `fit.ply` into `dir` (created if needed),
-/// and for an occlusion-aware fit `occlusion.png` (its labels on the photo, white: occluded).
+/// Writes a fit's `fit.json` (`rep`), `overlay.png`, `spread.png` (how sure the fit is of each part
+/// of the surface) and `fit.ply` into `dir` (created if needed), and for an occlusion-aware fit
+/// `occlusion.png` (its labels on the photo, white: occluded).
 pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, rep: &FitReport, dir: &Path) -> Result<(), FitFilesError> {
     let werr = |path: &Path, e: &dyn std::fmt::Display| FitFilesError::Write { path: path.to_path_buf(), message: e.to_string() };
     std::fs::create_dir_all(dir).map_err(|e| werr(dir, &e))?;
@@ -93,6 +94,11 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
         let occ_path = dir.join("occlusion.png");
         let photo = super::overlay::labels_in_photo(labels, &prepared.crop, prepared.original_size);
         photo.save(&occ_path).map_err(|e| werr(&occ_path, &e))?;
+    }
+    if !outcome.vertex_sd_mm.is_empty() {
+        let spread_path = dir.join("spread.png");
+        let picture = super::spread_picture::spread_picture(model, &outcome.params, &outcome.vertex_sd_mm, &prepared.image)?;
+        crate::render::figure::save_png(&picture, &spread_path).map_err(|e| werr(&spread_path, &e))?;
     }
     let ply_path = dir.join("fit.ply");
     let mesh = model

@@ -43,6 +43,7 @@ mod posterior;
 pub mod register;
 mod report;
 mod shape_spread;
+mod spread_picture;
 
 pub use buffers::FitBuffers;
 pub use error::FitRunError;
@@ -59,3 +60,4 @@ pub use pipeline::{camera_space_mesh, fit_image, fit_prepared, morphable, projec
 pub use posterior::{PosteriorSummary, VertexSpread, Z50, Z90};
 pub use report::{report, AcceptanceBoth, FitReport, LogDensities, ReportInputs, Timing};
 pub use shape_spread::{ShapeSpread, SHAPE_SPREAD_FACTOR};
+pub use spread_picture::{spread_color, spread_picture};
