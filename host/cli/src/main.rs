@@ -70,8 +70,10 @@ pub enum Command {
     /// leading shape components against the landmarks and the image, and an image chain on pose,
     /// colour and light (--image-steps, each renders the model).
     /// Writes OUTDIR/fit.json (every field: docs/fit-json.md; the chain's best sample, and the mean
-    /// and spread of its second half), overlay.png (input | fit | blend; green dots: target
-    /// landmarks, red crosses: fitted) and fit.ply (the fitted shape and albedo, model space, mm).
+    /// and spread of its second half; 90 % intervals of the angles and each vertex's spread along
+    /// its normal, calibrated: docs/intervals.md), overlay.png (input | fit | blend; green dots:
+    /// target landmarks, red crosses: fitted), spread.png (the face coloured by that spread) and
+    /// fit.ply (the fitted shape and albedo, model space, mm; the spread as the vertices' quality).
     /// The same inputs and seed give the same fit.json except `seconds` and `timing`.
     Fit(fit::FitArgs),
     /// Fit every image of a `gpmm synth` directory (in parallel) and print error statistics as JSON.
