@@ -234,10 +234,17 @@ pub fn run_fit(job: &FitJob) -> Result<()> {
     if let Some(post) = &rep.posterior {
         let [y, p, r] = post.angles_interval_90_deg;
         eprintln!("90 % intervals: yaw {:.1} to {:.1}, pitch {:.1} to {:.1}, roll {:.1} to {:.1} deg", y[0], y[1], p[0], p[1], r[0], r[1]);
+        let [x, y, z] = post.translation_interval_90_mm;
+        if post.translation_sd_mm.iter().all(|s| *s > 0.0) {
+            eprintln!(
+                "90 % intervals: translation x {:.0} to {:.0}, y {:.0} to {:.0}, z {:.0} to {:.0} mm",
+                x[0], x[1], y[0], y[1], z[0], z[1]
+            );
+        }
         let v = post.vertex_sd_mm;
         if v.median > 0.0 {
             eprintln!(
-                "surface: ±{:.1} mm along the normal at a typical vertex (90 %), ±{:.1} mm at the least sure tenth (per vertex in fit.ply's quality)",
+                "surface: ±{:.1} mm along the normal at a typical vertex (90 %), ±{:.1} mm at the least sure tenth (spread.png; per vertex in fit.ply's quality)",
                 Z90 * v.median,
                 Z90 * v.p90
             );

@@ -127,6 +127,14 @@ fn fit_recovers_yaw_of_a_synthetic_face_and_writes_three_files() {
     assert!(sd > chain && lo < mean_yaw && mean_yaw < hi && ((hi - lo) - 2.0 * 1.645 * sd).abs() < 1e-3, "{post}");
     let overlay = image::open(out.path().join("overlay.png")).unwrap();
     assert!(overlay.width() > 3 * 128 && overlay.height() > 128);
+    // The translation's intervals: around the fit's translation, the distance's the widest.
+    let t: Vec<f64> = (0..3).map(|k| j["translation_mm"][k].as_f64().unwrap()).collect();
+    for k in 0..3 {
+        let [lo, hi] = [0, 1].map(|i| post["translation_interval_90_mm"][k][i].as_f64().unwrap());
+        let sd = post["translation_sd_mm"][k].as_f64().unwrap();
+        assert!(sd > 0.0 && lo < t[k] && t[k] < hi && ((hi - lo) - 2.0 * 1.644_85 * sd).abs() < 1e-2, "{k}: {post}");
+    }
+    assert!(post["translation_sd_mm"][2].as_f64().unwrap() > post["translation_sd_mm"][0].as_f64().unwrap(), "{post}");
     // The shape's spread comes from the landmarks where the chain does not move the shape: every
     // coefficient within its prior, and the vertices' spread summarised and written per vertex.
     let (shape_sd, chain_sd) = (post["shape_sd"].as_array().unwrap(), post["shape_chain_sd"].as_array().unwrap());

@@ -54,6 +54,12 @@ def test_fit_outputs(py_fit):
     post = py_fit["posterior"]
     assert post["samples"] > 0 and post["color_mean"].shape == py_fit["color"].shape
     assert post["shape_sd"].dtype == np.float32 and (post["shape_sd"] >= 0).all()
+    # The translation's intervals around the fit's, the distance's the widest.
+    t, sd = py_fit["translation_mm"], post["translation_sd_mm"]
+    for k in range(3):
+        lo, hi = post["translation_interval_90_mm"][k]
+        assert sd[k] > 0 and lo < t[k] < hi, (k, post)
+    assert sd[2] > sd[0]
     # The shape's spread from the landmarks, per coefficient and per vertex along its normal.
     assert (post["shape_sd"] > 0).any() and (post["shape_sd"] <= 1 + 1e-6).all()
     mesh = py_fit["mesh"]

@@ -68,6 +68,13 @@ pub struct BenchImage {
     /// `fit_deg` (degrees).
     #[serde(default)]
     pub posterior_mean_deg: [f32; 3],
+    /// The fitted face frame's origin (the rule `gpmm synth`'s translation follows: the landmark
+    /// centroid on the mirror plane) minus the true translation, in the fit's camera (mm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation_error_mm: Option<[f32; 3]>,
+    /// Reported standard deviations of the translation (mm; fit.json's `posterior`).
+    #[serde(default)]
+    pub posterior_translation_sd_mm: [f32; 3],
 }
 
 /// Median and 90th percentile.
@@ -216,6 +223,9 @@ pub struct BenchSummary {
     /// How often the reported 50 % and 90 % intervals hold the truth.
     #[serde(default)]
     pub interval_coverage: Option<IntervalCoverage>,
+    /// How often the translation's intervals hold the truth (`None` without them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation_coverage: Option<TranslationCoverage>,
     /// Intersection over union of the occlusion labels and the occluders' true footprints over
     /// the face's pixels, where the set has them (`NAME.occluder.png`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -331,6 +341,7 @@ pub fn bench_one(
         .map(f32::to_degrees)
     };
     let face_frame = crate::eval::model_frame::fit_in_face_frame(model, o.params.shape_coeffs(), [p.yaw, p.pitch, p.roll]);
+    let translation_error_mm = translation_error(model, &o.params, &prepared.crop, size, truth).ok();
     let labels = match crate::eval::label_truth::truth_file(dir, &truth.image) {
         Some(path) => {
             let read = |e: image::ImageError| crate::photo::PhotoError::Read { path: path.clone(), message: e.to_string() };
@@ -356,7 +367,32 @@ pub fn bench_one(
         posterior_chain_sd_deg: o.posterior.angles_chain_sd_deg,
         labels,
         posterior_mean_deg: in_photo(o.posterior.angles_mean_deg.map(f32::to_radians)),
+        translation_error_mm,
+        posterior_translation_sd_mm: o.posterior.translation_sd_mm,
     })
+}
+
+/// The fitted face frame's origin minus the true translation, both in the fit's camera (mm): the
+/// origin of the fitted shape's iBUG frame moved by the fitted pose, against the truth's
+/// translation turned from the photo's camera into the fit's ([`crate::photo::crop_axis_rotation`]).
+fn translation_error(
+    model: &GpModel,
+    params: &crate::fit::Params,
+    crop: &crate::photo::CropBox,
+    size: u32,
+    truth: &ImageTruth,
+) -> Result<[f32; 3], crate::eval::model_frame::FrameError> {
+    let mut lm = [[0.0f32; 3]; 68];
+    crate::fit::morphable(model)?
+        .landmark_positions(params.shape_coeffs(), &mut lm)
+        .map_err(crate::eval::model_frame::FrameError::Shape)?;
+    let frame = crate::mesh::template::ibug_frame(&lm.map(|p| p.map(f64::from))).map_err(crate::eval::model_frame::FrameError::Frame)?;
+    let origin = params.pose.transform_point(frame.center.map(|v| v as f32));
+    let q = crate::photo::crop_axis_rotation(params.focal, crop, size, truth.principal_px);
+    let t = truth.translation_mm.map(f64::from);
+    // Qᵀ t: the photo camera's point in the fit's camera.
+    let true_in_fit: [f64; 3] = core::array::from_fn(|j| (0..3).map(|i| q[i][j] * t[i]).sum());
+    Ok(core::array::from_fn(|k| origin[k] - true_in_fit[k] as f32))
 }
 
 /// The errors against the truth in the model's frame, if every image has it.
@@ -469,6 +505,7 @@ pub fn bench(
         landmarks: landmarks.describe(),
         median_posterior_angles_sd_deg: [0, 1, 2].map(|k| stat(&col(&|b| f64::from(b.posterior_angles_sd_deg[k]))).median),
         interval_coverage: interval_coverage(&ok),
+        translation_coverage: translation_coverage(&ok),
         label_iou: ok.iter().any(|b| b.labels.is_some()).then(|| stat(&col(&|b| b.labels.map_or(f64::NAN, |l| f64::from(l.iou))))),
         seconds_per_fit: stat(&col(&|b| b.seconds)),
         wall_seconds,
@@ -542,6 +579,46 @@ pub fn reliability_chart(c: &IntervalCoverage) -> Result<image::RgbaImage, crate
     line_chart(&chart, 640, 480)
 }
 
+/// How often the translation's intervals (fit ± z · sd, per axis of the fit's camera) hold the
+/// truth, after the set's median signed error of each axis is removed (the two faces' frames put
+/// their origins differently).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TranslationCoverage {
+    /// The median signed error removed (mm).
+    pub median_signed_error_mm: [f64; 3],
+    /// Median |error| after that (mm).
+    pub median_abs_error_mm: [f64; 3],
+    /// Median reported standard deviation (mm).
+    pub median_sd_mm: [f64; 3],
+    /// Share of images whose 50 % interval holds the truth (ideal 0.5).
+    pub covered_50: [f64; 3],
+    /// Share of images whose 90 % interval holds the truth (ideal 0.9).
+    pub covered_90: [f64; 3],
+}
+
+/// The coverage of `images`' translation intervals (`None` without errors or reported spreads).
+pub fn translation_coverage(images: &[BenchImage]) -> Option<TranslationCoverage> {
+    let usable: Vec<([f32; 3], [f32; 3])> = images
+        .iter()
+        .filter_map(|b| b.translation_error_mm.map(|e| (e, b.posterior_translation_sd_mm)))
+        .filter(|(_, sd)| sd.iter().all(|s| *s > 0.0))
+        .collect();
+    if usable.is_empty() {
+        return None;
+    }
+    let offset: [f64; 3] = core::array::from_fn(|k| stat(&usable.iter().map(|(e, _)| f64::from(e[k])).collect::<Vec<_>>()).median);
+    let centred = |e: &[f32; 3], k: usize| (f64::from(e[k]) - offset[k]).abs();
+    let share =
+        |k: usize, z: f32| usable.iter().filter(|(e, sd)| centred(e, k) <= f64::from(z * sd[k])).count() as f64 / usable.len() as f64;
+    Some(TranslationCoverage {
+        median_signed_error_mm: offset,
+        median_abs_error_mm: core::array::from_fn(|k| stat(&usable.iter().map(|(e, _)| centred(e, k)).collect::<Vec<_>>()).median),
+        median_sd_mm: core::array::from_fn(|k| stat(&usable.iter().map(|(_, sd)| f64::from(sd[k])).collect::<Vec<_>>()).median),
+        covered_50: core::array::from_fn(|k| share(k, Z50)),
+        covered_90: core::array::from_fn(|k| share(k, Z90)),
+    })
+}
+
 /// The coverage of `images`' intervals (`None` without images or reported spreads).
 pub fn interval_coverage(images: &[BenchImage]) -> Option<IntervalCoverage> {
     let model_frame = images.iter().all(|b| b.truth_model_frame_deg.is_some());
@@ -574,6 +651,25 @@ pub fn interval_coverage(images: &[BenchImage]) -> Option<IntervalCoverage> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn translation_intervals_hold_what_their_width_covers_after_the_sets_offset() {
+        // Errors 10 + (−3 … 3) mm on x, sd 1: the offset 10 goes, |error| ≤ 1.645 for 3 of 7.
+        let img = |e: f32, sd: f32| BenchImage {
+            translation_error_mm: Some([10.0 + e, e, 100.0 + e]),
+            posterior_translation_sd_mm: [sd, sd, sd],
+            ..BenchImage::default()
+        };
+        let images: Vec<BenchImage> = (-3..=3).map(|e| img(e as f32, 1.0)).collect();
+        let c = translation_coverage(&images).expect("coverage");
+        assert!((c.median_signed_error_mm[0] - 10.0).abs() < 1e-9 && (c.median_signed_error_mm[2] - 100.0).abs() < 1e-9, "{c:?}");
+        assert!((c.covered_90[0] - 3.0 / 7.0).abs() < 1e-9 && (c.covered_50[1] - 1.0 / 7.0).abs() < 1e-9, "{c:?}");
+        // Wider intervals hold more; no spreads, no coverage.
+        let wide: Vec<BenchImage> = (-3..=3).map(|e| img(e as f32, 2.0)).collect();
+        assert!(translation_coverage(&wide).expect("coverage").covered_90[0] > c.covered_90[0]);
+        assert_eq!(translation_coverage(&[img(1.0, 0.0)]), None);
+        assert_eq!(translation_coverage(&[BenchImage::default()]), None);
+    }
 
     #[test]
     fn stat_interpolates() {

@@ -127,6 +127,7 @@ pub fn fit_prepared(
     };
     let posterior = PosteriorSummary::of(&observer.posterior)
         .with_pose_spread(spread)
+        .with_translation(result.image.best.pose.translation, spread)
         .with_shape_spread(shape_spread.as_ref())
         .with_vertex_spread(&vertex_sd_mm);
     let (landmark_acceptance, image_acceptance) = (observer.landmark, observer.image);

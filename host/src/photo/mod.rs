@@ -189,13 +189,11 @@ mod tests {
     }
 }
 
-/// Yaw, pitch and roll (radians) of a fitted rotation `(yaw, pitch, roll)`, found on the crop
-/// `crop` resampled to `size × size` with the principal point at the crop's centre and focal
-/// length `focal` (working pixels), expressed in the photo's camera frame (principal point
-/// `principal`, photo pixels: a photo's centre unless the camera says otherwise). The fit takes the crop's centre as the optical axis: a
-/// face off the photo's axis by an angle `α` is fitted as turned by `α` (2.6° for a face 26 mm
-/// below the axis at 570 mm). Rotating the fit's camera onto the photo's axis removes that.
-pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u32, principal: [f32; 2]) -> [f32; 3] {
+/// The rotation `Q` (rows) taking the fit's camera frame (its axis through the centre of the
+/// `size × size` working crop `crop`, focal length `focal` in working pixels) onto the photo's
+/// camera frame (principal point `principal`, photo pixels): a point `p` of the fit's camera lies at
+/// `Q p` in the photo's ([`pose_in_photo_frame`]).
+pub fn crop_axis_rotation(focal: f32, crop: &CropBox, size: u32, principal: [f32; 2]) -> [[f64; 3]; 3] {
     let c = crop.to_original([size as f32 * 0.5, size as f32 * 0.5], size);
     let f = f64::from(focal * crop.scale(size));
     let d = [f64::from(c[0] - principal[0]) / f, -f64::from(c[1] - principal[1]) / f, -1.0];
@@ -205,7 +203,7 @@ pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u
     let axis = [d[1], -d[0], 0.0]; // (0, 0, −1) × d
     let s = (axis[0] * axis[0] + axis[1] * axis[1]).sqrt();
     let cos = -d[2];
-    let q = if s < 1e-12 {
+    if s < 1e-12 {
         [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
     } else {
         let k = [axis[0] / s, axis[1] / s, 0.0];
@@ -215,7 +213,17 @@ pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u
             [k[1] * k[0] * v + k[2] * s, cos + k[1] * k[1] * v, k[1] * k[2] * v - k[0] * s],
             [k[2] * k[0] * v - k[1] * s, k[2] * k[1] * v + k[0] * s, cos + k[2] * k[2] * v],
         ]
-    };
+    }
+}
+
+/// Yaw, pitch and roll (radians) of a fitted rotation `(yaw, pitch, roll)`, found on the crop
+/// `crop` resampled to `size × size` with the principal point at the crop's centre and focal
+/// length `focal` (working pixels), expressed in the photo's camera frame (principal point
+/// `principal`, photo pixels: a photo's centre unless the camera says otherwise). The fit takes the crop's centre as the optical axis: a
+/// face off the photo's axis by an angle `α` is fitted as turned by `α` (2.6° for a face 26 mm
+/// below the axis at 570 mm). Rotating the fit's camera onto the photo's axis removes that.
+pub fn pose_in_photo_frame(angles: [f32; 3], focal: f32, crop: &CropBox, size: u32, principal: [f32; 2]) -> [f32; 3] {
+    let q = crop_axis_rotation(focal, crop, size, principal);
     let pose = gpmm_core::render::Pose { yaw: angles[0], pitch: angles[1], roll: angles[2], translation: [0.0; 3] };
     let r = pose.rotation().map(|row| row.map(f64::from));
     let mut m = [[0.0f64; 3]; 3];
