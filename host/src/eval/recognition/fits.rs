@@ -30,7 +30,8 @@ pub struct ImageFit {
     /// Seconds of this fit (one thread).
     pub seconds: f64,
     /// Per vertex of the fitted shape, its reported standard deviation along the normal (mm;
-    /// [`crate::fit::ShapeSpread::vertex_sd_mm`]); empty when the fit reported none.
+    /// [`crate::fit::ShapeSpread::vertex_sd_mm`]), rounded to 0.01 mm to keep the cache small;
+    /// empty when the fit reported none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub vertex_sd_mm: Vec<f32>,
 }
@@ -139,7 +140,7 @@ fn fit_one(
         color: p.color_coeffs().to_vec(),
         pixel_rmse: o.pixel_rmse,
         seconds: t0.elapsed().as_secs_f64(),
-        vertex_sd_mm: o.vertex_sd_mm,
+        vertex_sd_mm: o.vertex_sd_mm.iter().map(|s| (s * 100.0).round() / 100.0).collect(),
     })
 }
 
