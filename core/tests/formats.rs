@@ -115,6 +115,9 @@ fn fit_record_round_trip_and_corruption() {
         translation: [1.0, 2.0, -500.0],
         covered_pixels: 4321,
         log_likelihood: 45.5,
+        angles_sd: [0.01, 0.02, 0.005],
+        translation_sd: [0.3, 0.4, 2.5],
+        landmark_residual_px: 0.9,
         ..FitFigures::default()
     };
     let counts =

@@ -13,7 +13,9 @@ use crate::board::{fail, Rasterizer, MASK_WORDS, PROFILE};
 use crate::clock::instructions_now;
 use crate::{hexlog, stack};
 use gpmm_core::error::FitError;
-use gpmm_core::fit::{project_landmarks, standard_fit, FitSettings, OcclusionMask, Stage, StandardFit, TargetImage};
+use gpmm_core::fit::{
+    pose_spread, project_landmarks, standard_fit, FitSettings, LandmarkTarget, OcclusionMask, PoseSpread, Stage, StandardFit, TargetImage,
+};
 use gpmm_core::format::blob::ModelBlob;
 use gpmm_core::format::fit_input::{self, FitInput};
 use gpmm_core::format::fit_record::{self, DeviceCounts};
@@ -162,13 +164,16 @@ pub(crate) fn fit_and_log(
         Ok(f) => f,
         Err(e) => fit_failed("fit", e),
     };
+    // How well the landmarks pin the fit's pose, after the fit (outside its stack frame).
+    let target = LandmarkTarget::new(landmarks, valid.get(..landmarks.len()).unwrap_or(&[]), 1.0);
+    let spread = target.ok().and_then(|t| pose_spread(model, fit.params(), &t, width, height).ok());
     marks.fit_start = t_fit;
     marks.fit_end = t_end;
     let mut counts = counts(settings, &marks, (instance.shape_updates, instance.color_updates), parse, t_end - t_origin);
     counts.blob_bytes = sizes.blob_bytes;
     counts.partition_bytes = sizes.partition_bytes;
     counts.bits = sizes.bits;
-    log_record(model, &fit, width, height, counts);
+    log_record(model, &fit, spread.as_ref(), width, height, counts);
 }
 
 /// The record's counts of a fit: its stages from `marks`, `parse` and `total` instructions; the
@@ -196,14 +201,21 @@ pub(crate) fn counts(settings: &FitSettings, marks: &Marks, (shape, color): (u32
 /// the record's buffers are not on the stack during the fit). `counts` gets the model's sizes,
 /// the image size and the stack peak here.
 #[inline(never)]
-pub(crate) fn log_record(model: &MorphableModel<'_, u16>, fit: &StandardFit<KS, KC>, width: u32, height: u32, mut counts: DeviceCounts) {
+pub(crate) fn log_record(
+    model: &MorphableModel<'_, u16>,
+    fit: &StandardFit<KS, KC>,
+    spread: Option<&PoseSpread>,
+    width: u32,
+    height: u32,
+    mut counts: DeviceCounts,
+) {
     let p = fit.params();
     let mut lm = [[0.0f32; 2]; MAX_LANDMARKS];
     let k = match project_landmarks(model, p, width, height, &mut lm) {
         Ok(k) => k,
         Err(e) => fit_failed("landmark projection", e),
     };
-    let figures = fit.record_figures();
+    let figures = fit.record_figures(spread);
     counts.model_vertices = model.vertices() as u32;
     counts.model_triangles = model.triangles().len() as u32;
     counts.image_width = width;

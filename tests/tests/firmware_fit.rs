@@ -117,6 +117,13 @@ fn firmware_fit_matches_the_host_within_the_m4f_budget() {
     assert!((0.05..0.95).contains(&landmark_acceptance), "landmark chain acceptance {landmark_acceptance}");
     assert_eq!(dev.acceptance_landmark_chain, landmark_acceptance, "the device record's landmark acceptance");
     assert!(dev.acceptance_image_chain > 0.0, "the device record's image acceptance");
+    // The device reports the pose's spread from the landmarks, the host's own to the bit.
+    let valid = vec![true; prep.landmarks.len()];
+    let target = gpmm_core::fit::LandmarkTarget::new(&prep.landmarks, &valid, 1.0).expect("landmarks");
+    let view = blob.view().expect("blob");
+    let spread = gpmm_core::fit::pose_spread(&view.morphable().expect("model"), host.params(), &target, 128, 128).expect("spread");
+    assert_eq!(dev.angles_sd_deg, gpmm_host::fit::calibrated_angles_sd_deg(&spread), "the device's pose spread");
+    assert!(dev.angles_sd_deg.iter().all(|s| *s > 0.0) && dev.landmark_residual_px == spread.residual_sigma_px);
 
     // Budgets (m4f: 1 MiB flash for code + blob, 192 KiB RAM for statics + stack).
     assert_eq!(dev.flash_budget_bytes, 1024 * 1024);

@@ -43,6 +43,7 @@ use crate::fit::settings::FitSettings;
 use crate::fit::solve::color::{solve_color, ColorScene, ColorSolveConfig};
 use crate::fit::solve::light::{solve_light, LightSolveConfig};
 use crate::fit::solve::shape::{solve_shape, ShapeSolveConfig};
+use crate::fit::spread::PoseSpread;
 use crate::fit::start::{initial_guess, landmark_pivot};
 use crate::format::fit_record::FitFigures;
 use crate::geometry::TriIndex;
@@ -688,9 +689,12 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
         self.pose_acceptance.combined(&self.landmark.acceptance).overall()
     }
 
-    /// The fit record's figures of this fit (`GPFR`): the firmware logs them and the host's parity
-    /// run writes the same, so two records are equal exactly when the fits are.
-    pub fn record_figures(&self) -> FitFigures {
+    /// The fit record's figures of this fit (`GPFR`) with the pose's `spread` from the landmarks
+    /// ([`crate::fit::pose_spread`] of [`Self::params`]; `None`: zero, not measured): the firmware
+    /// logs them and the host's parity run writes the same, so two records are equal exactly when
+    /// the fits are. The spread is the caller's to compute after the fit, outside the fit's stack
+    /// frame.
+    pub fn record_figures(&self, spread: Option<&PoseSpread>) -> FitFigures {
         let p = self.params();
         let img = self.image.best_image.unwrap_or(self.start_image);
         FitFigures {
@@ -707,6 +711,9 @@ impl<const KS: usize, const KC: usize> StandardFit<KS, KC> {
             acceptance_landmark_chain: self.landmark_acceptance(),
             acceptance_image_chain: self.image.acceptance.overall(),
             covered_pixels: img.covered,
+            angles_sd: spread.map_or([0.0; 3], |s| s.angles_sd),
+            translation_sd: spread.map_or([0.0; 3], |s| s.translation_sd),
+            landmark_residual_px: spread.map_or(0.0, |s| s.residual_sigma_px),
         }
     }
 }

@@ -19,7 +19,6 @@ use crate::fit::solve::shape::pose_moved_by;
 use crate::geometry::{TriIndex, Vec3};
 use crate::model::morphable::MorphableModel;
 use crate::model::params::FitParams;
-use crate::model::MAX_LANDMARKS;
 use crate::render::Pose;
 
 /// Parameters of the pose the spread is about: yaw, pitch, roll (radians), translation (mm).
@@ -44,6 +43,9 @@ pub struct PoseSpread {
 /// The spread of `params`' pose given the `target` landmarks (its valid ones) in a `width ×
 /// height` image. Errors with [`FitError::Singular`] when fewer than 4 landmarks are usable or
 /// they do not determine the pose, [`FitError::NonFinite`] when one lies behind the camera.
+/// Never inlined: the fit calls it last, and its buffers must not join the fit's own stack frame
+/// (a device's stack peak is the chains').
+#[inline(never)]
 pub fn pose_spread<I: TriIndex, const KS: usize, const KC: usize>(
     model: &MorphableModel<'_, I>,
     params: &FitParams<KS, KC>,
@@ -51,8 +53,7 @@ pub fn pose_spread<I: TriIndex, const KS: usize, const KC: usize>(
     width: u32,
     height: u32,
 ) -> Result<PoseSpread, FitError> {
-    let mut lm = [[0.0f32; 3]; MAX_LANDMARKS];
-    let n = model.landmark_positions(params.shape_coeffs(), &mut lm)?;
+    let n = model.landmarks().len();
     if target.len() != n {
         return Err(FitError::LengthMismatch);
     }
@@ -60,11 +61,12 @@ pub fn pose_spread<I: TriIndex, const KS: usize, const KC: usize>(
     let project = |pose: &Pose, p: Vec3| -> Result<[f32; 2], FitError> {
         cam.project(pose.transform_point(p)).map(|s| [s.x, s.y]).ok_or(FitError::NonFinite)
     };
-    let used = || lm.iter().zip(target.points()).zip(target.valid()).take(n).filter(|(_, v)| **v).map(|(pair, _)| pair);
-    // The normal matrix JᵀJ and the residuals' sum of squares.
+    // The normal matrix JᵀJ and the residuals' sum of squares, one landmark at a time (no buffer
+    // of every landmark's position on a device's stack).
     let mut jtj = [[0.0f32; POSE_PARAMS]; POSE_PARAMS];
     let (mut rss, mut m) = (0.0f32, 0u32);
-    for (p, t) in used() {
+    for (k, (t, _)) in target.points().iter().zip(target.valid()).enumerate().filter(|(_, (_, v))| **v) {
+        let p = &model.landmark_position(params.shape_coeffs(), k)?;
         let at = project(&params.pose, *p)?;
         rss += (at[0] - t[0]) * (at[0] - t[0]) + (at[1] - t[1]) * (at[1] - t[1]);
         m += 1;

@@ -1,20 +1,22 @@
 //! The fit record (`GPFR`): a fit's result as the device reports it, read back by the host with
 //! this same code (the firmware logs it as hex; `gpmm device-fit` decodes it).
 //!
-//! Layout, version 1 (little-endian, 4-byte fields; offsets in bytes):
+//! Layout, version 2 (little-endian, 4-byte fields; offsets in bytes):
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 4 | magic `GPFR` |
-//! | 4 | 4 | version (`u32`, 1) |
+//! | 4 | 4 | version (`u32`, 2) |
 //! | 8 | 4 | shape coefficients `Ks` |
 //! | 12 | 4 | colour coefficients `Kc` |
 //! | 16 | 4 | landmarks `L` |
-//! | 20 | 60 | [`FitFigures`]: 14 × `f32`, then `u32` covered pixels |
-//! | 80 | 104 | [`DeviceCounts`]: 8 × `u64` instructions, then 10 × `u32` |
-//! | 184 | 108 | SH light, 9 × (r, g, b) `f32` |
-//! | 292 | 4 (Ks + Kc + 2 L) | shape, colour coefficients, landmarks `[f32; 2]` (image px) |
+//! | 20 | 88 | [`FitFigures`]: 14 × `f32`, `u32` covered pixels, then the pose's spread from the landmarks: 7 × `f32` |
+//! | 108 | 104 | [`DeviceCounts`]: 8 × `u64` instructions, then 10 × `u32` |
+//! | 212 | 108 | SH light, 9 × (r, g, b) `f32` |
+//! | 320 | 4 (Ks + Kc + 2 L) | shape, colour coefficients, landmarks `[f32; 2]` (image px) |
 //! | end − 4 | 4 | CRC-32 of every byte before it |
+//!
+//! Version 1 had no pose spread (its figures were 60 bytes); it is not read.
 
 use super::bytes::{check_crc, Reader, Writer};
 use super::FormatError;
@@ -24,9 +26,9 @@ use crate::render::ShLight;
 /// Magic bytes.
 pub const MAGIC: [u8; 4] = *b"GPFR";
 /// The layout version written and read.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Bytes before the light.
-const FIXED_BYTES: usize = 20 + 60 + 104;
+const FIXED_BYTES: usize = 20 + 88 + 104;
 /// Bytes before the coefficient arrays.
 pub const HEADER_BYTES: usize = FIXED_BYTES + 12 * SH_COEFFS;
 
@@ -60,6 +62,13 @@ pub struct FitFigures {
     pub acceptance_image_chain: f32,
     /// Pixels the fitted model covers.
     pub covered_pixels: u32,
+    /// The pose's spread from the landmarks ([`crate::fit::pose_spread`], before any calibration
+    /// factor): standard deviations of yaw, pitch, roll (radians); zero when not measured.
+    pub angles_sd: [f32; 3],
+    /// Its standard deviations of the translation (mm); zero when not measured.
+    pub translation_sd: [f32; 3],
+    /// The landmarks' residual σ it is scaled by (px); zero when not measured.
+    pub landmark_residual_px: f32,
 }
 
 /// Where the device's instructions went, and what it was given.
@@ -173,6 +182,7 @@ pub fn write(
     w.f32s([f.log_posterior, f.log_likelihood, f.landmark_log_likelihood, f.landmark_rmse_px, f.pixel_rmse])?;
     w.f32s([f.acceptance_landmark_chain, f.acceptance_image_chain])?;
     w.u32(f.covered_pixels)?;
+    w.f32s(f.angles_sd.iter().chain(&f.translation_sd).copied().chain([f.landmark_residual_px]))?;
     let c = counts;
     for v in [
         c.instructions_parse,
@@ -231,6 +241,9 @@ pub fn parse(bytes: &[u8]) -> Result<FitRecord<'_>, FormatError> {
         acceptance_landmark_chain: acc_l,
         acceptance_image_chain: acc_i,
         covered_pixels: r.u32()?,
+        angles_sd: [r.f32()?, r.f32()?, r.f32()?],
+        translation_sd: [r.f32()?, r.f32()?, r.f32()?],
+        landmark_residual_px: r.f32()?,
     };
     let counts = DeviceCounts {
         instructions_parse: r.u64()?,

@@ -55,7 +55,7 @@ pub fn device_fit_init(a: DeviceFitArgs) -> Result<()> {
                 "yaw_deg": f.fit.params().pose.yaw.to_degrees(),
                 "pitch_deg": f.fit.params().pose.pitch.to_degrees(),
                 "roll_deg": f.fit.params().pose.roll.to_degrees(),
-                "log_likelihood": f.fit.record_figures().log_likelihood,
+                "log_likelihood": f.fit.record_figures(f.spread.as_ref()).log_likelihood,
                 "landmarks_px": f.fitted_landmarks,
                 "landmarks_frame_px": f.fitted_landmarks.iter().map(|p| <[f32; 2]>::from(f.window.to_source(p[0], p[1]))).collect::<Vec<_>>(),
             })),

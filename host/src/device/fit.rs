@@ -160,6 +160,23 @@ pub fn host_fit_pixels(
     Ok((fit, lm))
 }
 
+/// The pose's spread of a device fit from its target `landmarks` in a `w × h` working image, as the
+/// firmware computes it after the fit for its record (`None` when the landmarks do not determine
+/// the pose).
+pub fn device_pose_spread(
+    blob: &BlobBuf,
+    fit: &StandardFit<DEVICE_KS, DEVICE_KC>,
+    landmarks: &[[f32; 2]],
+    w: u32,
+    h: u32,
+) -> Result<Option<gpmm_core::fit::PoseSpread>, DeviceFitError> {
+    let view = blob.view().map_err(|e| DeviceFitError::Blob(e.to_string()))?;
+    let model = view.morphable().map_err(DeviceFitError::Core)?;
+    let valid = vec![true; landmarks.len()];
+    let target = gpmm_core::fit::LandmarkTarget::new(landmarks, &valid, 1.0).map_err(DeviceFitError::Core)?;
+    Ok(gpmm_core::fit::pose_spread(&model, fit.params(), &target, w, h).ok())
+}
+
 /// What the firmware reported (the JSON of `gpmm device-fit`).
 #[derive(Debug, Clone, Serialize)]
 pub struct DeviceFitReport {
@@ -211,6 +228,19 @@ pub struct DeviceFitReport {
     pub roll_deg: f32,
     /// Focal length (px).
     pub focal_px: f32,
+    /// Standard deviations of yaw, pitch and roll from the landmarks the fit could not reach,
+    /// calibrated as a host fit's (degrees; docs/intervals.md; zero when not measured).
+    #[serde(default)]
+    pub angles_sd_deg: [f32; 3],
+    /// The central 90 % interval of yaw, pitch and roll (degrees): fit ± 1.645 sd.
+    #[serde(default)]
+    pub angles_interval_90_deg: [[f32; 2]; 3],
+    /// Standard deviations of the translation, calibrated as a host fit's (mm).
+    #[serde(default)]
+    pub translation_sd_mm: [f32; 3],
+    /// The landmarks' residual σ the spread is scaled by (working-image px).
+    #[serde(default)]
+    pub landmark_residual_px: f32,
     /// Best log posterior.
     pub log_posterior: f32,
     /// Image log-likelihood ratio of the fit.
@@ -302,6 +332,14 @@ pub fn parse_report(profile: &str, log: &str) -> Result<DeviceFitReport, DeviceF
     let stack_peak_bytes = u64::from(c.stack_peak_bytes).max(figure(log, "stack_peak_bytes").unwrap_or(0));
     let blob_bytes = u64::from(c.blob_bytes);
     let lm: Vec<f32> = r.landmarks.iter().collect();
+    let spread = gpmm_core::fit::PoseSpread {
+        angles_sd: f.angles_sd,
+        translation_sd: f.translation_sd,
+        residual_sigma_px: f.landmark_residual_px,
+        landmarks: 0,
+    };
+    let angles_deg = [f.yaw, f.pitch, f.roll].map(f32::to_degrees);
+    let angles_sd_deg = crate::fit::calibrated_angles_sd_deg(&spread);
     Ok(DeviceFitReport {
         profile: profile.to_string(),
         flash_bytes,
@@ -327,6 +365,12 @@ pub fn parse_report(profile: &str, log: &str) -> Result<DeviceFitReport, DeviceF
         pitch_deg: f.pitch.to_degrees(),
         roll_deg: f.roll.to_degrees(),
         focal_px: f.focal,
+        angles_sd_deg,
+        angles_interval_90_deg: core::array::from_fn(|k| {
+            [angles_deg[k] - crate::fit::Z90 * angles_sd_deg[k], angles_deg[k] + crate::fit::Z90 * angles_sd_deg[k]]
+        }),
+        translation_sd_mm: crate::fit::calibrated_translation_sd_mm(&spread),
+        landmark_residual_px: f.landmark_residual_px,
         log_posterior: f.log_posterior,
         log_likelihood: f.log_likelihood,
         landmark_rmse_px: f.landmark_rmse_px,
@@ -356,7 +400,14 @@ mod tests {
 
     #[test]
     fn the_record_is_read_back_from_hex_lines() {
-        let figures = FitFigures { yaw: 0.5, covered_pixels: 77, ..FitFigures::default() };
+        let figures = FitFigures {
+            yaw: 0.5,
+            covered_pixels: 77,
+            angles_sd: [0.01, 0.02, 0.005],
+            translation_sd: [0.5, 0.5, 3.0],
+            landmark_residual_px: 1.5,
+            ..FitFigures::default()
+        };
         let counts =
             DeviceCounts { instructions_total: 123_456_789, stack_peak_bytes: 4096, partition_bytes: 1000, ..DeviceCounts::default() };
         let mut rec = vec![0u8; fit_record::encoded_len(2, 1, 1)];
@@ -371,6 +422,17 @@ mod tests {
         );
         let r = parse_report("m4f", &log).unwrap();
         assert_eq!((r.instructions_total, r.stack_peak_bytes, r.flash_budget_bytes, r.ram_total_bytes), (123_456_789, 4096, 1512, 4296));
+        // The pose's spread, calibrated as a host fit's: the yaw interval around the fitted yaw.
+        let spread = gpmm_core::fit::PoseSpread {
+            angles_sd: figures.angles_sd,
+            translation_sd: figures.translation_sd,
+            residual_sigma_px: 1.5,
+            landmarks: 0,
+        };
+        assert_eq!((r.angles_sd_deg, r.landmark_residual_px), (crate::fit::calibrated_angles_sd_deg(&spread), 1.5));
+        let [lo, hi] = r.angles_interval_90_deg[0];
+        assert!(lo < r.yaw_deg && r.yaw_deg < hi && ((hi - lo) - 2.0 * crate::fit::Z90 * r.angles_sd_deg[0]).abs() < 1e-3, "{lo} {hi}");
+        assert!(r.translation_sd_mm[2] > r.translation_sd_mm[0]);
         assert_eq!((r.shape.clone(), r.color.clone(), r.landmarks_px.clone()), (vec![1.0, 2.0], vec![3.0], vec![[4.0, 5.0]]));
         assert!((r.yaw_deg - 0.5f32.to_degrees()).abs() < 1e-4);
         // One flipped digit: the CRC refuses the record.

@@ -120,6 +120,8 @@ pub struct HostCropFit {
     pub fit: StandardFit<DEVICE_KS, DEVICE_KC>,
     /// The fit's landmarks in the working image (px).
     pub fitted_landmarks: Vec<[f32; 2]>,
+    /// The fit's pose spread from the landmarks, as the firmware records it.
+    pub spread: Option<gpmm_core::fit::PoseSpread>,
 }
 
 /// The host's run of the device's landmark-free fit.
@@ -161,7 +163,12 @@ pub fn host_frame_fit(
     let window = crop_for_fit(frame.as_raw(), w, h, &det.landmarks, s, &mut pixels, &mut working).map_err(FrameFitError::Net)?;
     let covered = CoveredPixels::of_crop(window.x0, window.y0, window.step, side, w as u32, h as u32);
     let (fit, fitted_landmarks) = host_fit_pixels(blob, &pixels, side, side, covered, &working, settings, seed)?;
-    Ok(HostFrameFit { face, detection: Some(det), fitted: Some(HostCropFit { window, working_landmarks: working, fit, fitted_landmarks }) })
+    let spread = super::fit::device_pose_spread(blob, &fit, &working, side, side)?;
+    Ok(HostFrameFit {
+        face,
+        detection: Some(det),
+        fitted: Some(HostCropFit { window, working_landmarks: working, fit, fitted_landmarks, spread }),
+    })
 }
 
 /// The crop as reported: where the working image lies in the frame.
@@ -293,12 +300,13 @@ impl DeviceFrameFitReport {
 /// record exactly when the fits are bit-identical).
 pub fn fit_record_bytes(
     fit: &StandardFit<DEVICE_KS, DEVICE_KC>,
+    spread: Option<&gpmm_core::fit::PoseSpread>,
     landmarks: &[[f32; 2]],
     counts: &DeviceCounts,
 ) -> Result<Vec<u8>, FormatError> {
     let p = fit.params();
     let mut out = vec![0u8; fit_record::encoded_len(DEVICE_KS, DEVICE_KC, landmarks.len())];
-    let n = fit_record::write(&mut out, &fit.record_figures(), counts, &p.light, p.shape_coeffs(), p.color_coeffs(), landmarks)?;
+    let n = fit_record::write(&mut out, &fit.record_figures(spread), counts, &p.light, p.shape_coeffs(), p.color_coeffs(), landmarks)?;
     out.truncate(n);
     Ok(out)
 }
@@ -323,7 +331,7 @@ pub fn compare(report: &DeviceFrameFitReport, host: &HostFrameFit) -> Result<Fra
     let (fit_identical, diff, same) = match (&report.fit, &report.fit_record, &host.fitted) {
         (Some(dev), Some(record), Some(h)) => {
             let counts = fit_record::parse(record).map_err(FrameFitError::Record)?.counts;
-            let mine = fit_record_bytes(&h.fit, &h.fitted_landmarks, &counts).map_err(FrameFitError::Record)?;
+            let mine = fit_record_bytes(&h.fit, h.spread.as_ref(), &h.fitted_landmarks, &counts).map_err(FrameFitError::Record)?;
             let d = if dev.landmarks_px.len() == h.fitted_landmarks.len() {
                 dev.landmarks_px.iter().zip(&h.fitted_landmarks).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0f32, f32::max)
             } else {

@@ -57,7 +57,9 @@ pub use overlay::{labels_in_photo, overlay, FITTED_COLOR, OVERLAY_SCALE, TARGET_
 pub use overrides::override_settings;
 pub use params::{Params, KC, KS};
 pub use pipeline::{camera_space_mesh, fit_image, fit_prepared, morphable, project_landmarks, project_landmarks_of, rmse, Outcome};
-pub use posterior::{PosteriorSummary, VertexSpread, TRANSLATION_SPREAD_FACTOR, Z50, Z90};
+pub use posterior::{
+    calibrated_angles_sd_deg, calibrated_translation_sd_mm, PosteriorSummary, VertexSpread, TRANSLATION_SPREAD_FACTOR, Z50, Z90,
+};
 pub use report::{report, AcceptanceBoth, FitReport, LogDensities, ReportInputs, Timing};
 pub use shape_spread::{ShapeSpread, SHAPE_SPREAD_FACTOR};
 pub use spread_picture::{spread_color, spread_picture};

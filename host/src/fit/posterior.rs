@@ -20,6 +20,18 @@ pub const POSE_SPREAD_FACTOR: [f32; 3] = [2.0, 3.5, 1.75];
 /// (docs/intervals.md).
 pub const TRANSLATION_SPREAD_FACTOR: [f32; 3] = [6.0, 4.5, 21.0];
 
+/// The reported standard deviations of yaw, pitch and roll (degrees) from the landmarks' spread:
+/// its angles times [`POSE_SPREAD_FACTOR`] (a host fit adds the chain's own in quadrature).
+pub fn calibrated_angles_sd_deg(spread: &PoseSpread) -> [f32; 3] {
+    core::array::from_fn(|k| spread.angles_sd[k].to_degrees() * POSE_SPREAD_FACTOR[k])
+}
+
+/// The reported standard deviations of the translation (mm) from the landmarks' spread: its
+/// translation times [`TRANSLATION_SPREAD_FACTOR`].
+pub fn calibrated_translation_sd_mm(spread: &PoseSpread) -> [f32; 3] {
+    core::array::from_fn(|k| spread.translation_sd[k] * TRANSLATION_SPREAD_FACTOR[k])
+}
+
 /// The standard normal quantile of the central 50 % interval (`Φ⁻¹(0.75)`).
 pub const Z50: f32 = 0.674_49;
 /// The standard normal quantile of the central 90 % interval (`Φ⁻¹(0.95)`).
@@ -136,7 +148,7 @@ impl PosteriorSummary {
     /// The summary with the landmarks' spread of the pose (`None`: the chain's alone) in its
     /// standard deviations and intervals.
     pub fn with_pose_spread(mut self, spread: Option<PoseSpread>) -> Self {
-        let landmarks: [f32; 3] = core::array::from_fn(|k| spread.map_or(0.0, |s| s.angles_sd[k].to_degrees() * POSE_SPREAD_FACTOR[k]));
+        let landmarks = spread.as_ref().map_or([0.0; 3], calibrated_angles_sd_deg);
         self.landmark_residual_px = spread.map_or(0.0, |s| s.residual_sigma_px);
         self.angles_sd_deg = core::array::from_fn(|k| self.angles_chain_sd_deg[k].hypot(landmarks[k]));
         let interval = |z: f32| {
@@ -165,7 +177,7 @@ impl PosteriorSummary {
     /// measured, zero).
     pub fn with_translation(mut self, t: [f32; 3], spread: Option<PoseSpread>) -> Self {
         self.translation_mm = t;
-        self.translation_sd_mm = core::array::from_fn(|k| spread.map_or(0.0, |s| s.translation_sd[k] * TRANSLATION_SPREAD_FACTOR[k]));
+        self.translation_sd_mm = spread.as_ref().map_or([0.0; 3], calibrated_translation_sd_mm);
         let interval = |z: f32| core::array::from_fn(|k| [t[k] - z * self.translation_sd_mm[k], t[k] + z * self.translation_sd_mm[k]]);
         self.translation_interval_50_mm = interval(Z50);
         self.translation_interval_90_mm = interval(Z90);
