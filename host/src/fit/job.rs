@@ -89,7 +89,7 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
     let ov_path = dir.join("overlay.png");
     let ov =
         overlay(&prepared.image, &outcome.render, outcome.occlusion.as_ref().map(|o| &o.0), &prepared.landmarks, &outcome.fitted_landmarks);
-    crate::render::figure::save_png(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
+    crate::render::figure::save_png_fast(&ov, &ov_path).map_err(|e| werr(&ov_path, &e))?;
     if let Some((labels, _)) = &outcome.occlusion {
         let occ_path = dir.join("occlusion.png");
         let photo = super::overlay::labels_in_photo(labels, &prepared.crop, prepared.original_size);
@@ -98,7 +98,7 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
     if !outcome.vertex_sd_mm.is_empty() {
         let spread_path = dir.join("spread.png");
         let picture = super::spread_picture::spread_picture(model, &outcome.params, &outcome.vertex_sd_mm, &prepared.image)?;
-        crate::render::figure::save_png(&picture, &spread_path).map_err(|e| werr(&spread_path, &e))?;
+        crate::render::figure::save_png_fast(&picture, &spread_path).map_err(|e| werr(&spread_path, &e))?;
     }
     let ply_path = dir.join("fit.ply");
     let mesh = model
