@@ -284,11 +284,17 @@ pub fn device_fit(a: DeviceFitArgs) -> Result<()> {
     if a.host_only {
         let (fit, lm) = host_fit(&blob, &prepared, &device, settings.seed)?;
         let p = fit.params();
+        // The pose's spread as the firmware records it, calibrated as its report is.
+        let spread = gpmm_host::device::fit::device_pose_spread(&blob, &fit, &prepared.landmarks, size, size)?;
+        let angles_sd = spread.as_ref().map_or([0.0; 3], gpmm_host::fit::calibrated_angles_sd_deg);
+        let angles = [p.pose.yaw, p.pose.pitch, p.pose.roll].map(f32::to_degrees);
         let json = serde_json::json!({
             "profile": a.profile,
-            "yaw_deg": p.pose.yaw.to_degrees(),
-            "pitch_deg": p.pose.pitch.to_degrees(),
-            "roll_deg": p.pose.roll.to_degrees(),
+            "yaw_deg": angles[0],
+            "pitch_deg": angles[1],
+            "roll_deg": angles[2],
+            "angles_sd_deg": angles_sd,
+            "angles_interval_90_deg": gpmm_host::fit::central_intervals(angles, angles_sd, gpmm_host::fit::Z90),
             "log_posterior": fit.image.best_log_posterior,
             "log_likelihood": fit.image.best_image.map_or(f32::NAN, |e| e.log_likelihood),
             "landmarks_px": lm,

@@ -430,6 +430,26 @@ fn device_fit_without_landmarks_matches_the_host_bit_for_bit() {
     assert_eq!(json["parity"]["fit_bit_identical"], true, "{out}");
     assert_eq!(json["crop"]["side"].as_u64(), Some(72), "{out}");
     assert_eq!(json["fitted_landmarks_photo_px"].as_array().unwrap().len(), 68);
+    // The device's record carries the pose's spread (bit-identical above), reported calibrated.
+    let sd: Vec<f64> = json["fit"]["angles_sd_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!(sd.len() == 3 && sd.iter().all(|s| *s > 0.0), "{out}");
+    // The host's run of the same fit from landmarks reports the same kind of interval.
+    let pts = f.synth.join("0000_yaw00.pts");
+    let host = ok(&gpmm(&[
+        "device-fit",
+        s(&blob),
+        s(&image),
+        "--landmarks",
+        s(&pts),
+        "--host-only",
+        "--landmark-steps",
+        "300",
+        "--image-steps",
+        "20",
+    ]));
+    let host: serde_json::Value = serde_json::from_str(&host).unwrap();
+    let (yaw, [lo, hi]) = (host["yaw_deg"].as_f64().unwrap(), [0, 1].map(|i| host["angles_interval_90_deg"][0][i].as_f64().unwrap()));
+    assert!(lo < yaw && yaw < hi, "{host}");
     let st = &json["stage_instructions"];
     for stage in ["detection", "crop", "fit"] {
         assert!(st[stage].as_u64().unwrap() > 0, "{stage}: {st}");

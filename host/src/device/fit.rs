@@ -366,9 +366,7 @@ pub fn parse_report(profile: &str, log: &str) -> Result<DeviceFitReport, DeviceF
         roll_deg: f.roll.to_degrees(),
         focal_px: f.focal,
         angles_sd_deg,
-        angles_interval_90_deg: core::array::from_fn(|k| {
-            [angles_deg[k] - crate::fit::Z90 * angles_sd_deg[k], angles_deg[k] + crate::fit::Z90 * angles_sd_deg[k]]
-        }),
+        angles_interval_90_deg: crate::fit::central_intervals(angles_deg, angles_sd_deg, crate::fit::Z90),
         translation_sd_mm: crate::fit::calibrated_translation_sd_mm(&spread),
         landmark_residual_px: f.landmark_residual_px,
         log_posterior: f.log_posterior,

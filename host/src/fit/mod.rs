@@ -58,7 +58,8 @@ pub use overrides::override_settings;
 pub use params::{Params, KC, KS};
 pub use pipeline::{camera_space_mesh, fit_image, fit_prepared, morphable, project_landmarks, project_landmarks_of, rmse, Outcome};
 pub use posterior::{
-    calibrated_angles_sd_deg, calibrated_translation_sd_mm, PosteriorSummary, VertexSpread, TRANSLATION_SPREAD_FACTOR, Z50, Z90,
+    calibrated_angles_sd_deg, calibrated_translation_sd_mm, central_intervals, PosteriorSummary, VertexSpread, TRANSLATION_SPREAD_FACTOR,
+    Z50, Z90,
 };
 pub use report::{report, AcceptanceBoth, FitReport, LogDensities, ReportInputs, Timing};
 pub use shape_spread::{ShapeSpread, SHAPE_SPREAD_FACTOR};

@@ -32,6 +32,11 @@ pub fn calibrated_translation_sd_mm(spread: &PoseSpread) -> [f32; 3] {
     core::array::from_fn(|k| spread.translation_sd[k] * TRANSLATION_SPREAD_FACTOR[k])
 }
 
+/// The central intervals `mean ± z · sd` of three values, each `[low, high]`.
+pub fn central_intervals(mean: [f32; 3], sd: [f32; 3], z: f32) -> [[f32; 2]; 3] {
+    core::array::from_fn(|k| [mean[k] - z * sd[k], mean[k] + z * sd[k]])
+}
+
 /// The standard normal quantile of the central 50 % interval (`Φ⁻¹(0.75)`).
 pub const Z50: f32 = 0.674_49;
 /// The standard normal quantile of the central 90 % interval (`Φ⁻¹(0.95)`).
@@ -151,13 +156,8 @@ impl PosteriorSummary {
         let landmarks = spread.as_ref().map_or([0.0; 3], calibrated_angles_sd_deg);
         self.landmark_residual_px = spread.map_or(0.0, |s| s.residual_sigma_px);
         self.angles_sd_deg = core::array::from_fn(|k| self.angles_chain_sd_deg[k].hypot(landmarks[k]));
-        let interval = |z: f32| {
-            core::array::from_fn(|k| {
-                [self.angles_mean_deg[k] - z * self.angles_sd_deg[k], self.angles_mean_deg[k] + z * self.angles_sd_deg[k]]
-            })
-        };
-        self.angles_interval_50_deg = interval(Z50);
-        self.angles_interval_90_deg = interval(Z90);
+        self.angles_interval_50_deg = central_intervals(self.angles_mean_deg, self.angles_sd_deg, Z50);
+        self.angles_interval_90_deg = central_intervals(self.angles_mean_deg, self.angles_sd_deg, Z90);
         self
     }
 
@@ -178,9 +178,8 @@ impl PosteriorSummary {
     pub fn with_translation(mut self, t: [f32; 3], spread: Option<PoseSpread>) -> Self {
         self.translation_mm = t;
         self.translation_sd_mm = spread.as_ref().map_or([0.0; 3], calibrated_translation_sd_mm);
-        let interval = |z: f32| core::array::from_fn(|k| [t[k] - z * self.translation_sd_mm[k], t[k] + z * self.translation_sd_mm[k]]);
-        self.translation_interval_50_mm = interval(Z50);
-        self.translation_interval_90_mm = interval(Z90);
+        self.translation_interval_50_mm = central_intervals(t, self.translation_sd_mm, Z50);
+        self.translation_interval_90_mm = central_intervals(t, self.translation_sd_mm, Z90);
         self
     }
 
