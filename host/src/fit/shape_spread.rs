@@ -5,7 +5,8 @@
 //! landmarks), so the chain's own spread of the shape coefficients is zero and says nothing. Here
 //! the shape's posterior is that of the coefficients' standard normal prior times the landmark
 //! term linearised at the fit: precision `I + JᵀJ / s²`, `J` the projected landmarks' derivatives
-//! by the fitted shape coefficients (central differences) and `s` the landmarks' residual σ the
+//! by the fitted shape coefficients (the basis rows at the landmarks through the projection's
+//! derivative) and `s` the landmarks' residual σ the
 //! fit left ([`gpmm_core::fit::PoseSpread::residual_sigma_px`]) times [`SHAPE_SPREAD_FACTOR`].
 //! With `A = s² I + JJᵀ = LLᵀ` (landmark coordinates by landmark coordinates, far smaller than the
 //! coefficients) and `G = L⁻¹J`, the covariance is `I − GᵀG`: a coefficient's variance is
@@ -24,7 +25,7 @@ use gpmm_core::model::morphable::MorphableModel;
 /// are not independent, and the template's landmarks are not the person's, so the residual
 /// alone makes the landmarks look surer of the shape than they are. Chosen on the Mitsuba
 /// development set so that the vertices' 90 % intervals along the normal hold the true surface
-/// about 90 % of the time (docs/intervals.md).
+/// about 90 % of the time (88 % there and on the test set; at 1, 74 %: docs/intervals.md).
 pub const SHAPE_SPREAD_FACTOR: f32 = 6.0;
 
 /// Central-difference step of a landmark's position in the projection's derivative (mm).
