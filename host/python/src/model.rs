@@ -431,8 +431,9 @@ impl Model {
         mesh_dict.set_item("vertices", vec3_to_numpy(py, &f32s(&mesh.positions))?)?;
         mesh_dict.set_item("triangles", vec3_to_numpy(py, &mesh.triangles)?)?;
         mesh_dict.set_item("colors", vec3_to_numpy(py, &f32s(&mesh.colors))?)?;
-        if outcome.vertex_sd_mm.len() == mesh.positions.len() {
-            mesh_dict.set_item("vertex_sd_mm", vec_to_numpy(py, outcome.vertex_sd_mm.clone()))?;
+        let vertex_sd = outcome.vertex_sd_mm(&self.inner).map_err(err)?;
+        if vertex_sd.len() == mesh.positions.len() {
+            mesh_dict.set_item("vertex_sd_mm", vec_to_numpy(py, vertex_sd.to_vec()))?;
         }
         dict.set_item("mesh", mesh_dict)?;
         if let (Some(post), Ok(Some(d))) = (&rep.posterior, dict.get_item("posterior")) {

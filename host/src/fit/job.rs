@@ -95,9 +95,10 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
         let photo = super::overlay::labels_in_photo(labels, &prepared.crop, prepared.original_size);
         photo.save(&occ_path).map_err(|e| werr(&occ_path, &e))?;
     }
-    if !outcome.vertex_sd_mm.is_empty() {
+    let vertex_sd = outcome.vertex_sd_mm(model)?;
+    if !vertex_sd.is_empty() {
         let spread_path = dir.join("spread.png");
-        let picture = super::spread_picture::spread_picture(model, &outcome.params, &outcome.vertex_sd_mm, &prepared.image)?;
+        let picture = super::spread_picture::spread_picture(model, &outcome.params, vertex_sd, &prepared.image)?;
         crate::render::figure::save_png_fast(&picture, &spread_path).map_err(|e| werr(&spread_path, &e))?;
     }
     let ply_path = dir.join("fit.ply");
@@ -107,7 +108,7 @@ pub fn write_fit_files(model: &GpModel, prepared: &Prepared, outcome: &Outcome, 
     let attribution = model.metadata.template.attribution.clone().unwrap_or_default();
     let comments: Vec<&str> = if attribution.is_empty() { vec![] } else { vec![attribution.as_str()] };
     // Each vertex's spread along its normal rides along as its quality.
-    let quality = (outcome.vertex_sd_mm.len() == mesh.positions.len()).then_some(outcome.vertex_sd_mm.as_slice());
+    let quality = (vertex_sd.len() == mesh.positions.len()).then_some(vertex_sd);
     crate::mesh::io::write_ply_with_quality(&ply_path, &mesh, quality, crate::mesh::io::PlyEncoding::BinaryLittleEndian, &comments)
         .map_err(|e| werr(&ply_path, &e))?;
     Ok(())

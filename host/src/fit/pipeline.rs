@@ -62,13 +62,29 @@ pub struct Outcome {
     pub occlusion: Option<(image::GrayImage, f32)>,
     /// The shape's posterior from the landmarks (`None` when they do not determine the pose).
     pub shape_spread: Option<ShapeSpread>,
-    /// Per vertex of the fitted shape, the standard deviation of its position along its normal
-    /// (mm; [`ShapeSpread::vertex_sd_mm`]); empty without a shape spread.
-    pub vertex_sd_mm: Vec<f32>,
+    /// The vertices' spread once [`Outcome::vertex_sd_mm`] has computed it (only callers that
+    /// write or measure it pay for it: about 5 % of a fit).
+    vertex_sd: std::sync::OnceLock<Vec<f32>>,
     /// Seconds in the landmark chain.
     pub landmark_seconds: f64,
     /// Seconds in the light solve and the image chain.
     pub image_seconds: f64,
+}
+
+impl Outcome {
+    /// Per vertex of the fitted shape (`model`'s, the model fitted), the standard deviation of its
+    /// position along its normal (mm; [`ShapeSpread::vertex_sd_mm`]), computed on the first call;
+    /// empty without a shape spread.
+    pub fn vertex_sd_mm(&self, model: &GpModel) -> Result<&[f32], FitRunError> {
+        if let Some(sd) = self.vertex_sd.get() {
+            return Ok(sd);
+        }
+        let sd = match &self.shape_spread {
+            Some(s) => s.vertex_sd_mm(model, &self.params)?,
+            None => Vec::new(),
+        };
+        Ok(self.vertex_sd.get_or_init(|| sd))
+    }
 }
 
 /// Fits `model` to a prepared photo; `progress(phase, done, total)` reports steps per chain.
@@ -121,15 +137,10 @@ pub fn fit_prepared(
     // The shape's spread from the same residual and the coefficients' prior.
     let shape_spread =
         spread.and_then(|p| ShapeSpread::of(model, &mm, &result.image.best, &prepared.landmarks, w, h, p.residual_sigma_px).ok());
-    let vertex_sd_mm = match &shape_spread {
-        Some(s) => s.vertex_sd_mm(model, &result.image.best)?,
-        None => Vec::new(),
-    };
     let posterior = PosteriorSummary::of(&observer.posterior)
         .with_pose_spread(spread)
         .with_translation(result.image.best.pose.translation, spread)
-        .with_shape_spread(shape_spread.as_ref())
-        .with_vertex_spread(&vertex_sd_mm);
+        .with_shape_spread(shape_spread.as_ref());
     let (landmark_acceptance, image_acceptance) = (observer.landmark, observer.image);
     let best = result.image;
     let start = result.start;
@@ -166,7 +177,7 @@ pub fn fit_prepared(
         render: sink.into_image(),
         occlusion,
         shape_spread,
-        vertex_sd_mm,
+        vertex_sd: std::sync::OnceLock::new(),
         landmark_seconds,
         image_seconds,
     })

@@ -221,7 +221,7 @@ pub fn report(
         log_likelihood: o.image_log_likelihood + o.landmark_log_likelihood,
         log_densities: LogDensities { posterior: o.log_posterior, image: o.image_log_likelihood, landmarks: o.landmark_log_likelihood },
         acceptance: AcceptanceBoth { landmark_chain: o.landmark_acceptance.clone(), image_chain: o.image_acceptance.clone() },
-        posterior: Some(o.posterior.clone()),
+        posterior: Some(o.posterior.clone().with_vertex_spread(o.vertex_sd_mm(model).unwrap_or(&[]))),
         fitted_landmarks: fitted,
         seconds,
         timing,

@@ -130,7 +130,7 @@ fn fit_one(
     let o = fit_prepared(model, &prepared, settings, &mut |_, _, _| {}).map_err(ImageFitError::naming(&t.image))?;
     let p = match coefficients {
         Coefficients::PosteriorMean => o.posterior.mean_params(&o.params),
-        Coefficients::Best => o.params,
+        Coefficients::Best => o.params.clone(),
     };
     Ok(ImageFit {
         image: t.image.clone(),
@@ -140,7 +140,7 @@ fn fit_one(
         color: p.color_coeffs().to_vec(),
         pixel_rmse: o.pixel_rmse,
         seconds: t0.elapsed().as_secs_f64(),
-        vertex_sd_mm: o.vertex_sd_mm.iter().map(|s| (s * 100.0).round() / 100.0).collect(),
+        vertex_sd_mm: o.vertex_sd_mm(model).map_err(ImageFitError::naming(&t.image))?.iter().map(|s| (s * 100.0).round() / 100.0).collect(),
     })
 }
 
