@@ -382,11 +382,8 @@ fn translation_error(
     size: u32,
     truth: &ImageTruth,
 ) -> Result<[f32; 3], crate::eval::model_frame::FrameError> {
-    let mut lm = [[0.0f32; 3]; 68];
-    crate::fit::morphable(model)?
-        .landmark_positions(params.shape_coeffs(), &mut lm)
-        .map_err(crate::eval::model_frame::FrameError::Shape)?;
-    let frame = crate::mesh::template::ibug_frame(&lm.map(|p| p.map(f64::from))).map_err(crate::eval::model_frame::FrameError::Frame)?;
+    let lm = crate::eval::model_frame::fitted_landmarks(model, params.shape_coeffs())?;
+    let frame = crate::mesh::template::ibug_frame(&lm).map_err(crate::eval::model_frame::FrameError::Frame)?;
     let origin = params.pose.transform_point(frame.center.map(|v| v as f32));
     let q = crate::photo::crop_axis_rotation(params.focal, crop, size, truth.principal_px);
     let t = truth.translation_mm.map(f64::from);
@@ -596,26 +593,54 @@ pub struct TranslationCoverage {
     pub covered_90: [f64; 3],
 }
 
+/// Three values' errors against their reported spreads over a set: the set's median signed error
+/// of each (removed: a frame convention, not a fitting error), and each item's |error| after it.
+struct CentredErrors {
+    offset: [f64; 3],
+    centred: Vec<[f64; 3]>,
+}
+
+impl CentredErrors {
+    /// The errors `signed` (fitted − true per item; `None` without items).
+    fn of(signed: &[[f64; 3]]) -> Option<Self> {
+        if signed.is_empty() {
+            return None;
+        }
+        let offset: [f64; 3] = core::array::from_fn(|k| stat(&signed.iter().map(|e| e[k]).collect::<Vec<_>>()).median);
+        let centred = signed.iter().map(|e| core::array::from_fn(|k| (e[k] - offset[k]).abs())).collect();
+        Some(Self { offset, centred })
+    }
+
+    /// The share of items whose value `k` lies within `z` of their standard deviations `sd`.
+    fn share(&self, sd: &[[f32; 3]], k: usize, z: f64) -> f64 {
+        self.centred.iter().zip(sd).filter(|(e, s)| e[k] <= z * f64::from(s[k])).count() as f64 / self.centred.len() as f64
+    }
+
+    /// The median |error| after the offset, per value.
+    fn median_abs(&self) -> [f64; 3] {
+        core::array::from_fn(|k| stat(&self.centred.iter().map(|e| e[k]).collect::<Vec<_>>()).median)
+    }
+}
+
+/// The median of each of three values over `rows`.
+fn medians(rows: &[[f32; 3]]) -> [f64; 3] {
+    core::array::from_fn(|k| stat(&rows.iter().map(|r| f64::from(r[k])).collect::<Vec<_>>()).median)
+}
+
 /// The coverage of `images`' translation intervals (`None` without errors or reported spreads).
 pub fn translation_coverage(images: &[BenchImage]) -> Option<TranslationCoverage> {
-    let usable: Vec<([f32; 3], [f32; 3])> = images
+    let (signed, sd): (Vec<[f64; 3]>, Vec<[f32; 3]>) = images
         .iter()
-        .filter_map(|b| b.translation_error_mm.map(|e| (e, b.posterior_translation_sd_mm)))
+        .filter_map(|b| b.translation_error_mm.map(|e| (e.map(f64::from), b.posterior_translation_sd_mm)))
         .filter(|(_, sd)| sd.iter().all(|s| *s > 0.0))
-        .collect();
-    if usable.is_empty() {
-        return None;
-    }
-    let offset: [f64; 3] = core::array::from_fn(|k| stat(&usable.iter().map(|(e, _)| f64::from(e[k])).collect::<Vec<_>>()).median);
-    let centred = |e: &[f32; 3], k: usize| (f64::from(e[k]) - offset[k]).abs();
-    let share =
-        |k: usize, z: f32| usable.iter().filter(|(e, sd)| centred(e, k) <= f64::from(z * sd[k])).count() as f64 / usable.len() as f64;
+        .unzip();
+    let c = CentredErrors::of(&signed)?;
     Some(TranslationCoverage {
-        median_signed_error_mm: offset,
-        median_abs_error_mm: core::array::from_fn(|k| stat(&usable.iter().map(|(e, _)| centred(e, k)).collect::<Vec<_>>()).median),
-        median_sd_mm: core::array::from_fn(|k| stat(&usable.iter().map(|(_, sd)| f64::from(sd[k])).collect::<Vec<_>>()).median),
-        covered_50: core::array::from_fn(|k| share(k, Z50)),
-        covered_90: core::array::from_fn(|k| share(k, Z90)),
+        median_signed_error_mm: c.offset,
+        median_abs_error_mm: c.median_abs(),
+        median_sd_mm: medians(&sd),
+        covered_50: core::array::from_fn(|k| c.share(&sd, k, f64::from(Z50))),
+        covered_90: core::array::from_fn(|k| c.share(&sd, k, f64::from(Z90))),
     })
 }
 
@@ -624,26 +649,19 @@ pub fn interval_coverage(images: &[BenchImage]) -> Option<IntervalCoverage> {
     let model_frame = images.iter().all(|b| b.truth_model_frame_deg.is_some());
     let truth = |b: &BenchImage| if model_frame { b.truth_model_frame_deg.unwrap_or(b.truth_deg) } else { b.truth_deg };
     let usable: Vec<&BenchImage> = images.iter().filter(|b| b.posterior_angles_sd_deg.iter().all(|s| *s > 0.0)).collect();
-    if usable.is_empty() {
-        return None;
-    }
-    let signed = |b: &BenchImage, k: usize| f64::from(b.posterior_mean_deg[k] - truth(b)[k]);
-    let offset: [f64; 3] = core::array::from_fn(|k| stat(&usable.iter().map(|b| signed(b, k)).collect::<Vec<_>>()).median);
-    let centred = |b: &BenchImage, k: usize| (signed(b, k) - offset[k]).abs();
-    let share_of = |k: usize, z: f64, sd: &dyn Fn(&BenchImage) -> [f32; 3]| {
-        usable.iter().filter(|b| centred(b, k) <= z * f64::from(sd(b)[k])).count() as f64 / usable.len() as f64
-    };
-    let share = |k: usize, z: f64| share_of(k, z, &|b| b.posterior_angles_sd_deg);
+    let signed: Vec<[f64; 3]> = usable.iter().map(|b| core::array::from_fn(|k| f64::from(b.posterior_mean_deg[k] - truth(b)[k]))).collect();
+    let c = CentredErrors::of(&signed)?;
+    let sd: Vec<[f32; 3]> = usable.iter().map(|b| b.posterior_angles_sd_deg).collect();
+    let chain: Vec<[f32; 3]> = usable.iter().map(|b| b.posterior_chain_sd_deg).collect();
+    let share = |k: usize, z: f64| c.share(&sd, k, z);
     Some(IntervalCoverage {
         truth: if model_frame { "model frame" } else { "camera" }.into(),
-        median_signed_error_deg: offset,
-        median_abs_error_deg: core::array::from_fn(|k| stat(&usable.iter().map(|b| centred(b, k)).collect::<Vec<_>>()).median),
-        median_sd_deg: core::array::from_fn(|k| {
-            stat(&usable.iter().map(|b| f64::from(b.posterior_angles_sd_deg[k])).collect::<Vec<_>>()).median
-        }),
+        median_signed_error_deg: c.offset,
+        median_abs_error_deg: c.median_abs(),
+        median_sd_deg: medians(&sd),
         covered_50: core::array::from_fn(|k| share(k, f64::from(Z50))),
         covered_90: core::array::from_fn(|k| share(k, f64::from(Z90))),
-        chain_covered_90: core::array::from_fn(|k| share_of(k, f64::from(Z90), &|b| b.posterior_chain_sd_deg)),
+        chain_covered_90: core::array::from_fn(|k| c.share(&chain, k, f64::from(Z90))),
         reliability: LEVELS.iter().map(|&(level, z)| [level, share(0, z), share(1, z), share(2, z)]).collect(),
     })
 }

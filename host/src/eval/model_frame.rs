@@ -95,13 +95,18 @@ impl ModelFrame {
 /// ([`crate::mesh::template::ibug_frame`] of the fitted shape's 68 landmarks, the rule `gpmm
 /// synth` defines its truth by; see [`pose_of_face_frame`]).
 pub fn fit_in_face_frame(model: &GpModel, shape_coeffs: &[f32], fit_rad: [f32; 3]) -> Result<[f32; 3], FrameError> {
+    pose_of_face_frame(&fitted_landmarks(model, shape_coeffs)?, fit_rad)
+}
+
+/// The 68 iBUG landmarks of `model`'s shape with `shape_coeffs` (model coordinates, mm): the
+/// landmark vertices only, as the fitter computes them.
+pub fn fitted_landmarks(model: &GpModel, shape_coeffs: &[f32]) -> Result<[[f64; 3]; 68], FrameError> {
     if model.landmarks.len() != 68 {
         return Err(FrameError::Landmarks(model.landmarks.len()));
     }
-    // The fitted shape's landmark vertices only, as the fitter computes them.
     let mut lm = [[0.0f32; 3]; 68];
     crate::fit::morphable(model)?.landmark_positions(shape_coeffs, &mut lm).map_err(FrameError::Shape)?;
-    pose_of_face_frame(&lm.map(|p| p.map(f64::from)), fit_rad)
+    Ok(lm.map(|p| p.map(f64::from)))
 }
 
 /// The yaw, pitch, roll (radians) of the iBUG frame of landmarks `lm` (model coordinates) when
