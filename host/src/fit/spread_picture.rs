@@ -29,15 +29,13 @@ pub fn spread_picture(model: &GpModel, params: &Params, sd: &[f32], crop: &RgbIm
         return Err(FitRunError::Model(format!("{} vertex spreads for {} vertices", sd.len(), model.vertices())));
     }
     let (w, h) = crop.dimensions();
+    let render_error = |e: crate::render::RenderError| FitRunError::Model(format!("render: {e}"));
     let top = sd.iter().copied().filter(|s| s.is_finite()).fold(0.0f32, f32::max).max(1e-3);
-    let mut instance = Instance::of_model(model, params.shape_coeffs(), &[]).map_err(|e| FitRunError::Model(format!("render: {e}")))?;
+    let mut instance = Instance::of_model(model, params.shape_coeffs(), &[]).map_err(render_error)?;
     instance.albedos = sd.iter().map(|s| spread_color(s / top)).collect();
     let mut renderer = Renderer::new();
-    let render = |r: &mut Renderer| -> Result<RgbaImage, crate::render::RenderError> {
-        r.vertex_stage(&instance, &model.triangles, &params.pose, &params.camera(w, h), &shape_light())?;
-        Ok(r.rasterize(&model.triangles, w, h, Cull::Clockwise, Background::Transparent)?.0)
-    };
-    let face = render(&mut renderer).map_err(|e| FitRunError::Model(format!("render: {e}")))?;
+    renderer.vertex_stage(&instance, &model.triangles, &params.pose, &params.camera(w, h), &shape_light()).map_err(render_error)?;
+    let (face, _) = renderer.rasterize(&model.triangles, w, h, Cull::Clockwise, Background::Transparent).map_err(render_error)?;
     let s = OVERLAY_SCALE;
     let (pw, ph) = (w * s, h * s);
     let (gap, header, bar) = (4u32, 14u32, 16u32);
